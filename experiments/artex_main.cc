@@ -1,0 +1,30 @@
+// The `artex` command-line tool: one subcommand per pipeline stage.
+#include <cstdio>
+#include <exception>
+
+#include <CLI/CLI.hpp>
+
+#include "experiments/commands.h"
+#include "models/error.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"artex: articulated 3D model tracking with on-the-fly texturing"};
+  app.require_subcommand(1);
+  artex::RegisterTemplateCommands(&app);
+  artex::RegisterSynthCommand(&app);
+  artex::RegisterTrackCommand(&app);
+  artex::RegisterRenderCommand(&app);
+  artex::RegisterExperimentCommand(&app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  } catch (const artex::Error& e) {
+    std::fprintf(stderr, "artex: error: %s\n", e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "artex: error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,178 @@
+#include "experiments/config.h"
+
+#include <cmath>
+#include <sstream>
+
+#include <yaml-cpp/yaml.h>
+
+#include "models/error.h"
+
+namespace artex {
+
+struct Config::Impl {
+  YAML::Node node;
+  std::string source;  // file name
+  std::string prefix;  // dotted key path of this node, "" at the root
+};
+
+Config::Config() : impl_(std::make_unique<Impl>()) { impl_->node = YAML::Node(YAML::NodeType::Map); }
+Config::~Config() = default;
+Config::Config(const Config& other) : impl_(std::make_unique<Impl>(*other.impl_)) {}
+Config& Config::operator=(const Config& other) {
+  if (this != &other) *impl_ = *other.impl_;
+  return *this;
+}
+
+Config Config::Load(const std::string& path) {
+  Config c;
+  c.impl_->source = path;
+  try {
+    c.impl_->node = YAML::LoadFile(path);
+  } catch (const YAML::BadFile&) {
+    throw Error(path + ": cannot open the configuration file");
+  } catch (const YAML::Exception& e) {
+    throw Error(path + ": not valid YAML: " + e.what());
+  }
+  if (c.impl_->node.IsNull()) c.impl_->node = YAML::Node(YAML::NodeType::Map);
+  if (!c.impl_->node.IsMap()) throw Error(path + ": expected a mapping at the top level");
+  return c;
+}
+
+Config Config::FromString(const std::string& yaml, const std::string& source_name) {
+  Config c;
+  c.impl_->source = source_name;
+  try {
+    c.impl_->node = YAML::Load(yaml);
+  } catch (const YAML::Exception& e) {
+    throw Error(source_name + ": not valid YAML: " + e.what());
+  }
+  if (c.impl_->node.IsNull()) c.impl_->node = YAML::Node(YAML::NodeType::Map);
+  if (!c.impl_->node.IsMap()) throw Error(source_name + ": expected a mapping at the top level");
+  return c;
+}
+
+std::string Config::Path(const std::string& key) const {
+  return impl_->source + ": " + (impl_->prefix.empty() ? key : impl_->prefix + "." + key);
+}
+
+bool Config::Has(const std::string& key) const {
+  return impl_->node.IsMap() && impl_->node[key].IsDefined() && !impl_->node[key].IsNull();
+}
+
+Config Config::Section(const std::string& key) const {
+  Config c;
+  c.impl_->source = impl_->source;
+  c.impl_->prefix = impl_->prefix.empty() ? key : impl_->prefix + "." + key;
+  if (!Has(key)) return c;
+  YAML::Node n = impl_->node[key];
+  if (!n.IsMap()) throw Error(Path(key) + ": expected a mapping of options");
+  c.impl_->node = n;
+  return c;
+}
+
+std::vector<std::string> Config::Keys() const {
+  std::vector<std::string> keys;
+  for (const auto& kv : impl_->node) keys.push_back(kv.first.as<std::string>());
+  return keys;
+}
+
+namespace {
+template <typename T>
+T Convert(const YAML::Node& n, const std::string& path, const char* expected) {
+  if (!n.IsScalar()) throw Error(path + ": expected " + expected + ", found a non-scalar value");
+  try {
+    return n.as<T>();
+  } catch (const YAML::Exception&) {
+    throw Error(path + ": expected " + expected + ", found '" + n.Scalar() + "'");
+  }
+}
+}  // namespace
+
+void Config::Get(const std::string& key, double* value) const {
+  if (!Has(key)) return;
+  const double v = Convert<double>(impl_->node[key], Path(key), "a number");
+  if (!std::isfinite(v)) throw Error(Path(key) + ": expected a finite number, found " + impl_->node[key].Scalar());
+  *value = v;
+}
+
+void Config::Get(const std::string& key, int* value) const {
+  if (!Has(key)) return;
+  *value = Convert<int>(impl_->node[key], Path(key), "an integer");
+}
+
+void Config::Get(const std::string& key, bool* value) const {
+  if (!Has(key)) return;
+  *value = Convert<bool>(impl_->node[key], Path(key), "true or false");
+}
+
+void Config::Get(const std::string& key, std::string* value) const {
+  if (!Has(key)) return;
+  *value = Convert<std::string>(impl_->node[key], Path(key), "a string");
+}
+
+void Config::Get(const std::string& key, std::vector<double>* value) const {
+  if (!Has(key)) return;
+  const YAML::Node n = impl_->node[key];
+  if (!n.IsSequence()) throw Error(Path(key) + ": expected a list of numbers");
+  std::vector<double> out;
+  for (std::size_t i = 0; i < n.size(); ++i) {
+    std::ostringstream p;
+    p << Path(key) << "[" << i << "]";
+    out.push_back(Convert<double>(n[i], p.str(), "a number"));
+  }
+  *value = out;
+}
+
+void Config::CheckKeys(const std::vector<std::string>& valid) const {
+  for (const auto& key : Keys()) {
+    bool ok = false;
+    for (const auto& v : valid) ok = ok || v == key;
+    if (!ok) ThrowInvalidChoice("", key, valid);
+  }
+}
+
+void Config::ThrowInvalidChoice(const std::string& key, const std::string& found,
+                                const std::vector<std::string>& valid) const {
+  std::ostringstream msg;
+  if (key.empty()) {
+    msg << impl_->source << ": unknown key '"
+        << (impl_->prefix.empty() ? found : impl_->prefix + "." + found) << "'; valid keys:";
+  } else {
+    msg << Path(key) << ": unknown value '" << found << "'; valid choices:";
+  }
+  for (const auto& v : valid) msg << " " << v;
+  throw Error(msg.str());
+}
+
+void Config::Set(const std::string& dotted_key, const std::string& yaml_value) {
+  YAML::Node value;
+  try {
+    value = YAML::Load(yaml_value);
+  } catch (const YAML::Exception& e) {
+    throw Error("override " + dotted_key + ": not valid YAML: " + e.what());
+  }
+  std::vector<std::string> parts;
+  std::stringstream ss(dotted_key);
+  std::string part;
+  while (std::getline(ss, part, '.')) parts.push_back(part);
+  if (parts.empty()) throw Error("override: empty key");
+  YAML::Node node = impl_->node;
+  for (std::size_t i = 0; i + 1 < parts.size(); ++i) {
+    YAML::Node child = node[parts[i]];
+    if (!child.IsDefined() || child.IsNull()) {
+      node[parts[i]] = YAML::Node(YAML::NodeType::Map);
+    } else if (!child.IsMap()) {
+      throw Error("override " + dotted_key + ": '" + parts[i] + "' is not a section");
+    }
+    node.reset(node[parts[i]]);
+  }
+  node[parts.back()] = value;
+}
+
+std::string Config::ToYaml() const {
+  YAML::Emitter out;
+  out << impl_->node;
+  return out.c_str();
+}
+
+}  // namespace artex

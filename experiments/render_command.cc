@@ -1,0 +1,8 @@
+// placeholder until the subcommand is implemented
+#include <CLI/CLI.hpp>
+
+#include "experiments/commands.h"
+
+namespace artex {
+void RegisterRenderCommand(CLI::App* app) { (void)app; }
+}  // namespace artex
