@@ -1,2 +1,117 @@
-// placeholder: filled in by its owner
+#include "experiments/config.h"
+
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <string>
+
 #include <gtest/gtest.h>
+
+#include "models/error.h"
+
+namespace artex {
+namespace {
+
+enum class Color { kRed, kGreen };
+const std::map<std::string, Color> kColors = {{"red", Color::kRed}, {"green", Color::kGreen}};
+
+std::string ErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(ConfigTest, ReadsTypedValuesAndLeavesAbsentKeysUntouched) {
+  Config c = Config::FromString("fitting:\n  eps: 0.5\n  iterations: 12\n  dense: true\n"
+                                "  name: gn\n  radii: [0.15, 0.1]\n", "test.yaml");
+  Config f = c.Section("fitting");
+  double eps = 0;
+  int it = 0;
+  bool dense = false;
+  std::string name;
+  std::vector<double> radii;
+  double untouched = 7.0;
+  f.Get("eps", &eps);
+  f.Get("iterations", &it);
+  f.Get("dense", &dense);
+  f.Get("name", &name);
+  f.Get("radii", &radii);
+  f.Get("missing", &untouched);
+  EXPECT_DOUBLE_EQ(eps, 0.5);
+  EXPECT_EQ(it, 12);
+  EXPECT_TRUE(dense);
+  EXPECT_EQ(name, "gn");
+  ASSERT_EQ(radii.size(), 2u);
+  EXPECT_DOUBLE_EQ(radii[1], 0.1);
+  EXPECT_DOUBLE_EQ(untouched, 7.0);
+}
+
+TEST(ConfigTest, WrongTypeNamesFileKeyAndValue) {
+  Config c = Config::FromString("fitting:\n  eps: abc\n", "run.yaml");
+  double eps = 0;
+  const std::string msg = ErrorOf([&] { c.Section("fitting").Get("eps", &eps); });
+  EXPECT_NE(msg.find("run.yaml"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("fitting.eps"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("abc"), std::string::npos) << msg;
+}
+
+TEST(ConfigTest, UnknownKeyListsValidKeys) {
+  Config c = Config::FromString("fitting:\n  epz: 1\n", "run.yaml");
+  const std::string msg = ErrorOf([&] { c.Section("fitting").CheckKeys({"eps", "iterations"}); });
+  EXPECT_NE(msg.find("fitting.epz"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("eps"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("iterations"), std::string::npos) << msg;
+}
+
+TEST(ConfigTest, EnumChoicesAreValidated) {
+  Config c = Config::FromString("color: blue\nother: green\n", "e.yaml");
+  Color color = Color::kRed;
+  c.GetEnum("other", kColors, &color);
+  EXPECT_EQ(color, Color::kGreen);
+  const std::string msg = ErrorOf([&] { c.GetEnum("color", kColors, &color); });
+  EXPECT_NE(msg.find("blue"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("green"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("red"), std::string::npos) << msg;
+}
+
+TEST(ConfigTest, OverridesCreateNestedKeys) {
+  Config c = Config::FromString("texture:\n  lambda: 1\n", "o.yaml");
+  c.Set("texture.lambda", "0.25");
+  c.Set("fitting.solver", "ceres_lm");
+  double lambda = 0;
+  std::string solver;
+  c.Section("texture").Get("lambda", &lambda);
+  c.Section("fitting").Get("solver", &solver);
+  EXPECT_DOUBLE_EQ(lambda, 0.25);
+  EXPECT_EQ(solver, "ceres_lm");
+  // The resolved YAML reads back to the same values.
+  Config again = Config::FromString(c.ToYaml(), "resolved.yaml");
+  again.Section("texture").Get("lambda", &lambda);
+  EXPECT_DOUBLE_EQ(lambda, 0.25);
+}
+
+TEST(ConfigTest, MissingAndMalformedFilesAreErrors) {
+  EXPECT_NE(ErrorOf([] { Config::Load("/nonexistent/artex.yaml"); }).find("/nonexistent/artex.yaml"),
+            std::string::npos);
+  const std::string path = testing::TempDir() + "/bad_config.yaml";
+  {
+    std::ofstream out(path);
+    out << "a: [1, 2\n";
+  }
+  EXPECT_NE(ErrorOf([&] { Config::Load(path); }).find("bad_config.yaml"), std::string::npos);
+  std::remove(path.c_str());
+  EXPECT_NE(ErrorOf([] { Config::FromString("- 1\n- 2\n", "list.yaml"); }).find("mapping"),
+            std::string::npos);
+}
+
+TEST(ConfigTest, NonFiniteNumberIsRejected) {
+  Config c = Config::FromString("x: .nan\n", "n.yaml");
+  double x = 0;
+  EXPECT_THROW(c.Get("x", &x), Error);
+}
+
+}  // namespace
+}  // namespace artex
