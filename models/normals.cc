@@ -1,5 +1,6 @@
 #include "models/normals.h"
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <sstream>
 
