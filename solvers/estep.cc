@@ -1,1 +1,503 @@
-// placeholder: filled in by its owner
+#include "solvers/estep.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <sstream>
+#include <unordered_map>
+
+#include <nanoflann.hpp>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+#include "models/error.h"
+
+namespace artex {
+
+const char* EStepModeName(EStepMode mode) {
+  switch (mode) {
+    case EStepMode::kDense:
+      return "dense";
+    case EStepMode::kRadius:
+      return "radius";
+    case EStepMode::kKNearest:
+      return "knn";
+  }
+  return "unknown";
+}
+
+bool EStepOptions::IsValid(std::string* error) const {
+  std::ostringstream msg;
+  std::string inner;
+  if (!weights.IsValid(&inner)) {
+    msg << "weights." << inner;
+  } else if (k < 1) {
+    msg << "k: expected >= 1, found " << k;
+  } else if (!(std::isfinite(voxel_fraction) && voxel_fraction >= 0.0 && voxel_fraction <= 1.0)) {
+    msg << "voxel_fraction: expected a value in [0, 1], found " << voxel_fraction;
+  } else if (kdtree_leaf_size < 1) {
+    msg << "kdtree_leaf_size: expected >= 1, found " << kdtree_leaf_size;
+  } else if (grain_size < 1) {
+    msg << "grain_size: expected >= 1, found " << grain_size;
+  } else {
+    return true;
+  }
+  if (error) *error = msg.str();
+  return false;
+}
+
+// ---------------------------------------------------------------------------------------------
+// PointCloudIndex
+
+namespace {
+struct RowMajorCloud {
+  std::vector<double> xyz;  // 3 N
+  size_t kdtree_get_point_count() const { return xyz.size() / 3; }
+  double kdtree_get_pt(size_t i, size_t d) const { return xyz[3 * i + d]; }
+  template <class Box>
+  bool kdtree_get_bbox(Box&) const {
+    return false;
+  }
+};
+using KdTree = nanoflann::KDTreeSingleIndexAdaptor<
+    nanoflann::L2_Simple_Adaptor<double, RowMajorCloud>, RowMajorCloud, 3, int>;
+}  // namespace
+
+struct PointCloudIndex::Impl {
+  RowMajorCloud cloud;
+  std::unique_ptr<KdTree> tree;
+};
+
+PointCloudIndex::PointCloudIndex(const Eigen::MatrixX3d& points, int leaf_size)
+    : impl_(new Impl) {
+  impl_->cloud.xyz.resize(3 * points.rows());
+  for (Eigen::Index i = 0; i < points.rows(); ++i) {
+    for (int d = 0; d < 3; ++d) impl_->cloud.xyz[3 * i + d] = points(i, d);
+  }
+  impl_->tree = std::make_unique<KdTree>(3, impl_->cloud,
+                                         nanoflann::KDTreeSingleIndexAdaptorParams(leaf_size));
+  if (points.rows() > 0) impl_->tree->buildIndex();
+}
+
+PointCloudIndex::~PointCloudIndex() = default;
+
+int PointCloudIndex::size() const {
+  return static_cast<int>(impl_->cloud.kdtree_get_point_count());
+}
+
+int PointCloudIndex::Nearest(const Eigen::Vector3d& query, double* distance2) const {
+  int index = -1;
+  double d2 = std::numeric_limits<double>::infinity();
+  if (size() > 0) KNearest(query, 1, &index, &d2);
+  if (distance2) *distance2 = d2;
+  return index;
+}
+
+int PointCloudIndex::KNearest(const Eigen::Vector3d& query, int k, int* indices,
+                              double* distances2) const {
+  if (size() == 0 || k <= 0) return 0;
+  nanoflann::KNNResultSet<double, int, int> result(k);
+  result.init(indices, distances2);
+  impl_->tree->findNeighbors(result, query.data(), nanoflann::SearchParams());
+  return static_cast<int>(result.size());
+}
+
+void PointCloudIndex::Radius(const Eigen::Vector3d& query, double radius,
+                             std::vector<std::pair<int, double>>* out) const {
+  out->clear();
+  if (size() == 0) return;
+  nanoflann::RadiusResultSet<double, int> result(radius * radius, *out);
+  impl_->tree->findNeighbors(result, query.data(), nanoflann::SearchParams(32, 0.0f, false));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Shared accumulation
+
+namespace {
+
+// Sums relative to the template vertex x_t (numerically stable):
+//   a = sum p, b = sum p (v_s - x_t), c = sum p |v_s - x_t|^2
+// so that P_t = a, mu_t = x_t + b / a and c_t = c - |b|^2 / a.
+struct VertexSums {
+  double a = 0.0;
+  Eigen::Vector3d b = Eigen::Vector3d::Zero();
+  double c = 0.0;
+  long long pairs = 0;
+
+  void Add(double p, const Eigen::Vector3d& d, double d2) {
+    a += p;
+    b += p * d;
+    c += p * d2;
+    ++pairs;
+  }
+};
+
+// Writes vertex t of the targets; returns c_t.
+double Finish(const VertexSums& sums, const Eigen::Vector3d& x, int t,
+              CorrespondenceTargets* targets) {
+  if (!(sums.a > 0.0) || !std::isfinite(sums.a)) {
+    targets->weight[t] = 0.0;
+    targets->mean.row(t).setZero();
+    return 0.0;
+  }
+  targets->weight[t] = sums.a;
+  targets->mean.row(t) = (x + sums.b / sums.a).transpose();
+  return std::max(0.0, sums.c - sums.b.squaredNorm() / sums.a);
+}
+
+void ResizeTargets(int t_count, CorrespondenceTargets* targets) {
+  targets->weight.setZero(t_count);
+  targets->mean.setZero(t_count, 3);
+  targets->constant = 0.0;
+  targets->num_pairs = 0;
+}
+
+void CheckPosed(const PosedTemplateView& posed, const char* where) {
+  if (posed.vertices == nullptr || posed.normals == nullptr) {
+    throw Error(std::string(where) + ": posed template vertices and normals are required");
+  }
+  const Eigen::Index t = posed.vertices->rows();
+  if (posed.normals->rows() != t || (posed.colors != nullptr && posed.colors->rows() != t)) {
+    std::ostringstream msg;
+    msg << where << ": expected " << t << " template normals/colours (one per vertex), found "
+        << posed.normals->rows() << "/" << (posed.colors ? posed.colors->rows() : t);
+    throw Error(msg.str());
+  }
+}
+
+void CheckScan(const Scan& scan, const char* where) {
+  const Eigen::Index n = scan.points.rows();
+  std::ostringstream msg;
+  if (scan.normals.rows() != n) {
+    msg << where << ": scan.normals: expected " << n << " rows, found " << scan.normals.rows();
+  } else if (scan.colors.rows() != 0 && scan.colors.rows() != n) {
+    msg << where << ": scan.colors: expected 0 or " << n << " rows, found " << scan.colors.rows();
+  } else if (!scan.color_valid.empty() && static_cast<Eigen::Index>(scan.color_valid.size()) != n) {
+    msg << where << ": scan.color_valid: expected 0 or " << n << " entries, found "
+        << scan.color_valid.size();
+  } else {
+    return;
+  }
+  throw Error(msg.str());
+}
+
+template <typename Body>
+void ForRange(int count, int grain, bool parallel, const Body& body) {
+  if (!parallel || count <= grain) {
+    body(0, count);
+    return;
+  }
+  tbb::parallel_for(tbb::blocked_range<int>(0, count, grain),
+                    [&](const tbb::blocked_range<int>& r) { body(r.begin(), r.end()); });
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// Dense E-step
+
+void DenseEStep(const Scan& scan, const PosedTemplateView& posed, const OneToManyOptions& options,
+                CorrespondenceTargets* targets, bool parallel) {
+  CheckScan(scan, "dense E-step");
+  CheckPosed(posed, "dense E-step");
+  const int t_count = static_cast<int>(posed.vertices->rows());
+  const int n = scan.size();
+  ResizeTargets(t_count, targets);
+  if (n == 0 || t_count == 0) return;
+  const bool color = options.use_color && posed.colors != nullptr && scan.colors.rows() == n;
+  // Structure of arrays over the scan.
+  Eigen::ArrayXd sx = scan.points.col(0), sy = scan.points.col(1), sz = scan.points.col(2);
+  Eigen::ArrayXd nx = scan.normals.col(0), ny = scan.normals.col(1), nz = scan.normals.col(2);
+  Eigen::ArrayXd cr, cg, cb, cvalid;
+  if (color) {
+    cr = scan.colors.col(0);
+    cg = scan.colors.col(1);
+    cb = scan.colors.col(2);
+    cvalid = Eigen::ArrayXd::Ones(n);
+    for (int s = 0; s < n && !scan.color_valid.empty(); ++s) {
+      cvalid[s] = scan.color_valid[s] ? 1.0 : 0.0;
+    }
+  }
+  const double eps = options.epsilon;
+  const double lambda = options.lambda_color;
+  // p_st for one template vertex against all scan points (into `p`), with d = v_s - x_t.
+  auto weights_for = [&](int t, Eigen::ArrayXd* p, Eigen::ArrayXd* dx, Eigen::ArrayXd* dy,
+                         Eigen::ArrayXd* dz, Eigen::ArrayXd* d2) {
+    const Eigen::RowVector3d x = posed.vertices->row(t);
+    const Eigen::RowVector3d nt = posed.normals->row(t);
+    *dx = sx - x[0];
+    *dy = sy - x[1];
+    *dz = sz - x[2];
+    *d2 = dx->square() + dy->square() + dz->square();
+    Eigen::ArrayXd denom = *d2 + eps;
+    if (color) {
+      const Eigen::RowVector3d ct = posed.colors->row(t);
+      denom += lambda * cvalid *
+               ((cr - ct[0]).square() + (cg - ct[1]).square() + (cb - ct[2]).square());
+    }
+    *p = (nx * nt[0] + ny * nt[1] + nz * nt[2]).max(0.0) / denom;
+  };
+
+  Eigen::ArrayXd inv_scan_sum;
+  if (options.normalize_per_scan_point) {
+    // sum_t p_st per scan point, accumulated per template vertex block (thread-local arrays).
+    inv_scan_sum = tbb::parallel_reduce(
+        tbb::blocked_range<int>(0, t_count, parallel ? 64 : t_count),
+        Eigen::ArrayXd(Eigen::ArrayXd::Zero(n)),
+        [&](const tbb::blocked_range<int>& r, Eigen::ArrayXd acc) {
+          Eigen::ArrayXd p, dx, dy, dz, d2;
+          for (int t = r.begin(); t != r.end(); ++t) {
+            weights_for(t, &p, &dx, &dy, &dz, &d2);
+            acc += p;
+          }
+          return acc;
+        },
+        [](Eigen::ArrayXd a, const Eigen::ArrayXd& b) {
+          a += b;
+          return a;
+        });
+    inv_scan_sum = (inv_scan_sum > 0.0).select(inv_scan_sum.inverse(), 0.0);
+  }
+  std::vector<double> constants(t_count, 0.0);
+  std::vector<long long> pairs(t_count, 0);
+  ForRange(t_count, 64, parallel, [&](int begin, int end) {
+    Eigen::ArrayXd p, dx, dy, dz, d2;
+    for (int t = begin; t < end; ++t) {
+      weights_for(t, &p, &dx, &dy, &dz, &d2);
+      if (options.normalize_per_scan_point) p *= inv_scan_sum;
+      VertexSums sums;
+      sums.a = p.sum();
+      sums.b = Eigen::Vector3d((p * dx).sum(), (p * dy).sum(), (p * dz).sum());
+      sums.c = (p * d2).sum();
+      pairs[t] = (p > 0.0).count();
+      constants[t] = Finish(sums, posed.vertices->row(t).transpose(), t, targets);
+    }
+  });
+  for (int t = 0; t < t_count; ++t) {
+    targets->constant += constants[t];
+    targets->num_pairs += pairs[t];
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Truncated E-step
+
+struct EStep::Cloud {
+  Eigen::MatrixX3d points, normals, colors;
+  Eigen::VectorXd color_valid;  // 1 / 0
+  Eigen::VectorXd count;        // multiplicity (1 for the full scan)
+  std::unique_ptr<PointCloudIndex> index;
+};
+
+EStep::EStep(const Scan& scan, const EStepOptions& options) : scan_(scan), options_(options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw Error("E-step options: " + error);
+  CheckScan(scan, "E-step");
+  const int n = scan.size();
+  full_ = std::make_unique<Cloud>();
+  full_->points = scan.points;
+  full_->normals = scan.normals;
+  if (scan.colors.rows() == n) {
+    full_->colors = scan.colors;
+    full_->color_valid = Eigen::VectorXd::Ones(n);
+    for (int s = 0; s < n && !scan.color_valid.empty(); ++s) {
+      full_->color_valid[s] = scan.color_valid[s] ? 1.0 : 0.0;
+    }
+  }
+  full_->count = Eigen::VectorXd::Ones(n);
+  full_->index = std::make_unique<PointCloudIndex>(scan.points, options.kdtree_leaf_size);
+}
+
+EStep::~EStep() = default;
+
+const EStep::Cloud& EStep::CloudForRadius(double radius) {
+  const double cell = radius * options_.voxel_fraction;
+  if (options_.mode != EStepMode::kRadius || !(cell > 0.0)) return *full_;
+  auto it = subsampled_.find(cell);
+  if (it != subsampled_.end()) return *it->second;
+  // Voxel grid: mean position, summed then normalised normal, mean valid colour, count.
+  const int n = scan_.size();
+  const bool has_color = full_->colors.rows() == n;
+  std::unordered_map<int64_t, int> cells;
+  cells.reserve(static_cast<size_t>(n));
+  std::vector<int> cell_of(n);
+  const auto key_of = [cell](const Eigen::RowVector3d& p) {
+    const int64_t kOffset = 1 << 20;  // grid coordinates fit 21 bits around the origin
+    const int64_t ix = static_cast<int64_t>(std::floor(p[0] / cell)) + kOffset;
+    const int64_t iy = static_cast<int64_t>(std::floor(p[1] / cell)) + kOffset;
+    const int64_t iz = static_cast<int64_t>(std::floor(p[2] / cell)) + kOffset;
+    return (ix << 42) ^ (iy << 21) ^ iz;
+  };
+  for (int s = 0; s < n; ++s) {
+    auto ins = cells.emplace(key_of(scan_.points.row(s)), static_cast<int>(cells.size()));
+    cell_of[s] = ins.first->second;
+  }
+  const int m = static_cast<int>(cells.size());
+  auto cloud = std::make_unique<Cloud>();
+  cloud->points.setZero(m, 3);
+  cloud->normals.setZero(m, 3);
+  cloud->count.setZero(m);
+  Eigen::VectorXd color_count;
+  if (has_color) {
+    cloud->colors.setZero(m, 3);
+    color_count.setZero(m);
+  }
+  for (int s = 0; s < n; ++s) {
+    const int c = cell_of[s];
+    cloud->points.row(c) += scan_.points.row(s);
+    cloud->normals.row(c) += scan_.normals.row(s);
+    cloud->count[c] += 1.0;
+    if (has_color && full_->color_valid[s] > 0.0) {
+      cloud->colors.row(c) += full_->colors.row(s);
+      color_count[c] += 1.0;
+    }
+  }
+  if (has_color) cloud->color_valid = (color_count.array() > 0.0).cast<double>();
+  for (int c = 0; c < m; ++c) {
+    cloud->points.row(c) /= cloud->count[c];
+    const double norm = cloud->normals.row(c).norm();
+    if (norm > 0.0) cloud->normals.row(c) /= norm;
+    if (has_color && color_count[c] > 0.0) cloud->colors.row(c) /= color_count[c];
+  }
+  cloud->index = std::make_unique<PointCloudIndex>(cloud->points, options_.kdtree_leaf_size);
+  const Cloud& result = *cloud;
+  subsampled_.emplace(cell, std::move(cloud));
+  return result;
+}
+
+void EStep::Compute(const PosedTemplateView& posed, double radius,
+                    CorrespondenceTargets* targets) {
+  CheckPosed(posed, "E-step");
+  const int t_count = static_cast<int>(posed.vertices->rows());
+  if (options_.mode == EStepMode::kDense) {
+    DenseEStep(scan_, posed, options_.weights, targets, options_.parallel);
+    return;
+  }
+  if (options_.mode == EStepMode::kRadius && !(std::isfinite(radius) && radius > 0.0)) {
+    std::ostringstream msg;
+    msg << "E-step: expected a finite search radius > 0 (m), found " << radius;
+    throw Error(msg.str());
+  }
+  ResizeTargets(t_count, targets);
+  const Cloud& cloud = CloudForRadius(radius);
+  const int m = static_cast<int>(cloud.points.rows());
+  if (m == 0 || t_count == 0) return;
+  const OneToManyOptions& w = options_.weights;
+  const bool color =
+      w.use_color && posed.colors != nullptr && cloud.colors.rows() == cloud.points.rows();
+  const bool normalize = w.normalize_per_scan_point;
+  const int grain = options_.grain_size;
+  const int num_chunks = (t_count + grain - 1) / grain;
+
+  // Pass 1: per chunk of template vertices, the (s, p_st) pairs in CSR form.
+  struct ChunkPairs {
+    std::vector<int> offset;  // per vertex of the chunk, + 1
+    std::vector<int> s;
+    std::vector<double> p;
+  };
+  std::vector<ChunkPairs> chunks(num_chunks);
+  const bool knn = options_.mode == EStepMode::kKNearest;
+  ForRange(num_chunks, 1, options_.parallel, [&](int chunk_begin, int chunk_end) {
+    std::vector<std::pair<int, double>> found;
+    std::vector<int> knn_index(knn ? options_.k : 0);
+    std::vector<double> knn_d2(knn ? options_.k : 0);
+    for (int chunk = chunk_begin; chunk < chunk_end; ++chunk) {
+      ChunkPairs& out = chunks[chunk];
+      const int t0 = chunk * grain, t1 = std::min(t_count, t0 + grain);
+      out.offset.assign(1, 0);
+      out.s.clear();
+      out.p.clear();
+      for (int t = t0; t < t1; ++t) {
+        const Eigen::Vector3d x = posed.vertices->row(t).transpose();
+        const Eigen::Vector3d nt = posed.normals->row(t).transpose();
+        if (knn) {
+          const int got = cloud.index->KNearest(x, options_.k, knn_index.data(), knn_d2.data());
+          found.resize(got);
+          for (int i = 0; i < got; ++i) found[i] = {knn_index[i], knn_d2[i]};
+        } else {
+          cloud.index->Radius(x, radius, &found);
+        }
+        for (const auto& [s, d2] : found) {
+          const double dot = cloud.normals.row(s).dot(nt.transpose());
+          double c2 = 0.0;
+          if (color && cloud.color_valid[s] > 0.0) {
+            c2 = (cloud.colors.row(s) - posed.colors->row(t)).squaredNorm();
+          }
+          const double p = cloud.count[s] * CorrespondenceWeight(dot, d2, c2, w);
+          if (p > 0.0) {
+            out.s.push_back(s);
+            out.p.push_back(p);
+          }
+        }
+        out.offset.push_back(static_cast<int>(out.s.size()));
+      }
+    }
+  });
+
+  // Per-scan-point normalisation: p_st / sum_t p_st over the pairs found (a cell of
+  // multiplicity c stands for c points with the same weights, so it divides the same way).
+  Eigen::VectorXd inv_sum;
+  if (normalize) {
+    Eigen::VectorXd sum = Eigen::VectorXd::Zero(m);
+    for (const ChunkPairs& chunk : chunks) {
+      for (size_t i = 0; i < chunk.s.size(); ++i) sum[chunk.s[i]] += chunk.p[i];
+    }
+    // sum counts every member of a cell: per member the sum is sum / count.
+    inv_sum = (sum.array() > 0.0).select(cloud.count.array() / sum.array(), 0.0);
+  }
+
+  // Pass 2: P_t, mu_t, c_t.
+  std::vector<double> constants(num_chunks, 0.0);
+  std::vector<long long> pairs(num_chunks, 0);
+  ForRange(num_chunks, 1, options_.parallel, [&](int chunk_begin, int chunk_end) {
+    for (int chunk = chunk_begin; chunk < chunk_end; ++chunk) {
+      const ChunkPairs& in = chunks[chunk];
+      const int t0 = chunk * grain, t1 = std::min(t_count, t0 + grain);
+      for (int t = t0; t < t1; ++t) {
+        const Eigen::Vector3d x = posed.vertices->row(t).transpose();
+        VertexSums sums;
+        for (int i = in.offset[t - t0]; i < in.offset[t - t0 + 1]; ++i) {
+          const int s = in.s[i];
+          const double p = normalize ? in.p[i] * inv_sum[s] : in.p[i];
+          const Eigen::Vector3d d = cloud.points.row(s).transpose() - x;
+          sums.Add(p, d, d.squaredNorm());
+        }
+        constants[chunk] += Finish(sums, x, t, targets);
+        pairs[chunk] += sums.pairs;
+      }
+    }
+  });
+  for (int chunk = 0; chunk < num_chunks; ++chunk) {
+    targets->constant += constants[chunk];
+    targets->num_pairs += pairs[chunk];
+  }
+}
+
+void EStep::FindNearest(const PosedTemplateView& posed, const OneToOneOptions& options,
+                        NearestTargets* targets) const {
+  CheckPosed(posed, "nearest-neighbour search");
+  std::string error;
+  if (!options.IsValid(&error)) throw Error("one-to-one options: " + error);
+  const int t_count = static_cast<int>(posed.vertices->rows());
+  targets->weight.setZero(t_count);
+  targets->point.setZero(t_count, 3);
+  targets->normal.setZero(t_count, 3);
+  targets->index.setConstant(t_count, -1);
+  const double max_d2 = options.max_distance * options.max_distance;
+  ForRange(t_count, options_.grain_size, options_.parallel, [&](int begin, int end) {
+    for (int t = begin; t < end; ++t) {
+      double d2 = 0.0;
+      const int s = full_->index->Nearest(posed.vertices->row(t).transpose(), &d2);
+      if (s < 0 || d2 > max_d2) continue;
+      if (scan_.normals.row(s).dot(posed.normals->row(t)) < options.min_normal_dot) continue;
+      targets->weight[t] = 1.0;
+      targets->point.row(t) = scan_.points.row(s);
+      targets->normal.row(t) = scan_.normals.row(s);
+      targets->index[t] = s;
+    }
+  });
+  targets->num_matched = static_cast<int>((targets->weight.array() > 0.0).count());
+}
+
+}  // namespace artex

@@ -1,1 +1,105 @@
+// E-step of the EM fitting (paper eq. 3-4, DESIGN.md "Fitting energy"): the correspondence
+// weights p_st between scan points s and posed template vertices t, reduced per template vertex
+// to P_t = sum_s p_st and mu_t = sum_s p_st v_s / P_t (energies/one_to_many_correspondence.h).
+//   dense:     every (s, t) pair, O(S T) (the paper's cost; the exact reference)
+//   radius:    scan points within a radius of v'_t (kd-tree over the scan, built once per frame);
+//              optionally over a voxel-subsampled scan (cell = radius * voxel_fraction) whose
+//              cells carry their point count as multiplicity, so large radii stay O(T k)
+//   k-nearest: the k nearest scan points of v'_t
+// Plus the one-to-one nearest-neighbour search of the articulated ICP baseline.
 #pragma once
+
+#include <map>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "energies/one_to_many_correspondence.h"
+#include "energies/one_to_one_correspondence.h"
+#include "sensors/scan.h"
+
+namespace artex {
+
+enum class EStepMode { kDense, kRadius, kKNearest };
+const char* EStepModeName(EStepMode mode);
+
+struct EStepOptions {
+  EStepMode mode = EStepMode::kRadius;
+  OneToManyOptions weights;      // eps, lambda_c, colour, per-scan-point normalisation
+  int k = 8;                     // neighbours per template vertex (kKNearest)
+  // kRadius: scan subsampled on a voxel grid of cell radius * voxel_fraction (0: full scan).
+  // The weights are smooth at the radius scale, so 0.25 keeps ~50 cells per template vertex.
+  double voxel_fraction = 0.25;
+  int kdtree_leaf_size = 10;     // nanoflann leaf size
+  bool parallel = true;          // TBB over template vertices
+  int grain_size = 256;          // template vertices per TBB task
+
+  bool IsValid(std::string* error) const;
+};
+
+// kd-tree over an N x 3 point set (copied). Queries are thread-safe.
+class PointCloudIndex {
+ public:
+  explicit PointCloudIndex(const Eigen::MatrixX3d& points, int leaf_size = 10);
+  ~PointCloudIndex();
+  PointCloudIndex(const PointCloudIndex&) = delete;
+  PointCloudIndex& operator=(const PointCloudIndex&) = delete;
+
+  int size() const;
+  // Index of the nearest point (-1 when empty) and its squared distance.
+  int Nearest(const Eigen::Vector3d& query, double* distance2) const;
+  // Up to k nearest, ascending; returns how many were written.
+  int KNearest(const Eigen::Vector3d& query, int k, int* indices, double* distances2) const;
+  // Replaces *out with (index, squared distance) of the points within `radius` (unsorted).
+  void Radius(const Eigen::Vector3d& query, double radius,
+              std::vector<std::pair<int, double>>* out) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// The posed template as the E-step sees it (T rows each).
+struct PosedTemplateView {
+  const Eigen::MatrixX3d* vertices = nullptr;  // v'_t (m)
+  const Eigen::MatrixX3d* normals = nullptr;   // n(v'_t), unit
+  const Eigen::MatrixX3d* colors = nullptr;    // rgb(v'_t) in [0,1]; null: colour term off
+};
+
+// Exact dense E-step over all pairs (parallel, vectorised). Throws artex::Error on mismatched
+// shapes. With weights.normalize_per_scan_point, p_st is divided by sum_t p_st.
+void DenseEStep(const Scan& scan, const PosedTemplateView& posed, const OneToManyOptions& options,
+                CorrespondenceTargets* targets, bool parallel = true);
+
+// Per-frame correspondence search: builds the scan's kd-tree once (voxel-subsampled trees are
+// built on first use per radius and cached), then serves E-steps for successive poses.
+class EStep {
+ public:
+  // Throws artex::Error on invalid options or a scan with inconsistent shapes.
+  EStep(const Scan& scan, const EStepOptions& options);
+  ~EStep();
+
+  const EStepOptions& options() const { return options_; }
+  const Scan& scan() const { return scan_; }
+
+  // P_t, mu_t for the posed template; `radius` (m) is used by kRadius only.
+  void Compute(const PosedTemplateView& posed, double radius, CorrespondenceTargets* targets);
+  // One-to-one nearest scan point per template vertex, gated by options (max distance, normal
+  // compatibility n_s . n'_t >= min_normal_dot).
+  void FindNearest(const PosedTemplateView& posed, const OneToOneOptions& options,
+                   NearestTargets* targets) const;
+
+ private:
+  struct Cloud;  // a (possibly subsampled) scan with multiplicities and its kd-tree
+  const Cloud& CloudForRadius(double radius);
+
+  Scan scan_;
+  EStepOptions options_;
+  std::unique_ptr<Cloud> full_;
+  std::map<double, std::unique_ptr<Cloud>> subsampled_;  // keyed by voxel size
+};
+
+}  // namespace artex
