@@ -1,1 +1,92 @@
-// placeholder: filled in by its owner
+#include "energies/texture_terms.h"
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <queue>
+#include <sstream>
+#include <utility>
+
+namespace artex {
+
+bool TextureTermOptions::IsValid(std::string* error) const {
+  std::ostringstream msg;
+  if (!(beta >= 0.0 && beta <= 1.0)) msg << "texture.beta: expected [0, 1], found " << beta;
+  else if (!(t_max > 0.0)) msg << "texture.t_max: expected > 0, found " << t_max;
+  else if (!(alpha >= 0.0 && alpha <= 1.0)) msg << "texture.alpha: expected [0, 1], found " << alpha;
+  else if (!(lambda >= 0.0) || !std::isfinite(lambda))
+    msg << "texture.lambda: expected a finite value >= 0, found " << lambda;
+  else if (!(seam_distance_scale > 0.0))
+    msg << "texture.seam_distance_scale: expected > 0, found " << seam_distance_scale;
+  else if (!(min_quality >= 0.0 && min_quality < 1.0))
+    msg << "texture.min_quality: expected [0, 1), found " << min_quality;
+  if (msg.str().empty()) return true;
+  if (error) *error = msg.str();
+  return false;
+}
+
+double TriangleQuality(const Eigen::Vector3d& normal, const Eigen::Vector3d& view_direction) {
+  return std::max(0.0, -normal.dot(view_direction));
+}
+
+double ViewDataCost(bool visible, double quality, double age_frames,
+                    const TextureTermOptions& options) {
+  if (!visible || quality < options.min_quality) return std::numeric_limits<double>::infinity();
+  const double age = std::min(options.t_max, std::max(0.0, age_frames)) / options.t_max;
+  return options.beta * (1.0 - quality) + (1.0 - options.beta) * age;
+}
+
+double SeamPairCost(double colour_cost, double temporal_cost, const TextureTermOptions& options) {
+  return (1.0 - options.alpha) * colour_cost + options.alpha * temporal_cost;
+}
+
+double TemporalSeamCost(double distance, const TextureTermOptions& options) {
+  return std::min(1.0, distance / options.seam_distance_scale);
+}
+
+std::vector<double> MeshDistanceField(const Eigen::MatrixX3d& vertices,
+                                      const Eigen::MatrixX3i& triangles,
+                                      const std::vector<int>& sources) {
+  const int n = static_cast<int>(vertices.rows());
+  std::vector<double> dist(n, std::numeric_limits<double>::infinity());
+  if (sources.empty()) return dist;
+  // Vertex adjacency (CSR) from the triangles.
+  std::vector<int> degree(n + 1, 0);
+  for (int f = 0; f < triangles.rows(); ++f)
+    for (int c = 0; c < 3; ++c) degree[triangles(f, c) + 1] += 2;
+  for (int i = 0; i < n; ++i) degree[i + 1] += degree[i];
+  std::vector<int> adjacency(degree[n]);
+  std::vector<int> fill(degree.begin(), degree.end() - 1);
+  for (int f = 0; f < triangles.rows(); ++f) {
+    for (int c = 0; c < 3; ++c) {
+      const int a = triangles(f, c);
+      adjacency[fill[a]++] = triangles(f, (c + 1) % 3);
+      adjacency[fill[a]++] = triangles(f, (c + 2) % 3);
+    }
+  }
+  using Item = std::pair<double, int>;
+  std::priority_queue<Item, std::vector<Item>, std::greater<Item>> queue;
+  for (int s : sources) {
+    if (s >= 0 && s < n && dist[s] > 0.0) {
+      dist[s] = 0.0;
+      queue.push({0.0, s});
+    }
+  }
+  while (!queue.empty()) {
+    const auto [d, v] = queue.top();
+    queue.pop();
+    if (d > dist[v]) continue;
+    for (int k = degree[v]; k < degree[v + 1]; ++k) {
+      const int u = adjacency[k];
+      const double nd = d + (vertices.row(u) - vertices.row(v)).norm();
+      if (nd < dist[u]) {
+        dist[u] = nd;
+        queue.push({nd, u});
+      }
+    }
+  }
+  return dist;
+}
+
+}  // namespace artex

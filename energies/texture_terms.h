@@ -1,1 +1,50 @@
+// Texture MRF terms of the paper (eq. 6-14, DESIGN.md "Texture") for per-triangle view
+// selection: quality W, the data term D with its lifetime part, the seam colour cost Pi, the
+// temporal seam cost Psi, and V = (1 - alpha) Pi + alpha Psi. Pure functions of their inputs;
+// the image sampling that produces Pi's colour differences lives in texture/.
 #pragma once
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace artex {
+
+struct TextureTermOptions {
+  double beta = 0.7;     // D = beta (1 - W) + (1 - beta) min(t_max, age) / t_max; [0, 1]
+  double t_max = 60.0;   // lifetime saturation (frames); > 0
+  double alpha = 0.3;    // V = (1 - alpha) Pi + alpha Psi; [0, 1]
+  double lambda = 1.0;   // smoothness weight of sum V (eq. 14); >= 0
+  // Psi = min(1, d / seam_distance_scale), d = distance (m, along the rest mesh) from the edge
+  // to the nearest seam of the previous labelling; > 0.
+  double seam_distance_scale = 0.10;
+  // Views with W below this are treated as not visible (grazing views give smeared texels).
+  double min_quality = 0.05;
+
+  bool IsValid(std::string* error) const;
+};
+
+// W = max(0, -n . v): n the unit triangle normal, v the unit viewing direction from the camera
+// centre towards the triangle (paper eq. 12).
+double TriangleQuality(const Eigen::Vector3d& normal, const Eigen::Vector3d& view_direction);
+
+// D(f, l) of eq. 13: +inf when not visible or quality < min_quality.
+double ViewDataCost(bool visible, double quality, double age_frames,
+                    const TextureTermOptions& options);
+
+// V_ij for l_i != l_j: (1 - alpha) Pi + alpha Psi (0 when the labels are equal: the caller
+// does not call it then).
+double SeamPairCost(double colour_cost, double temporal_cost, const TextureTermOptions& options);
+
+// Psi per mesh edge from a per-vertex distance field d (m) to the previous seams.
+double TemporalSeamCost(double distance, const TextureTermOptions& options);
+
+// Distance (m, shortest paths along mesh edges of `vertices`) from every vertex to the nearest
+// vertex in `sources`; +inf everywhere when sources is empty (no previous seams: Psi = 1).
+// vertices: V x 3; triangles: F x 3.
+std::vector<double> MeshDistanceField(const Eigen::MatrixX3d& vertices,
+                                      const Eigen::MatrixX3i& triangles,
+                                      const std::vector<int>& sources);
+
+}  // namespace artex

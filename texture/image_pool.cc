@@ -1,1 +1,214 @@
-// placeholder: filled in by its owner
+#include "texture/image_pool.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <sstream>
+#include <utility>
+
+#include "models/error.h"
+
+namespace artex {
+
+TextureMesh TextureMesh::Build(const Eigen::MatrixX3i& triangles) {
+  TextureMesh mesh;
+  mesh.triangles = triangles;
+  std::map<std::pair<int, int>, std::vector<int>> faces_of_edge;
+  for (int f = 0; f < triangles.rows(); ++f) {
+    for (int c = 0; c < 3; ++c) {
+      int a = triangles(f, c), b = triangles(f, (c + 1) % 3);
+      if (a > b) std::swap(a, b);
+      faces_of_edge[{a, b}].push_back(f);
+    }
+  }
+  std::vector<std::array<int, 4>> edges;
+  for (const auto& [key, faces] : faces_of_edge) {
+    if (faces.size() == 2) edges.push_back({key.first, key.second, faces[0], faces[1]});
+  }
+  mesh.edges.resize(static_cast<Eigen::Index>(edges.size()), 2);
+  mesh.edge_faces.resize(static_cast<Eigen::Index>(edges.size()), 2);
+  for (std::size_t e = 0; e < edges.size(); ++e) {
+    mesh.edges.row(e) << edges[e][0], edges[e][1];
+    mesh.edge_faces.row(e) << edges[e][2], edges[e][3];
+  }
+  return mesh;
+}
+
+bool ImagePoolOptions::IsValid(std::string* error) const {
+  std::ostringstream msg;
+  if (max_images < 1) msg << "pool.max_images: expected >= 1, found " << max_images;
+  else if (hard_max_images < max_images)
+    msg << "pool.hard_max_images: expected >= pool.max_images (" << max_images << "), found "
+        << hard_max_images;
+  else if (histogram_bins < 1) msg << "pool.histogram_bins: expected >= 1, found " << histogram_bins;
+  else if (crop_margin < 0) msg << "pool.crop_margin: expected >= 0, found " << crop_margin;
+  else if (edge_samples < 2) msg << "pool.edge_samples: expected >= 2, found " << edge_samples;
+  if (msg.str().empty()) return true;
+  if (error) *error = msg.str();
+  return false;
+}
+
+bool PoolEntry::Sample(const Eigen::Vector2d& pixel, Eigen::Vector3f* color) const {
+  const double x = pixel.x() - offset.x();
+  const double y = pixel.y() - offset.y();
+  if (!(x >= 0.0 && y >= 0.0 && x <= image.cols - 1 && y <= image.rows - 1)) return false;
+  const int x0 = std::min(static_cast<int>(x), image.cols - 2 < 0 ? 0 : image.cols - 2);
+  const int y0 = std::min(static_cast<int>(y), image.rows - 2 < 0 ? 0 : image.rows - 2);
+  const int x1 = std::min(x0 + 1, image.cols - 1);
+  const int y1 = std::min(y0 + 1, image.rows - 1);
+  const float fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
+  const auto* r0 = image.ptr<cv::Vec3b>(y0);
+  const auto* r1 = image.ptr<cv::Vec3b>(y1);
+  for (int c = 0; c < 3; ++c) {
+    const float top = r0[x0][c] * (1 - fx) + r0[x1][c] * fx;
+    const float bottom = r1[x0][c] * (1 - fx) + r1[x1][c] * fx;
+    (*color)[c] = (top * (1 - fy) + bottom * fy) / 255.0f;
+  }
+  return true;
+}
+
+std::size_t PoolEntry::MemoryBytes() const {
+  return image.total() * image.elemSize() + vertices.size() * sizeof(double) +
+         visibility.visible.size() * 5 + vertex_colors.size() * 4 + edge_colors.size() * 4;
+}
+
+ImagePool::ImagePool(const TextureMesh* mesh, const ImagePoolOptions& pool_options,
+                     const VisibilityOptions& visibility_options)
+    : mesh_(mesh), options_(pool_options), visibility_options_(visibility_options) {
+  std::string why;
+  if (!options_.IsValid(&why)) throw Error(why);
+  if (!visibility_options_.IsValid(&why)) throw Error(why);
+}
+
+int ImagePool::Add(int frame_index, const cv::Mat& color_bgr, const PinholeCamera& camera,
+                   const Eigen::MatrixX3d& posed_vertices) {
+  if (color_bgr.type() != CV_8UC3 || color_bgr.cols != camera.width ||
+      color_bgr.rows != camera.height) {
+    std::ostringstream msg;
+    msg << "frame " << frame_index << ": expected a " << camera.width << "x" << camera.height
+        << " 8-bit BGR colour image, found " << color_bgr.cols << "x" << color_bgr.rows
+        << " with " << color_bgr.channels() << " channel(s)";
+    throw Error(msg.str());
+  }
+  auto entry = std::make_unique<PoolEntry>();
+  entry->frame_index = frame_index;
+  entry->camera = camera;
+  entry->vertices = posed_vertices;
+  entry->visibility =
+      ComputeVisibility(posed_vertices, mesh_->triangles, camera, visibility_options_);
+  // Crop to the projection of the subject.
+  const int v_count = static_cast<int>(posed_vertices.rows());
+  std::vector<Eigen::Vector2d> pixels(v_count);
+  double min_x = std::numeric_limits<double>::infinity(), min_y = min_x;
+  double max_x = -min_x, max_y = -min_x;
+  for (int v = 0; v < v_count; ++v) {
+    double z = 0.0;
+    pixels[v] = camera.Project(posed_vertices.row(v).transpose(), &z);
+    if (!(z > 0.0)) pixels[v].setConstant(std::numeric_limits<double>::quiet_NaN());
+    if (!pixels[v].allFinite()) continue;
+    min_x = std::min(min_x, pixels[v].x());
+    min_y = std::min(min_y, pixels[v].y());
+    max_x = std::max(max_x, pixels[v].x());
+    max_y = std::max(max_y, pixels[v].y());
+  }
+  const int x0 = std::clamp(static_cast<int>(std::floor(min_x)) - options_.crop_margin, 0, camera.width);
+  const int y0 = std::clamp(static_cast<int>(std::floor(min_y)) - options_.crop_margin, 0, camera.height);
+  const int x1 = std::clamp(static_cast<int>(std::ceil(max_x)) + options_.crop_margin + 1, 0, camera.width);
+  const int y1 = std::clamp(static_cast<int>(std::ceil(max_y)) + options_.crop_margin + 1, 0, camera.height);
+  if (x1 > x0 && y1 > y0) {
+    entry->image = color_bgr(cv::Rect(x0, y0, x1 - x0, y1 - y0)).clone();
+    entry->offset = {x0, y0};
+  } else {
+    entry->image = cv::Mat(1, 1, CV_8UC3, cv::Scalar(0, 0, 0));
+    entry->offset = {-10, -10};  // nothing samples inside
+  }
+  // Colours at vertices that belong to a visible triangle.
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  std::vector<uint8_t> vertex_seen(v_count, 0);
+  for (int f = 0; f < mesh_->triangles.rows(); ++f) {
+    if (!entry->visibility.visible[f]) continue;
+    for (int c = 0; c < 3; ++c) vertex_seen[mesh_->triangles(f, c)] = 1;
+  }
+  entry->vertex_colors.setConstant(v_count, 3, nan);
+  for (int v = 0; v < v_count; ++v) {
+    Eigen::Vector3f color;
+    if (vertex_seen[v] && pixels[v].allFinite() && entry->Sample(pixels[v], &color))
+      entry->vertex_colors.row(v) = color.transpose();
+  }
+  // Colours along edges with a visible side.
+  const int samples = options_.edge_samples;
+  const int e_count = static_cast<int>(mesh_->edges.rows());
+  entry->edge_colors.setConstant(static_cast<Eigen::Index>(e_count) * samples, 3, nan);
+  for (int e = 0; e < e_count; ++e) {
+    if (!entry->visibility.visible[mesh_->edge_faces(e, 0)] &&
+        !entry->visibility.visible[mesh_->edge_faces(e, 1)])
+      continue;
+    const Eigen::Vector3d a = posed_vertices.row(mesh_->edges(e, 0));
+    const Eigen::Vector3d b = posed_vertices.row(mesh_->edges(e, 1));
+    for (int k = 0; k < samples; ++k) {
+      const double t = (k + 0.5) / samples;
+      Eigen::Vector3f color;
+      if (entry->Sample(camera.Project((1 - t) * a + t * b), &color))
+        entry->edge_colors.row(static_cast<Eigen::Index>(e) * samples + k) = color.transpose();
+    }
+  }
+  entries_.push_back(std::move(entry));
+  return size() - 1;
+}
+
+int ImagePool::SlotOfFrame(int frame_index) const {
+  for (int s = 0; s < size(); ++s) {
+    if (entries_[s]->frame_index == frame_index) return s;
+  }
+  return -1;
+}
+
+bool ImagePool::IsUniquelyBest(int slot) const {
+  const int bins = options_.histogram_bins;
+  const int f_count = static_cast<int>(mesh_->triangles.rows());
+  const auto bin_of = [bins](float w) { return std::min(bins - 1, static_cast<int>(w * bins)); };
+  for (int f = 0; f < f_count; ++f) {
+    if (!entries_[slot]->visibility.visible[f]) continue;
+    const int my_bin = bin_of(entries_[slot]->visibility.quality[f]);
+    bool unique = true;
+    for (int s = 0; s < size() && unique; ++s) {
+      if (s == slot || !entries_[s]->visibility.visible[f]) continue;
+      if (bin_of(entries_[s]->visibility.quality[f]) >= my_bin) unique = false;
+    }
+    if (unique) return true;
+  }
+  return false;
+}
+
+std::vector<int> ImagePool::Prune() {
+  std::vector<int> dropped;
+  // The paper's rule, oldest first: drop an image unless it is uniquely best for a triangle.
+  bool changed = true;
+  while (size() > options_.max_images && changed) {
+    changed = false;
+    for (int s = 0; s < size(); ++s) {
+      if (!IsUniquelyBest(s)) {
+        dropped.push_back(entries_[s]->frame_index);
+        entries_.erase(entries_.begin() + s);
+        changed = true;
+        break;
+      }
+    }
+  }
+  // Memory bound: beyond the hard cap the oldest go regardless.
+  while (size() > options_.hard_max_images) {
+    dropped.push_back(entries_.front()->frame_index);
+    entries_.erase(entries_.begin());
+  }
+  return dropped;
+}
+
+std::size_t ImagePool::MemoryBytes() const {
+  std::size_t bytes = 0;
+  for (const auto& e : entries_) bytes += e->MemoryBytes();
+  return bytes;
+}
+
+}  // namespace artex

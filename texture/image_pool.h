@@ -1,1 +1,85 @@
+// The pool of earlier colour images used for texturing (paper sec. 4): each entry keeps its
+// colour image cropped to the subject, the posed template mesh of its frame, its camera, and
+// what texturing reads from it repeatedly (per-triangle visibility and quality, colours at the
+// template vertices and along mesh edges), computed once when the image enters the pool.
+// Pruning follows the paper's coarse-histogram rule; a hard cap bounds memory.
 #pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "render/camera.h"
+#include "texture/visibility.h"
+
+namespace artex {
+
+// Mesh connectivity used by texturing: the F triangles and the E interior edges, each shared by
+// exactly two triangles (the MRF's neighbourhood).
+struct TextureMesh {
+  Eigen::MatrixX3i triangles;    // F x 3
+  Eigen::MatrixX2i edges;        // E x 2 vertex indices
+  Eigen::MatrixX2i edge_faces;   // E x 2 triangles on either side
+  static TextureMesh Build(const Eigen::MatrixX3i& triangles);
+};
+
+struct ImagePoolOptions {
+  int max_images = 12;       // pruning starts above this many images; >= 1
+  int hard_max_images = 24;  // oldest images are dropped regardless above this; >= max_images
+  int histogram_bins = 4;    // coarse histogram of W over the pool (pruning rule); >= 1
+  int crop_margin = 8;       // pixels kept around the subject's projection; >= 0
+  int edge_samples = 5;      // colour samples along each edge for the seam cost; >= 2
+
+  bool IsValid(std::string* error) const;
+};
+
+struct PoolEntry {
+  int frame_index = 0;
+  cv::Mat image;                 // CV_8UC3 (BGR), cropped
+  Eigen::Vector2i offset{0, 0};  // crop origin in the full image (pixels)
+  PinholeCamera camera;          // full-image colour camera
+  Eigen::MatrixX3d vertices;     // V x 3 posed template of that frame (world, m)
+  TriangleVisibility visibility;
+  // V x 3 colours (channel order of `image`, [0, 1]) at the projected vertices; NaN outside.
+  Eigen::MatrixX3f vertex_colors;
+  // (E * edge_samples) x 3 colours along every edge (rows e * samples + k); NaN where the edge
+  // is not seen (neither side visible).
+  Eigen::MatrixX3f edge_colors;
+
+  // Bilinear colour at a full-image pixel position; false outside the crop.
+  bool Sample(const Eigen::Vector2d& pixel, Eigen::Vector3f* color) const;
+  std::size_t MemoryBytes() const;
+};
+
+class ImagePool {
+ public:
+  ImagePool(const TextureMesh* mesh, const ImagePoolOptions& pool_options,
+            const VisibilityOptions& visibility_options);
+
+  // Adds the image of a frame with its posed template; returns the new entry's slot.
+  int Add(int frame_index, const cv::Mat& color_bgr, const PinholeCamera& camera,
+          const Eigen::MatrixX3d& posed_vertices);
+  // Applies the pruning rule; returns the frame indices of the dropped images.
+  std::vector<int> Prune();
+
+  int size() const { return static_cast<int>(entries_.size()); }
+  const PoolEntry& entry(int slot) const { return *entries_[slot]; }
+  int SlotOfFrame(int frame_index) const;  // -1 when not in the pool
+  std::size_t MemoryBytes() const;
+
+  // True when the entry at `slot` is, for some triangle, the only image in the best non-empty
+  // bin of that triangle's histogram of W over the pool (the paper's reason to keep it).
+  bool IsUniquelyBest(int slot) const;
+
+ private:
+  const TextureMesh* mesh_;
+  ImagePoolOptions options_;
+  VisibilityOptions visibility_options_;
+  std::vector<std::unique_ptr<PoolEntry>> entries_;  // oldest first
+};
+
+}  // namespace artex

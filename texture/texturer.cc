@@ -1,1 +1,230 @@
-// placeholder: filled in by its owner
+#include "texture/texturer.h"
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include "models/error.h"
+#include "render/rasterizer.h"
+
+#include <algorithm>
+#include <opencv2/imgproc.hpp>
+
+namespace artex {
+namespace {
+double SecondsSince(std::chrono::steady_clock::time_point t) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+}
+}  // namespace
+
+bool TexturingOptions::IsValid(std::string* error) const {
+  if (!selection.IsValid(error) || !mrf.IsValid(error) || !pool.IsValid(error) ||
+      !visibility.IsValid(error) || !levelling.IsValid(error))
+    return false;
+  std::ostringstream msg;
+  if (atlas_size < 16) msg << "texture.atlas_size: expected >= 16, found " << atlas_size;
+  else if (padding_texels < 0) msg << "texture.padding_texels: expected >= 0, found " << padding_texels;
+  else if (add_every < 1) msg << "texture.add_every: expected >= 1, found " << add_every;
+  if (msg.str().empty()) return true;
+  if (error) *error = msg.str();
+  return false;
+}
+
+Texturer::Texturer(const Template& tmpl, const TexturingOptions& options)
+    : template_(tmpl), options_(options) {
+  std::string why;
+  if (!options_.IsValid(&why)) throw Error(why);
+  mesh_ = TextureMesh::Build(template_.triangles);
+  map_ = std::make_unique<AtlasMap>(template_, options_.atlas_size);
+  pool_ = std::make_unique<ImagePool>(&mesh_, options_.pool, options_.visibility);
+  solver_ = MrfSolver::Create(options_.mrf);
+  base_.color = cv::Mat(options_.atlas_size, options_.atlas_size, CV_32FC3, cv::Scalar(0, 0, 0));
+  base_.mask = cv::Mat(options_.atlas_size, options_.atlas_size, CV_8UC1, cv::Scalar(0));
+  frames_.assign(template_.num_triangles(), -1);
+  seam_distance_.assign(template_.num_vertices(), std::numeric_limits<double>::infinity());
+  const int e_count = static_cast<int>(mesh_.edges.rows());
+  edge_weight_.resize(e_count);
+  double mean = 0.0;
+  for (int e = 0; e < e_count; ++e) {
+    edge_weight_[e] = (template_.vertices.row(mesh_.edges(e, 0)) -
+                       template_.vertices.row(mesh_.edges(e, 1))).norm();
+    mean += edge_weight_[e];
+  }
+  mean = e_count > 0 ? mean / e_count : 1.0;
+  for (double& w : edge_weight_) w /= mean;
+  corrections_.setZero(3 * template_.num_triangles(), 3);
+}
+
+Texturer::~Texturer() = default;
+
+TextureFrameSummary Texturer::AddFrame(int frame, const cv::Mat& color_bgr,
+                                       const PinholeCamera& camera,
+                                       const Eigen::MatrixX3d& posed_vertices) {
+  const auto start = std::chrono::steady_clock::now();
+  TextureFrameSummary s;
+  s.frame = frame;
+  if (posed_vertices.rows() != template_.num_vertices() || !posed_vertices.allFinite()) {
+    std::ostringstream msg;
+    msg << "texturing frame " << frame << ": expected " << template_.num_vertices()
+        << " finite posed vertices, found " << posed_vertices.rows();
+    throw Error(msg.str());
+  }
+  if (frames_seen_++ % options_.add_every == 0) {
+    pool_->Add(frame, color_bgr, camera, posed_vertices);
+    pool_->Prune();
+    s.image_added = true;
+  }
+  s.seconds_pool = SecondsSince(start);
+  s.pool_size = pool_->size();
+  s.pool_bytes = pool_->MemoryBytes();
+
+  const auto t_mrf = std::chrono::steady_clock::now();
+  ViewSelectionInput input;
+  input.mesh = &mesh_;
+  input.pool = pool_.get();
+  input.current_frame = frame;
+  input.previous_frames = frames_;
+  input.seam_distance = seam_distance_;
+  input.edge_weight = edge_weight_;
+  ViewSelectionResult result = SelectViews(input, options_.selection, solver_.get());
+  s.seconds_mrf = SecondsSince(t_mrf);
+  s.energy = result.mrf.energy;
+  s.lower_bound = result.mrf.lower_bound;
+  s.mrf_iterations = result.mrf.iterations;
+
+  const auto t_sample = std::chrono::steady_clock::now();
+  const int f_count = template_.num_triangles();
+  for (int f = 0; f < f_count; ++f) {
+    // Resample only where the source image changed (labels always name pooled images).
+    if (result.frames[f] == frames_[f]) continue;
+    ++s.changed_triangles;
+    if (result.frames[f] < 0) {
+      ClearTriangle(*map_, f, &base_);
+    } else {
+      SampleTriangle(*map_, f, template_.triangles, pool_->entry(pool_->SlotOfFrame(result.frames[f])),
+                     &base_);
+    }
+  }
+  frames_ = result.frames;
+  for (int f = 0; f < f_count; ++f) s.textured_triangles += frames_[f] >= 0;
+  s.seconds_sampling = SecondsSince(t_sample);
+
+  // Seams of the new labelling: Psi's distance field for the next frame, and the count.
+  std::vector<int> seam_vertices;
+  for (int e = 0; e < mesh_.edges.rows(); ++e) {
+    if (frames_[mesh_.edge_faces(e, 0)] != frames_[mesh_.edge_faces(e, 1)]) {
+      ++s.seam_edges;
+      seam_vertices.push_back(mesh_.edges(e, 0));
+      seam_vertices.push_back(mesh_.edges(e, 1));
+    }
+  }
+  seam_distance_ = MeshDistanceField(template_.vertices, template_.triangles, seam_vertices);
+
+  const auto t_level = std::chrono::steady_clock::now();
+  if (options_.seam_levelling) {
+    SeamLevellingSummary ls;
+    LevelSeams(template_.num_vertices(), template_.triangles, frames_,
+               [this](int v, int frame_index, Eigen::Vector3f* c) {
+                 const int slot = pool_->SlotOfFrame(frame_index);
+                 if (slot < 0) return false;
+                 const auto row = pool_->entry(slot).vertex_colors.row(v);
+                 if (!row.allFinite()) return false;
+                 *c = row.transpose();
+                 return true;
+               },
+               options_.levelling, &corrections_, &ls);
+    s.seam_rms_before = ls.seam_residual_before;
+    s.seam_rms_after = ls.seam_residual_after;
+  } else {
+    corrections_.setZero(3 * f_count, 3);
+  }
+  s.seconds_levelling = SecondsSince(t_level);
+  s.seconds_total = SecondsSince(start);
+  return s;
+}
+
+cv::Mat Texturer::Atlas() const {
+  return ComposeAtlas(*map_, base_, options_.seam_levelling ? &corrections_ : nullptr,
+                      options_.padding_texels);
+}
+
+void Texturer::VertexColors(Eigen::MatrixX3d* rgb, std::vector<uint8_t>* valid) const {
+  const int v_count = template_.num_vertices();
+  Eigen::MatrixX3d sum = Eigen::MatrixX3d::Zero(v_count, 3);
+  std::vector<int> count(v_count, 0);
+  for (int f = 0; f < template_.num_triangles(); ++f) {
+    if (frames_[f] < 0) continue;
+    const int slot = pool_->SlotOfFrame(frames_[f]);
+    if (slot < 0) continue;
+    for (int c = 0; c < 3; ++c) {
+      const int v = template_.triangles(f, c);
+      const auto col = pool_->entry(slot).vertex_colors.row(v);
+      if (!col.allFinite()) continue;
+      Eigen::Vector3d bgr = (col + corrections_.row(3 * f + c)).cast<double>().transpose();
+      sum.row(v) += Eigen::Vector3d(bgr.z(), bgr.y(), bgr.x()).transpose();
+      ++count[v];
+    }
+  }
+  rgb->setZero(v_count, 3);
+  valid->assign(v_count, 0);
+  for (int v = 0; v < v_count; ++v) {
+    if (count[v] == 0) continue;
+    rgb->row(v) = (sum.row(v) / count[v]).cwiseMax(0.0).cwiseMin(1.0);
+    (*valid)[v] = 1;
+  }
+}
+
+cv::Mat Texturer::LabelMap() const {
+  const int size = map_->size();
+  cv::Mat out(size, size, CV_8UC3, cv::Scalar(0, 0, 0));
+  for (int f = 0; f < template_.num_triangles(); ++f) {
+    if (frames_[f] < 0) continue;
+    // A fixed pseudo-random colour per source frame (golden-ratio hue walk).
+    const double hue = std::fmod(frames_[f] * 0.618033988749895, 1.0) * 180.0;
+    cv::Mat hsv(1, 1, CV_8UC3, cv::Scalar(hue, 200, 230)), bgr;
+    cv::cvtColor(hsv, bgr, cv::COLOR_HSV2BGR);
+    const cv::Vec3b color = bgr.at<cv::Vec3b>(0, 0);
+    for (const int* t = map_->texels_begin(f); t != map_->texels_end(f); ++t)
+      out.at<cv::Vec3b>(*t / size, *t % size) = color;
+  }
+  return out;
+}
+
+void RenderTextured(const Template& tmpl, const Eigen::MatrixX3d& posed_vertices,
+                    const cv::Mat& atlas, const PinholeCamera& camera, cv::Mat* image,
+                    cv::Mat* mask) {
+  if (atlas.type() != CV_8UC3 || atlas.empty())
+    throw Error("RenderTextured: expected an 8-bit 3-channel atlas image");
+  if (!tmpl.has_uvs()) throw Error("RenderTextured: the template has no UV atlas");
+  RasterBuffers buffers;
+  Rasterize(posed_vertices, tmpl.triangles, camera, RasterOptions(), &buffers);
+  *image = cv::Mat(camera.height, camera.width, CV_8UC3, cv::Scalar(0, 0, 0));
+  *mask = cv::Mat(camera.height, camera.width, CV_8UC1, cv::Scalar(0));
+  for (int v = 0; v < camera.height; ++v) {
+    for (int u = 0; u < camera.width; ++u) {
+      const int i = buffers.index(u, v);
+      const int f = buffers.triangle_id[i];
+      if (f < 0) continue;
+      const Eigen::Vector2f b = buffers.barycentric[i];
+      const Eigen::Vector2d uv = (1.0 - b.x() - b.y()) * tmpl.uvs.row(tmpl.uv_triangles(f, 0)) +
+                                 b.x() * tmpl.uvs.row(tmpl.uv_triangles(f, 1)) +
+                                 b.y() * tmpl.uvs.row(tmpl.uv_triangles(f, 2));
+      const double x = std::clamp(uv.x() * atlas.cols - 0.5, 0.0, atlas.cols - 1.0);
+      const double y = std::clamp(uv.y() * atlas.rows - 0.5, 0.0, atlas.rows - 1.0);
+      const int x0 = std::min(static_cast<int>(x), atlas.cols - 2);
+      const int y0 = std::min(static_cast<int>(y), atlas.rows - 2);
+      const double fx = x - x0, fy = y - y0;
+      cv::Vec3d c = (1 - fy) * ((1 - fx) * cv::Vec3d(atlas.at<cv::Vec3b>(y0, x0)) +
+                                fx * cv::Vec3d(atlas.at<cv::Vec3b>(y0, x0 + 1))) +
+                    fy * ((1 - fx) * cv::Vec3d(atlas.at<cv::Vec3b>(y0 + 1, x0)) +
+                          fx * cv::Vec3d(atlas.at<cv::Vec3b>(y0 + 1, x0 + 1)));
+      image->at<cv::Vec3b>(v, u) = cv::Vec3b(cv::saturate_cast<uchar>(c[0]),
+                                             cv::saturate_cast<uchar>(c[1]),
+                                             cv::saturate_cast<uchar>(c[2]));
+      mask->at<uint8_t>(v, u) = 255;
+    }
+  }
+}
+
+}  // namespace artex

@@ -1,1 +1,101 @@
+// On-the-fly texturing (paper sec. 4), one call per frame: the frame's colour image joins the
+// pool (visibility, colours), the pool is pruned, views are selected per triangle by an MRF
+// warm-started from the previous frame, texels of triangles whose source changed are resampled,
+// and seams are levelled. The atlas and per-vertex colours (the fitting's rgb(v'_t)) are read
+// from the current state at any time.
 #pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "models/template.h"
+#include "solvers/mrf.h"
+#include "solvers/seam_levelling.h"
+#include "texture/image_pool.h"
+#include "texture/texel_sampling.h"
+#include "texture/view_selection.h"
+
+namespace artex {
+
+struct TexturingOptions {
+  ViewSelectionOptions selection;
+  MrfSolverOptions mrf;
+  ImagePoolOptions pool;
+  VisibilityOptions visibility;
+  int atlas_size = 1024;        // atlas side (texels); >= 16
+  int padding_texels = 4;       // dilation passes at chart borders when composing the atlas
+  bool seam_levelling = true;   // Lempitsky-Ivanov levelling on/off
+  SeamLevellingOptions levelling;
+  int add_every = 1;            // add every n-th frame's image to the pool; >= 1
+
+  bool IsValid(std::string* error) const;
+};
+
+struct TextureFrameSummary {
+  int frame = 0;
+  bool image_added = false;
+  double energy = 0.0;
+  double lower_bound = 0.0;  // -inf when the MRF solver gives none
+  int mrf_iterations = 0;
+  int pool_size = 0;
+  std::size_t pool_bytes = 0;
+  int seam_edges = 0;           // interior edges whose triangles use different images
+  int changed_triangles = 0;    // triangles whose source image changed
+  int textured_triangles = 0;
+  double seam_rms_before = 0.0; // RMS colour jump at seam vertices before levelling
+  double seam_rms_after = 0.0;
+  double seconds_pool = 0.0, seconds_mrf = 0.0, seconds_sampling = 0.0,
+         seconds_levelling = 0.0, seconds_total = 0.0;
+};
+
+class Texturer {
+ public:
+  // Throws artex::Error for invalid options or a template without UVs.
+  Texturer(const Template& tmpl, const TexturingOptions& options);
+  ~Texturer();
+
+  // color_bgr: the full colour image (CV_8UC3) of `frame`; camera: the colour camera;
+  // posed_vertices: V x 3 fitted template of that frame (world, m).
+  TextureFrameSummary AddFrame(int frame, const cv::Mat& color_bgr, const PinholeCamera& camera,
+                               const Eigen::MatrixX3d& posed_vertices);
+
+  // The current atlas (CV_8UC3, BGR, atlas_size^2): levelled (when on) and padded.
+  cv::Mat Atlas() const;
+  // F: source frame per triangle, -1 untextured.
+  const std::vector<int>& triangle_frames() const { return frames_; }
+  // V x 3 RGB in [0, 1] per template vertex from the current texture; valid[v] = 0 where no
+  // incident triangle is textured.
+  void VertexColors(Eigen::MatrixX3d* rgb, std::vector<uint8_t>* valid) const;
+  // A label map for inspection: every triangle's UV footprint coloured by its source frame.
+  cv::Mat LabelMap() const;
+  const ImagePool& pool() const { return *pool_; }
+  const TextureMesh& mesh() const { return mesh_; }
+  const AtlasMap& atlas_map() const { return *map_; }
+
+ private:
+  Template template_;
+  TexturingOptions options_;
+  TextureMesh mesh_;
+  std::unique_ptr<AtlasMap> map_;
+  std::unique_ptr<ImagePool> pool_;
+  std::unique_ptr<MrfSolver> solver_;
+  AtlasImage base_;
+  std::vector<int> frames_;          // F
+  std::vector<double> seam_distance_;
+  std::vector<double> edge_weight_;
+  Eigen::MatrixX3f corrections_;     // 3F x 3
+  int frames_seen_ = 0;
+};
+
+// Renders a textured template (per-corner UVs into `atlas`, bilinear) through a camera: the
+// image (CV_8UC3, BGR) and a coverage mask (CV_8UC1). Background pixels are black.
+void RenderTextured(const Template& tmpl, const Eigen::MatrixX3d& posed_vertices,
+                    const cv::Mat& atlas, const PinholeCamera& camera, cv::Mat* image,
+                    cv::Mat* mask);
+
+}  // namespace artex
