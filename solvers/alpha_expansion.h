@@ -1,1 +1,51 @@
+// Alpha-expansion (Boykov, Veksler & Zabih 2001): for each label alpha in turn, the best move
+// letting any node switch to alpha is one s-t min cut (Kolmogorov's maxflow). Non-submodular
+// move terms are majorised (off-diagonal entries raised, the current state kept exact; a
+// truncation in the sense of Rother et al. 2005), so an accepted move never raises the energy.
+// Within 2x of the optimum on Potts energies; exact on submodular two-label energies.
 #pragma once
+
+#include <memory>
+#include <vector>
+
+#include "solvers/mrf.h"
+
+namespace artex {
+
+class AlphaExpansionSolver : public MrfSolver {
+ public:
+  explicit AlphaExpansionSolver(const MrfSolverOptions& options) : options_(options) {}
+  MrfSummary Solve(const MrfProblem& problem, std::vector<int>* labels) override;
+
+ private:
+  MrfSolverOptions options_;
+};
+
+namespace mrf_internal {
+
+// A binary energy sum_v U_v(y_v) + sum P_uv(y_u, y_v) over move variables y in {0, 1}
+// (0 = keep the current label), minimised exactly by one s-t min cut. Pair terms that are not
+// submodular (A + D > B + C) are replaced by a majoriser that is exact at the current state
+// (cur_u, cur_v): the off-diagonal entries not equal to the current state are raised by the
+// excess, so the cut's optimum never has a higher true energy than the current state.
+class BinaryMoveCut {
+ public:
+  BinaryMoveCut();
+  ~BinaryMoveCut();
+  // Starts a new move with num_vars variables (all-zero unaries, no pair terms).
+  void Reset(int num_vars, int expected_pairs);
+  void AddUnary(int v, double cost0, double cost1);
+  // Pair term with E(0,0) = a, E(0,1) = b, E(1,0) = c, E(1,1) = d. Returns true when the term
+  // was not submodular and had to be majorised.
+  bool AddPair(int u, int v, double a, double b, double c, double d, bool cur_u, bool cur_v);
+  // Minimises; (*y)[v] = 1 for variables on the sink side (switch), 0 otherwise (ties keep 0).
+  void Solve(std::vector<char>* y);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace mrf_internal
+
+}  // namespace artex
