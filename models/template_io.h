@@ -1,1 +1,94 @@
+// Template files: glTF 2.0 binary (.glb) skinned meshes that any glTF viewer or Blender can
+// open, with the paper's per-vertex skinning constants (joint k, w_l, tau; eq. 2) kept in
+// custom attributes so that reading back is exact up to float precision.
+// Layout and conventions: docs/formats-template.md.
+//
+// The standard glTF skin is a linear-blend approximation of the paper's model: weight w_l on
+// joint k and 1 - w_l on its parent (the root joint's parent is the global-similarity node).
+// It is exact when no joint twists; glTF cannot express the cylindrical SLERP of the twist.
 #pragma once
+
+#include <string>
+#include <vector>
+
+#include "models/pose.h"
+#include "models/template.h"
+
+namespace artex {
+
+// An optional base-colour texture embedded as PNG. Either `png` holds an encoded PNG file,
+// or `rgb` holds width x height RGB8 pixels, row-major, row 0 at v = 0 (glTF convention).
+struct GlbTexture {
+  std::vector<unsigned char> png;
+  std::vector<unsigned char> rgb;
+  int width = 0;
+  int height = 0;
+
+  bool empty() const { return png.empty() && rgb.empty(); }
+};
+
+struct GlbReadOptions {
+  // Largest accepted |sum of WEIGHTS_0 (+ WEIGHTS_1) - 1| per vertex.
+  double weight_sum_tolerance = 1e-3;
+  // Largest accepted distance of a stored weight or tau from [0, 1] (float round-off).
+  double unit_interval_tolerance = 1e-6;
+};
+
+// Writes `tmpl` (must pass Template::IsValid) as a skinned glTF binary, through a temporary
+// file and a rename. Throws artex::Error naming `path` on an invalid template, texture or an
+// I/O failure; never leaves a partial file.
+void WriteTemplateGlb(const std::string& path, const Template& tmpl,
+                      const GlbTexture* texture = nullptr);
+
+// As WriteTemplateGlb, plus one animation with a keyframe per pose at `frame_rate` Hz: joint
+// rotations R_j on the joint nodes, the global similarity (s0, R0, t0) on the root node,
+// linearly interpolated (quaternion slerp). Every pose must have tmpl.num_joints() joints,
+// finite entries and a positive scale; frame_rate > 0; at least one pose.
+void WriteAnimatedGlb(const std::string& path, const Template& tmpl,
+                      const std::vector<Pose>& poses, double frame_rate,
+                      const GlbTexture* texture = nullptr);
+
+// In-memory encoders behind the two writers (GLB bytes).
+std::string EncodeTemplateGlb(const Template& tmpl, const GlbTexture* texture = nullptr);
+std::string EncodeAnimatedGlb(const Template& tmpl, const std::vector<Pose>& poses,
+                              double frame_rate, const GlbTexture* texture = nullptr);
+
+// Reads a file written by WriteTemplateGlb / WriteAnimatedGlb (animations are ignored). The
+// embedded base-colour image, if any and if `texture` is non-null, is returned as PNG bytes
+// (texture->png; empty when the file has none). Throws artex::Error naming `path` and the
+// problem: unreadable, truncated or malformed GLB, missing artex attributes (files without
+// them must go through ImportGltfSkinnedMesh), non-finite values, skin weights that do not sum
+// to 1, cycles in the joint hierarchy, or a result failing Template::IsValid.
+Template ReadTemplateGlb(const std::string& path, GlbTexture* texture = nullptr,
+                         const GlbReadOptions& options = GlbReadOptions());
+
+// Per-vertex linear-blend skinning weights: for every vertex a list of (joint, weight) pairs
+// with weights summing to 1. Shared by the importers (models/makehuman_import.h).
+struct JointWeight {
+  int joint = 0;
+  double weight = 0.0;
+};
+using VertexJointWeights = std::vector<std::vector<JointWeight>>;
+
+struct GltfImportOptions {
+  GlbReadOptions read;
+  // Vertices whose positions coincide exactly (UV-seam copies) are merged into one template
+  // vertex; their first copy's skin weights are kept.
+  bool weld_identical_positions = true;
+  // Joint weights below this are dropped before the conversion (then renormalised).
+  double min_joint_weight = 1e-4;
+};
+
+// Imports any glTF 2.0 (.glb or .gltf with embedded buffers) skinned mesh without artex
+// attributes: the first node with both a mesh and a skin, all its triangle primitives. The
+// rest pose is the scene's default node pose; joint centres are the joint nodes' world
+// positions there; the joint tree follows the node hierarchy (exactly one root joint);
+// linear-blend weights are converted by ConvertLbsWeights (models/makehuman_import.h), twist
+// axes by DefaultTwistAxes. If `lbs_weights` is non-null it receives the original weights
+// (after welding and thresholding) per template vertex, over template joint indices.
+// Throws artex::Error naming `path` and the problem.
+Template ImportGltfSkinnedMesh(const std::string& path,
+                               const GltfImportOptions& options = GltfImportOptions(),
+                               VertexJointWeights* lbs_weights = nullptr);
+
+}  // namespace artex
