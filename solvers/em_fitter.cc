@@ -1,1 +1,469 @@
-// placeholder: filled in by its owner
+#include "solvers/em_fitter.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include "energies/pose_smoothness_term.h"
+#include "models/error.h"
+#include "models/normals.h"
+
+namespace artex {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// sqrt(w) (s - s_ref): holds the global scale near its estimate (ScaleMode::kEstimateThenPrior).
+class ScalePriorTerm : public FittingTerm {
+ public:
+  ScalePriorTerm(double weight, double reference)
+      : sqrt_weight_(std::sqrt(weight)), reference_(reference) {}
+  std::string name() const override { return "scale_prior"; }
+  int num_residuals() const override { return 1; }
+  bool Evaluate(const FitEvaluation& eval, double* residuals, double* jacobian) const override {
+    residuals[0] = sqrt_weight_ * (eval.pose.scale - reference_);
+    if (jacobian != nullptr) {
+      Eigen::Map<Eigen::VectorXd>(jacobian, eval.delta.size()).setZero();
+      jacobian[kScaleIndex] = sqrt_weight_;
+    }
+    return std::isfinite(residuals[0]);
+  }
+
+ private:
+  double sqrt_weight_;
+  double reference_;
+};
+
+}  // namespace
+
+const std::map<std::string, CorrespondenceModel>& CorrespondenceModelNames() {
+  static const std::map<std::string, CorrespondenceModel> kNames = {
+      {"one_to_many", CorrespondenceModel::kOneToMany},
+      {"one_to_one", CorrespondenceModel::kOneToOne}};
+  return kNames;
+}
+
+const std::map<std::string, ScaleMode>& ScaleModeNames() {
+  static const std::map<std::string, ScaleMode> kNames = {
+      {"free", ScaleMode::kFree},
+      {"estimate_then_fix", ScaleMode::kEstimateThenFix},
+      {"estimate_then_prior", ScaleMode::kEstimateThenPrior},
+      {"fixed", ScaleMode::kFixed}};
+  return kNames;
+}
+
+const char* FrameTerminationName(FrameTermination termination) {
+  switch (termination) {
+    case FrameTermination::kConverged:
+      return "converged";
+    case FrameTermination::kMaxIterations:
+      return "max_iterations";
+    case FrameTermination::kFailed:
+      return "failed";
+  }
+  return "unknown";
+}
+
+bool EMFitterOptions::IsValid(std::string* error) const {
+  std::ostringstream msg;
+  std::string inner;
+  auto radii_ok = [](const std::vector<double>& radii) {
+    for (double r : radii) {
+      if (!(std::isfinite(r) && r > 0.0)) return false;
+    }
+    return true;
+  };
+  if (!estep.IsValid(&inner)) {
+    msg << "estep." << inner;
+  } else if (!one_to_one.IsValid(&inner)) {
+    msg << "one_to_one." << inner;
+  } else if (!solver.IsValid(&inner)) {
+    msg << "solver." << inner;
+  } else if (!tikhonov.IsValid(&inner)) {
+    msg << "tikhonov." << inner;
+  } else if (!smoothness.IsValid(&inner)) {
+    msg << "smoothness." << inner;
+  } else if (!icp.IsValid(&inner)) {
+    msg << "icp." << inner;
+  } else if (estep.mode == EStepMode::kRadius &&
+             (first_frame_radii.empty() || tracking_radii.empty())) {
+    msg << "first_frame_radii/tracking_radii: expected at least one radius for the radius "
+           "E-step, found an empty schedule";
+  } else if (!radii_ok(first_frame_radii) || !radii_ok(tracking_radii)) {
+    msg << "first_frame_radii/tracking_radii: expected finite radii > 0 (m)";
+  } else if (first_frame_iterations_per_stage < 1 || tracking_iterations_per_stage < 1) {
+    msg << "iterations_per_stage: expected >= 1, found " << first_frame_iterations_per_stage
+        << " / " << tracking_iterations_per_stage;
+  } else if (max_iterations < 1) {
+    msg << "max_iterations: expected >= 1, found " << max_iterations;
+  } else if (!(relative_cost_tolerance >= 0.0) || !(parameter_tolerance >= 0.0)) {
+    msg << "relative_cost_tolerance/parameter_tolerance: expected values >= 0";
+  } else if (scale_estimation_frames < 1) {
+    msg << "scale_estimation_frames: expected >= 1, found " << scale_estimation_frames;
+  } else if (!(std::isfinite(scale_prior_weight) && scale_prior_weight >= 0.0)) {
+    msg << "scale_prior_weight: expected a finite value >= 0, found " << scale_prior_weight;
+  } else if (min_scan_points < 0) {
+    msg << "min_scan_points: expected >= 0, found " << min_scan_points;
+  } else if (!(max_mean_motion > 0.0) || !(max_scale_change > 0.0)) {
+    msg << "max_mean_motion/max_scale_change: expected values > 0";
+  } else {
+    return true;
+  }
+  if (error) *error = msg.str();
+  return false;
+}
+
+std::string FitSummary::BriefReport() const {
+  std::ostringstream out;
+  out << "frame " << frame << ": " << FrameTerminationName(termination) << " after "
+      << iterations << " iterations, cost " << initial_cost << " -> " << final_cost
+      << ", scale " << scale << ", " << total_seconds * 1e3 << " ms (E " << estep_seconds * 1e3
+      << ", M " << mstep_seconds * 1e3 << ", skinning " << skinning_seconds * 1e3 << ")";
+  if (too_few_points) out << " [too few points]";
+  if (non_finite) out << " [non-finite]";
+  if (diverged) out << " [diverged]";
+  return out.str();
+}
+
+struct EMFitter::FrameState {
+  Clock::time_point start;
+  std::unique_ptr<EStep> estep;
+  Pose initial_guess;
+  Eigen::MatrixX3d initial_posed;
+  std::vector<double> radii;  // empty: a single stage without radius
+  int iterations_per_stage = 1;
+  int max_iterations = 1;
+  bool first_frame = false;
+  bool scale_free = true;
+  int stage = 0;
+  int stage_iteration = 0;
+  double stage_last_cost = std::numeric_limits<double>::quiet_NaN();
+  bool done = false;
+  bool converged = false;
+  FitSummary summary;
+  // Buffers reused across iterations.
+  Eigen::MatrixX3d posed, normals;
+  CorrespondenceTargets targets;
+  NearestTargets nearest;
+  Pose previous;  // temporal prior reference (valid when has_previous)
+  bool has_previous = false;
+  std::unique_ptr<PoseSmoothnessTerm> smoothness;
+};
+
+EMFitter::EMFitter(const Template& tmpl, const EMFitterOptions& options) : options_(options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw Error("fitting options: " + error);
+  if (!options.joint_limits.IsValid(tmpl.num_joints(), &error)) {
+    throw Error("fitting options: joint_limits." + error);
+  }
+  skinning_ = std::make_unique<Skinning>(tmpl);
+  solver_ = FitSolver::Create(options.solver);
+  initial_pose_ = Pose::Identity(tmpl.num_joints());
+  pose_ = initial_pose_;
+}
+
+EMFitter::~EMFitter() = default;
+
+void EMFitter::SetInitialPose(const Pose& pose) {
+  if (pose.num_joints() != skinning_->model().num_joints() || !pose.AllFinite()) {
+    std::ostringstream msg;
+    msg << "initial pose: expected a finite pose with " << skinning_->model().num_joints()
+        << " joints, found " << pose.num_joints() << " joints";
+    throw Error(msg.str());
+  }
+  initial_pose_ = pose;
+}
+
+void EMFitter::SetTemplateColors(const Eigen::MatrixX3d& colors) {
+  if (colors.rows() != 0 && colors.rows() != skinning_->model().num_vertices()) {
+    std::ostringstream msg;
+    msg << "template colours: expected 0 or " << skinning_->model().num_vertices()
+        << " rows, found " << colors.rows();
+    throw Error(msg.str());
+  }
+  template_colors_ = colors;
+}
+
+void EMFitter::Reset() {
+  history_.clear();
+  frame_ = 0;
+  accepted_frames_ = 0;
+  scale_estimate_ = 1.0;
+  state_.reset();
+  pose_ = initial_pose_;
+}
+
+bool EMFitter::ScaleIsFree() const {
+  switch (options_.scale_mode) {
+    case ScaleMode::kFree:
+      return true;
+    case ScaleMode::kFixed:
+      return false;
+    case ScaleMode::kEstimateThenFix:
+      return accepted_frames_ < options_.scale_estimation_frames;
+    case ScaleMode::kEstimateThenPrior:
+      return true;
+  }
+  return true;
+}
+
+Pose EMFitter::PredictNextPose() const {
+  if (history_.empty()) return initial_pose_;
+  Pose guess = history_.back();
+  if (options_.constant_velocity_prediction && history_.size() >= 2) {
+    guess = ConstantVelocityPrediction(history_[history_.size() - 2], history_.back());
+  }
+  const bool estimated = accepted_frames_ >= options_.scale_estimation_frames;
+  if (options_.scale_mode == ScaleMode::kFixed ||
+      (estimated && options_.scale_mode != ScaleMode::kFree)) {
+    guess.scale = options_.scale_mode == ScaleMode::kFixed ? history_.back().scale
+                                                          : scale_estimate_;
+  }
+  return guess;
+}
+
+void EMFitter::BeginFrame(const Scan& scan, const Pose& initial_guess) {
+  if (initial_guess.num_joints() != skinning_->model().num_joints()) {
+    std::ostringstream msg;
+    msg << "initial guess: expected " << skinning_->model().num_joints() << " joints, found "
+        << initial_guess.num_joints();
+    throw Error(msg.str());
+  }
+  state_ = std::make_unique<FrameState>();
+  FrameState& st = *state_;
+  st.start = Clock::now();
+  st.first_frame = history_.empty();
+  st.scale_free = ScaleIsFree();
+  st.initial_guess = initial_guess;
+  st.summary.frame = frame_;
+  st.summary.num_scan_points = scan.size();
+  pose_ = initial_guess;
+  if (!initial_guess.AllFinite()) {
+    st.summary.non_finite = true;
+    st.done = true;
+    return;
+  }
+  if (scan.size() < std::max(options_.min_scan_points, 1)) {
+    st.summary.too_few_points = true;
+    st.done = true;
+    return;
+  }
+  const auto estep_start = Clock::now();
+  st.estep = std::make_unique<EStep>(scan, options_.estep);
+  st.summary.estep_seconds += SecondsSince(estep_start);
+  const auto skin_start = Clock::now();
+  skinning_->Apply(initial_guess, &st.initial_posed);
+  st.summary.skinning_seconds += SecondsSince(skin_start);
+
+  const bool radius_mode = options_.correspondence == CorrespondenceModel::kOneToMany &&
+                           options_.estep.mode == EStepMode::kRadius;
+  if (radius_mode) st.radii = st.first_frame ? options_.first_frame_radii : options_.tracking_radii;
+  st.iterations_per_stage = st.first_frame ? options_.first_frame_iterations_per_stage
+                                           : options_.tracking_iterations_per_stage;
+  st.max_iterations = st.first_frame ? 2 * options_.max_iterations : options_.max_iterations;
+  if (!radius_mode) st.iterations_per_stage = st.max_iterations;
+  if (!history_.empty()) {
+    st.previous = history_.back();
+    st.has_previous = true;
+    if (history_.size() >= 2 && !options_.smoothness.AllZero()) {
+      st.smoothness = std::make_unique<PoseSmoothnessTerm>(
+          options_.smoothness, history_[history_.size() - 2], history_.back());
+    }
+  }
+}
+
+EMIterationInfo EMFitter::Iterate() {
+  if (!state_) throw Error("EM fitter: Iterate() called before BeginFrame()");
+  FrameState& st = *state_;
+  EMIterationInfo info;
+  info.frame = frame_;
+  info.iteration = st.summary.iterations;
+  info.stage = st.stage;
+  if (st.done) {
+    info.converged = st.converged;
+    return info;
+  }
+  const Template& model = skinning_->model();
+
+  // Pose the template and its normals.
+  auto start = Clock::now();
+  skinning_->Apply(pose_, &st.posed);
+  ComputeVertexNormals(st.posed, model.triangles, &st.normals);
+  st.summary.skinning_seconds += SecondsSince(start);
+
+  // E-step (colour only once a texture exists and never on the first frame).
+  start = Clock::now();
+  PosedTemplateView view;
+  view.vertices = &st.posed;
+  view.normals = &st.normals;
+  if (!st.first_frame && template_colors_.rows() == model.num_vertices()) {
+    view.colors = &template_colors_;
+  }
+  const double radius = st.radii.empty() ? 0.0 : st.radii[st.stage];
+  info.radius = radius;
+  double total_weight = 0.0, constant = 0.0;
+  std::unique_ptr<FittingTerm> data_term;
+  if (options_.correspondence == CorrespondenceModel::kOneToMany) {
+    st.estep->Compute(view, radius, &st.targets);
+    total_weight = st.targets.total_weight();
+    info.num_pairs = st.targets.num_pairs;
+  } else {
+    st.estep->FindNearest(view, options_.one_to_one, &st.nearest);
+    total_weight = st.nearest.num_matched;
+    info.num_pairs = st.nearest.num_matched;
+  }
+  st.summary.estep_seconds += SecondsSince(start);
+  info.total_weight = total_weight;
+  if (!(total_weight > 0.0) || !std::isfinite(total_weight)) {
+    // No correspondences at all: nothing to fit.
+    if (std::isfinite(total_weight)) {
+      st.summary.too_few_points = true;
+    } else {
+      st.summary.non_finite = true;
+    }
+    st.done = true;
+    return info;
+  }
+  const double data_weight = options_.normalize_data_term ? 1.0 / total_weight : 1.0;
+  if (options_.correspondence == CorrespondenceModel::kOneToMany) {
+    data_term = std::make_unique<OneToManyCorrespondenceTerm>(&st.targets, data_weight);
+    constant = data_weight * st.targets.constant;
+  } else {
+    data_term = std::make_unique<OneToOneCorrespondenceTerm>(
+        &st.nearest, options_.one_to_one.metric, data_weight);
+  }
+
+  // M-step problem.
+  TikhonovTerm tikhonov(options_.tikhonov, model.num_joints(),
+                        st.has_previous ? &st.previous : nullptr);
+  JointLimitTerm joint_limits(options_.joint_limits, model.num_joints());
+  const bool prior_scale = options_.scale_mode == ScaleMode::kEstimateThenPrior &&
+                           accepted_frames_ >= options_.scale_estimation_frames;
+  ScalePriorTerm scale_prior(options_.scale_prior_weight, scale_estimate_);
+  FitProblem problem;
+  problem.skinning = skinning_.get();
+  problem.anchor = pose_;
+  problem.terms.push_back(data_term.get());
+  problem.terms.push_back(&tikhonov);
+  if (options_.joint_limits.weight > 0.0) problem.terms.push_back(&joint_limits);
+  if (st.smoothness) problem.terms.push_back(st.smoothness.get());
+  if (prior_scale) problem.terms.push_back(&scale_prior);
+  if (!st.scale_free) problem.constant_parameters.push_back(kScaleIndex);
+
+  const FitSolverSummary m = solver_->Solve(problem, &pose_);
+  st.summary.mstep_seconds += m.seconds;
+  st.summary.skinning_seconds += m.skinning_seconds;
+
+  info.cost = m.final_cost + constant;
+  info.max_update = m.delta.size() > 0 ? m.delta.cwiseAbs().maxCoeff() : 0.0;
+  info.scale = pose_.scale;
+  if (st.summary.iterations == 0) st.summary.initial_cost = m.initial_cost + constant;
+  ++st.summary.iterations;
+  st.summary.final_cost = info.cost;
+  if (m.termination == FitTermination::kFailure || !pose_.AllFinite() ||
+      !std::isfinite(info.cost)) {
+    st.summary.non_finite = true;
+    st.done = true;
+    st.summary.trace.push_back(info);
+    if (callback_) callback_(info);
+    return info;
+  }
+
+  // Convergence of the stage and of the frame.
+  ++st.stage_iteration;
+  const double relative_change =
+      std::isnan(st.stage_last_cost)
+          ? std::numeric_limits<double>::infinity()
+          : std::abs(info.cost - st.stage_last_cost) / std::max(std::abs(info.cost), 1e-300);
+  st.stage_last_cost = info.cost;
+  info.stage_converged = info.max_update < options_.parameter_tolerance ||
+                         relative_change < options_.relative_cost_tolerance;
+  const int num_stages = std::max<int>(1, static_cast<int>(st.radii.size()));
+  const bool last_stage = st.stage + 1 >= num_stages;
+  if (info.stage_converged || st.stage_iteration >= st.iterations_per_stage) {
+    if (last_stage) {
+      st.done = true;
+      st.converged = info.stage_converged;
+      info.converged = info.stage_converged;
+    } else {
+      ++st.stage;
+      st.stage_iteration = 0;
+      st.stage_last_cost = std::numeric_limits<double>::quiet_NaN();
+    }
+  }
+  if (st.summary.iterations >= st.max_iterations) st.done = true;
+  st.summary.trace.push_back(info);
+  if (callback_) callback_(info);
+  return info;
+}
+
+FitSummary EMFitter::EndFrame() {
+  if (!state_) throw Error("EM fitter: EndFrame() called before BeginFrame()");
+  FrameState& st = *state_;
+  FitSummary summary = std::move(st.summary);
+  summary.scale = pose_.scale;
+  bool ok = !summary.too_few_points && !summary.non_finite;
+  if (ok && st.initial_posed.rows() > 0) {
+    Eigen::MatrixX3d posed;
+    const auto start = Clock::now();
+    skinning_->Apply(pose_, &posed);
+    summary.skinning_seconds += SecondsSince(start);
+    summary.mean_motion = (posed - st.initial_posed).rowwise().norm().mean();
+    const double scale_change = std::abs(pose_.scale / st.initial_guess.scale - 1.0);
+    if (!std::isfinite(summary.mean_motion) || summary.mean_motion > options_.max_mean_motion ||
+        !(scale_change <= options_.max_scale_change)) {
+      summary.diverged = true;
+      ok = false;
+    }
+  }
+  if (ok) {
+    summary.termination = st.converged ? FrameTermination::kConverged
+                                       : FrameTermination::kMaxIterations;
+    if (st.scale_free && options_.scale_mode != ScaleMode::kFree &&
+        accepted_frames_ < options_.scale_estimation_frames) {
+      // Running mean of the scale over the estimation frames.
+      const double n = static_cast<double>(accepted_frames_);
+      scale_estimate_ = (scale_estimate_ * n + pose_.scale) / (n + 1.0);
+    }
+    history_.push_back(pose_);
+    ++accepted_frames_;
+  } else {
+    summary.termination = FrameTermination::kFailed;
+    // Keep the previous pose (zero velocity for the next prediction).
+    if (!history_.empty()) {
+      pose_ = history_.back();
+      history_.push_back(pose_);
+    } else {
+      pose_ = st.initial_guess;
+    }
+    summary.scale = pose_.scale;
+  }
+  if (history_.size() > 2) history_.erase(history_.begin(), history_.end() - 2);
+  summary.total_seconds = SecondsSince(st.start) + summary.icp_seconds;
+  ++frame_;
+  state_.reset();
+  return summary;
+}
+
+FitSummary EMFitter::FitFrame(const Scan& scan) {
+  Pose guess = PredictNextPose();
+  double icp_seconds = 0.0;
+  if (history_.empty() && options_.icp_first_frame &&
+      scan.size() >= std::max(options_.min_scan_points, 3)) {
+    const auto start = Clock::now();
+    guess = AlignByIcp(*skinning_, guess, scan, options_.icp).pose;
+    icp_seconds = SecondsSince(start);
+  }
+  BeginFrame(scan, guess);
+  while (!state_->done) Iterate();
+  state_->summary.icp_seconds = icp_seconds;
+  return EndFrame();
+}
+
+}  // namespace artex

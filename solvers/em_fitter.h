@@ -1,1 +1,184 @@
+// EM fitting of the template to one scan per frame (paper sec. 3, eq. 3-5; DESIGN.md
+// "Fitting energy"). Per EM iteration: pose the template (S(v; theta), normals), E-step
+// (P_t, mu_t; solvers/estep.h) or nearest-neighbour pairs (ICP baseline), then an M-step
+// (FitSolver: Gauss-Newton or Ceres LM) over the data term plus priors (Tikhonov update,
+// temporal, joint limits, constant-velocity smoothness, scale prior).
+// Radius E-steps follow a coarse-to-fine schedule of stages; the first frame uses its own
+// (wider) schedule. The first frame starts from a predefined pose pre-aligned by similarity
+// ICP (solvers/icp_init.h); later frames from the previous pose, optionally extrapolated at
+// constant velocity. The global scale is free on the first frame(s) and then fixed or held by
+// a prior (the literal energy is degenerate with a free scale). Bad frames (too few points,
+// non-finite values, divergence) are flagged and keep the previous pose.
 #pragma once
+
+#include <functional>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "energies/joint_limit_term.h"
+#include "energies/one_to_many_correspondence.h"
+#include "energies/one_to_one_correspondence.h"
+#include "energies/tikhonov_term.h"
+#include "models/pose.h"
+#include "models/skinning.h"
+#include "models/template.h"
+#include "sensors/scan.h"
+#include "solvers/estep.h"
+#include "solvers/fit_solver.h"
+#include "solvers/icp_init.h"
+
+namespace artex {
+
+// kOneToMany: the paper's probabilistic correspondences; kOneToOne: articulated ICP baseline.
+enum class CorrespondenceModel { kOneToMany, kOneToOne };
+const std::map<std::string, CorrespondenceModel>& CorrespondenceModelNames();
+
+// kFree: optimised on every frame (literal paper). kEstimateThenFix: free during the first
+// `scale_estimation_frames` frames, then fixed. kEstimateThenPrior: afterwards held by a prior
+// of weight scale_prior_weight towards the estimate. kFixed: never optimised (the initial or
+// ICP value).
+enum class ScaleMode { kFree, kEstimateThenFix, kEstimateThenPrior, kFixed };
+const std::map<std::string, ScaleMode>& ScaleModeNames();
+
+struct EMFitterOptions {
+  CorrespondenceModel correspondence = CorrespondenceModel::kOneToMany;
+  EStepOptions estep;              // one-to-many E-step (mode, weights, k, voxel subsampling)
+  OneToOneOptions one_to_one;      // ICP baseline pairing
+  FitSolverOptions solver;         // M-step backend
+
+  // Radius schedule (m) of the kRadius E-step, one stage per entry, coarse to fine.
+  std::vector<double> first_frame_radii = {0.15, 0.10, 0.05, 0.03};
+  std::vector<double> tracking_radii = {0.05, 0.03};
+  int first_frame_iterations_per_stage = 10;  // max EM iterations per stage, first frame
+  int tracking_iterations_per_stage = 6;      // max EM iterations per stage, later frames
+  int max_iterations = 30;                    // per frame, over all stages (first frame: 2x)
+
+  // Convergence (per stage; the frame converges when its last stage does):
+  double relative_cost_tolerance = 1e-3;  // |cost change| / cost between EM iterations
+  double parameter_tolerance = 2e-4;      // max |M-step update| component (m, rad)
+
+  // Data term weight 1 / sum_t P_t (cost = weighted mean squared distance, m^2) when true;
+  // the literal unnormalised sum when false. Prior weights are relative to this choice.
+  bool normalize_data_term = true;
+  TikhonovOptions tikhonov;            // Gamma on the update, temporal prior to frame f-1
+  JointLimitOptions joint_limits;      // soft joint boxes (weight 0: off)
+  PoseGroupWeights smoothness;         // constant-velocity prior (all 0: off)
+
+  ScaleMode scale_mode = ScaleMode::kEstimateThenFix;
+  int scale_estimation_frames = 1;
+  double scale_prior_weight = 1.0;     // kEstimateThenPrior (cost units per unit^2)
+
+  bool icp_first_frame = true;         // pre-align the first frame's pose by similarity ICP
+  IcpInitOptions icp;
+  bool constant_velocity_prediction = true;  // initial guess of frame f from f-1 and f-2
+
+  // Robustness.
+  int min_scan_points = 100;           // fewer: frame flagged too_few_points, pose kept
+  double max_mean_motion = 0.5;        // mean vertex displacement (m) from the frame's initial
+                                       // guess beyond which the frame is flagged diverged
+  double max_scale_change = 0.5;       // relative scale change within a frame: diverged
+
+  bool IsValid(std::string* error) const;
+};
+
+struct EMIterationInfo {
+  int frame = 0;
+  int iteration = 0;      // 0-based within the frame
+  int stage = 0;
+  double radius = 0.0;    // E-step radius of the stage (kRadius), else 0
+  double cost = 0.0;      // after the M-step: data (incl. the E-step constant) + priors
+  double max_update = 0.0;
+  double total_weight = 0.0;  // sum_t P_t (or matched vertices, one-to-one)
+  long long num_pairs = 0;
+  double scale = 1.0;
+  bool stage_converged = false;
+  bool converged = false;     // last stage converged: the frame is done
+};
+
+enum class FrameTermination { kConverged, kMaxIterations, kFailed };
+const char* FrameTerminationName(FrameTermination termination);
+
+struct FitSummary {
+  int frame = 0;
+  int iterations = 0;
+  double initial_cost = 0.0;   // of the first EM iteration (before its M-step)
+  double final_cost = 0.0;
+  FrameTermination termination = FrameTermination::kFailed;
+  bool too_few_points = false;
+  bool non_finite = false;
+  bool diverged = false;
+  int num_scan_points = 0;
+  double scale = 1.0;
+  double mean_motion = 0.0;    // mean vertex displacement from the initial guess (m)
+  // Timings (s).
+  double icp_seconds = 0.0;
+  double estep_seconds = 0.0;
+  double mstep_seconds = 0.0;  // includes the skinning done inside the solver
+  double skinning_seconds = 0.0;  // all posing (E-step posing + inside the M-step)
+  double total_seconds = 0.0;
+  std::vector<EMIterationInfo> trace;
+
+  bool ok() const { return !too_few_points && !non_finite && !diverged; }
+  std::string BriefReport() const;
+};
+
+class EMFitter {
+ public:
+  // Throws artex::Error on an invalid template or options.
+  EMFitter(const Template& tmpl, const EMFitterOptions& options);
+  ~EMFitter();
+
+  const EMFitterOptions& options() const { return options_; }
+  const Skinning& skinning() const { return *skinning_; }
+
+  // Fits the next frame and returns its summary; pose() is the result (the previous pose when
+  // the frame failed). The first frame starts from initial_pose() (rest pose unless set),
+  // pre-aligned by ICP when options.icp_first_frame.
+  FitSummary FitFrame(const Scan& scan);
+
+  // Lower level (GTSAM style): BeginFrame prepares the frame (kd-tree, initial guess, priors);
+  // Iterate runs one EM iteration (E-step + M-step) and advances the radius schedule.
+  void BeginFrame(const Scan& scan, const Pose& initial_guess);
+  EMIterationInfo Iterate();
+  // Completes the frame begun by BeginFrame: robustness checks, history update.
+  FitSummary EndFrame();
+
+  const Pose& pose() const { return pose_; }
+  int frames_fitted() const { return frame_; }
+  void SetInitialPose(const Pose& pose);   // pose for the first frame (before ICP)
+  const Pose& initial_pose() const { return initial_pose_; }
+  // Per-vertex template colours (T x 3, [0,1]) for the colour term; empty disables it.
+  void SetTemplateColors(const Eigen::MatrixX3d& colors);
+  // The guess FitFrame would start the next frame from.
+  Pose PredictNextPose() const;
+  // Forgets the history: the next frame is a first frame again.
+  void Reset();
+
+  // Progress hook, called after every EM iteration (never prints).
+  void SetIterationCallback(std::function<void(const EMIterationInfo&)> callback) {
+    callback_ = std::move(callback);
+  }
+
+ private:
+  struct FrameState;
+  bool ScaleIsFree() const;
+
+  EMFitterOptions options_;
+  std::unique_ptr<Skinning> skinning_;
+  std::unique_ptr<FitSolver> solver_;
+  Eigen::MatrixX3d template_colors_;
+  Pose initial_pose_;
+  Pose pose_;
+  std::vector<Pose> history_;  // accepted poses of previous frames (last two kept)
+  int frame_ = 0;
+  int accepted_frames_ = 0;     // frames that passed the robustness checks
+  double scale_estimate_ = 1.0;
+  std::unique_ptr<FrameState> state_;
+  std::function<void(const EMIterationInfo&)> callback_;
+};
+
+}  // namespace artex
