@@ -20,8 +20,8 @@ Eigen::Vector3d PinholeCamera::Center() const {
 Eigen::Isometry3d PinholeCamera::LookAt(const Eigen::Vector3d& eye, const Eigen::Vector3d& target,
                                         const Eigen::Vector3d& up) {
   const Eigen::Vector3d z = (target - eye).normalized();
-  const Eigen::Vector3d x = z.cross(-up).normalized();  // image x to the right
-  const Eigen::Vector3d y = z.cross(x);                 // image y downwards
+  const Eigen::Vector3d x = z.cross(up).normalized();  // image x to the right (forward x up)
+  const Eigen::Vector3d y = z.cross(x);                // image y downwards (-up projected)
   Eigen::Matrix3d r;
   r.row(0) = x.transpose();
   r.row(1) = y.transpose();

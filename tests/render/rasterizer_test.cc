@@ -315,6 +315,24 @@ TEST(RasterizerTest, TrianglesCrossingTheNearPlaneAreRejected) {
   EXPECT_GT(hits, 0);
 }
 
+TEST(RasterizerTest, LookAtCameraShowsWorldUpAsImageUp) {
+  // A camera in front of the body (+z) looking at it: world +y appears upwards in the image
+  // and world +x (the body's left) to the right; projection and unprojection agree.
+  PinholeCamera camera = KinectLikeCamera();
+  camera.world_to_camera = PinholeCamera::LookAt(Eigen::Vector3d(0, 1, 3), Eigen::Vector3d(0, 1, 0),
+                                                 Eigen::Vector3d::UnitY());
+  const Eigen::Vector2d centre = camera.Project(Eigen::Vector3d(0, 1, 0));
+  const Eigen::Vector2d above = camera.Project(Eigen::Vector3d(0, 1.5, 0));
+  const Eigen::Vector2d right = camera.Project(Eigen::Vector3d(0.5, 1, 0));
+  EXPECT_NEAR(centre.x(), camera.cx, 1e-9);
+  EXPECT_NEAR(centre.y(), camera.cy, 1e-9);
+  EXPECT_LT(above.y(), centre.y() - 10);
+  EXPECT_GT(right.x(), centre.x() + 10);
+  EXPECT_NEAR(camera.world_to_camera.linear().determinant(), 1.0, 1e-12);
+  const Eigen::Vector3d back = camera.Unproject(right.x(), right.y(), 3.0);
+  EXPECT_NEAR((back - Eigen::Vector3d(0.5, 1, 0)).norm(), 0, 1e-9);
+}
+
 TEST(RasterizerTest, BadIndicesThrow) {
   Eigen::MatrixX3d v(3, 3);
   v.setOnes();
