@@ -1,1 +1,48 @@
+// The synthetic subject's true texture (albedo) for the virtual Kinect: a procedural,
+// clothing-like atlas over the template's UV charts (shirt with stripes and a printed
+// text-like panel, plaid trousers, shoes, skin for head and hands with hair and facial
+// marks). Patterns are defined in the rest-pose 3D frame, so they continue across UV seams;
+// each chart gets its own garment colourway. Deterministic given the seed.
 #pragma once
+
+#include <cstdint>
+#include <string>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "models/template.h"
+
+namespace artex {
+
+struct SubjectTextureOptions {
+  int size = 2048;                 // atlas side (texels); [64, 8192]
+  uint64_t seed = 1;               // colour choices, glyphs and fabric noise
+  double stripe_period_m = 0.05;   // shirt stripes (rest-pose height period, m)
+  double plaid_period_m = 0.08;    // trouser plaid (m)
+  double glyph_size_m = 0.012;     // height of one text glyph on the chest panel (m)
+  double sleeve_length_m = 0.10;   // how far the shirt sleeve reaches below the elbow (m)
+  double fabric_noise = 0.04;      // per-texel multiplicative albedo noise (relative)
+  int padding_texels = 4;          // chart colours dilated this far into the empty gutter
+  Eigen::Vector3d gutter_rgb = Eigen::Vector3d(0.5, 0.5, 0.5);  // texels outside all charts
+
+  // Returns false and describes the first invalid field in `error` (name, valid range, value).
+  bool IsValid(std::string* error) const;
+};
+
+// Returns a size x size CV_8UC3 image in BGR order (OpenCV), row 0 at v = 0 (glTF UVs:
+// texel (x, y) covers u in [x, x+1) / size, v in [y, y+1) / size). The template must have
+// UVs and joints named as in models/template_generator.h (other names fall back to the
+// shirt pattern). Throws artex::Error for invalid options or a template without UVs.
+cv::Mat GenerateSubjectTexture(const Template& subject, const SubjectTextureOptions& options);
+
+// Bilinear lookup (texel centres at ((x + 0.5) / W, (y + 0.5) / H), clamped at the border)
+// of a CV_8UC3 BGR image at glTF uv; returns linear RGB in [0, 1].
+Eigen::Vector3d SampleTextureBilinear(const cv::Mat& texture_bgr, const Eigen::Vector2d& uv);
+
+// V x 3 RGB in [0, 1]: the texture at each vertex (mean over its UV corners, which differ
+// only at chart seams). Vertices without a corner get the mean texture colour.
+// Throws artex::Error when the template has no UVs or the image is not CV_8UC3.
+Eigen::MatrixX3d VertexColorsFromTexture(const Template& tmpl, const cv::Mat& texture_bgr);
+
+}  // namespace artex

@@ -1,1 +1,252 @@
+// The synthetic "virtual Kinect" (DESIGN.md "Ground truth"): renders a textured, articulated
+// subject in a static scene (floor, back wall) into a Kinect-like depth camera (disparity
+// quantisation and noise, drop-outs at depth discontinuities and grazing angles, the IR
+// projector's shadow) and a separate colour camera (Lambert shading, per-frame exposure and
+// white-balance drift, sensor noise), and writes an artex sequence with ground truth
+// (sensors/sequence.h): pose and posed vertices per frame, true texture, subject.glb.
+// Everything is deterministic given the seeds (docs/synthesis.md).
 #pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "models/template.h"
+#include "models/template_generator.h"
+#include "render/camera.h"
+#include "sensors/calibration.h"
+#include "sensors/motion.h"
+#include "sensors/sequence.h"
+#include "sensors/subject_texture.h"
+
+namespace artex {
+
+// Noise presets for both cameras ("off" = ideal sensors: exact depth up to the 16-bit unit,
+// no drop-outs or shadow, constant exposure, no colour noise).
+enum class NoiseLevel { kOff, kDefault, kHigh };
+// "off", "default", "high"; throws artex::Error listing the valid names otherwise.
+NoiseLevel ParseNoiseLevel(const std::string& name);
+const char* NoiseLevelName(NoiseLevel level);
+
+struct DepthNoiseOptions {
+  // Disparity model d = b f / z (f = depth camera fx in pixels): quantised to
+  // disparity_step_px after adding Gaussian noise of disparity_noise_px, so the depth noise
+  // std is z^2 / (b f) * disparity_noise_px (Khoshelham & Elberink 2012).
+  double baseline_m = 0.075;          // b: IR camera to projector (m), > 0
+  double disparity_step_px = 0.125;   // 1/8 pixel sub-pixel disparity; 0 = no quantisation
+  double disparity_noise_px = 0.07;   // Gaussian std in disparity (px); >= 0
+  double min_depth_m = 0.4;           // nearer: missing (0)
+  double max_depth_m = 6.0;           // farther: missing
+  // Depth discontinuities: a pixel whose (2r+1)^2 neighbourhood of true depths spans more
+  // than edge_jump_m (or touches a pixel without a surface) is dropped with this probability.
+  double edge_jump_m = 0.08;
+  int edge_radius_px = 1;
+  double edge_drop_probability = 0.6;
+  // Grazing angles: angle between the surface normal and the viewing ray above this: missing.
+  double grazing_angle_deg = 78.0;
+  // IR projector shadow: the projector sits at projector_offset_m in the depth camera frame
+  // (x right); a surface point the projector cannot see (depth test against a rendering
+  // from the projector, tolerance shadow_tolerance_m) gets no pattern and is missing.
+  bool projector_shadow = true;
+  Eigen::Vector3d projector_offset_m = Eigen::Vector3d(0.075, 0.0, 0.0);
+  double shadow_tolerance_m = 0.01;
+  int projector_margin_px = 64;       // the projector's image extends the camera's by this
+  double random_dropout = 0.0;        // probability of an isolated missing pixel
+
+  bool IsValid(std::string* error) const;
+};
+
+struct ColorModelOptions {
+  // Lambert shading of the albedo: albedo * (ambient + (1 - ambient) max(0, n . l)).
+  double ambient = 0.5;
+  Eigen::Vector3d light_direction = Eigen::Vector3d(0.3, 0.8, 0.6);  // towards the light, world
+  double noise_std = 0.01;            // Gaussian per channel (fraction of full scale)
+  // Exposure (log gain) and white balance (log gain per channel, zero mean over channels):
+  // smooth random walks, velocity v <- walk_smoothing v + (1 - walk_smoothing) N(0, step),
+  // value reflected into [-limit, limit].
+  double exposure_step = 0.06;
+  double exposure_limit = 0.25;
+  double white_balance_step = 0.03;
+  double white_balance_limit = 0.08;
+  double walk_smoothing = 0.8;        // [0, 1)
+  Eigen::Vector3d background_rgb = Eigen::Vector3d(0.05, 0.05, 0.06);  // rays hitting nothing
+
+  bool IsValid(std::string* error) const;
+};
+
+// The static scene: floor y = 0 and a back wall z = wall_z behind the subject, both
+// procedurally textured (floor planks, patterned wall), tessellated into cells (the
+// rasteriser rejects triangles crossing the near plane).
+struct SceneOptions {
+  bool floor = true;
+  bool back_wall = true;
+  double wall_z_m = -1.5;            // back wall plane (m); the subject stands near z = 0
+  double half_width_m = 3.5;         // both planes span x in [-w, w]
+  double wall_height_m = 3.0;
+  double floor_front_z_m = 3.5;      // the floor reaches from the wall to this z
+  double cell_m = 0.25;              // tessellation cell size
+  double pattern_m = 0.3;            // size of the floor planks / wall pattern
+
+  bool IsValid(std::string* error) const;
+};
+
+struct VirtualKinectOptions {
+  uint64_t seed = 1;  // noise streams and colour drift
+  // Depth (IR) camera: intrinsics (width, height, fx, fy, cx, cy; its pose is ignored) placed
+  // at depth_eye looking at depth_target, world up +Y.
+  PinholeCamera depth_intrinsics;  // 640 x 480, f = 525
+  Eigen::Vector3d depth_eye = Eigen::Vector3d(0.3, 1.2, 2.5);
+  Eigen::Vector3d depth_target = Eigen::Vector3d(0.0, 1.0, 0.0);
+  // Colour camera: own resolution (default: half of 1600 x 2032, same aspect), vertical field
+  // of view, principal point at the centre; pose = depth camera pose followed by
+  // color_offset_m (in the depth camera frame) and a small yaw / pitch (degrees).
+  int color_width = 800;
+  int color_height = 1016;
+  double color_vertical_fov_deg = 55.0;
+  Eigen::Vector3d color_offset_m = Eigen::Vector3d(-0.06, 0.0, 0.0);
+  double color_yaw_deg = 1.0;
+  double color_pitch_deg = -0.5;
+  double depth_scale = 1000.0;  // 16-bit depth units per metre
+  double frame_rate = 30.0;     // Hz
+  double near_plane_m = 0.05;
+
+  SceneOptions scene;
+  DepthNoiseOptions depth_noise;
+  ColorModelOptions color_model;
+
+  // Sets depth_noise and color_model to a preset (keeps cameras, scene and seed).
+  void SetNoiseLevel(NoiseLevel level);
+  bool IsValid(std::string* error) const;
+};
+
+// Exposure and white balance of one colour frame: colour = albedo * shading * gain.
+struct ColorConditions {
+  Eigen::Vector3d gain = Eigen::Vector3d::Ones();  // per channel (RGB), exp(exposure + wb)
+};
+// The conditions of frames 0 .. frames-1 (deterministic given options and seed; frame 0 is
+// neutral).
+std::vector<ColorConditions> GenerateColorConditions(const ColorModelOptions& options,
+                                                     uint64_t seed, int frames);
+
+// Why a depth pixel is 0.
+enum class DepthStatus : uint8_t {
+  kValid = 0,
+  kNoSurface = 1,
+  kOutOfRange = 2,
+  kGrazing = 3,
+  kShadow = 4,
+  kEdge = 5,
+  kDropout = 6,
+};
+
+// Per-pixel internals of one depth rendering, for tests, previews and evaluation.
+struct DepthDiagnostics {
+  cv::Mat true_depth;    // CV_32FC1, exact camera depth (m) of the visible surface, 0 = none
+  cv::Mat status;        // CV_8UC1, DepthStatus
+  cv::Mat subject_mask;  // CV_8UC1, 255 where the visible surface is the subject
+};
+
+class VirtualKinect {
+ public:
+  // subject: the template being rendered (must have UVs); texture: its CV_8UC3 BGR atlas.
+  // Throws artex::Error for invalid options, a template without UVs or a bad texture.
+  VirtualKinect(const VirtualKinectOptions& options, const Template& subject,
+                const cv::Mat& subject_texture_bgr);
+
+  const Calibration& calibration() const { return calibration_; }
+  const VirtualKinectOptions& options() const { return options_; }
+
+  // Renders frame `frame_index` (selects the noise streams) with the subject posed at
+  // `posed_vertices` (V x 3 world; nullptr: empty scene). frame->depth CV_16UC1 (0 = missing),
+  // frame->color CV_8UC3 BGR; timestamps frame_index / frame_rate.
+  void RenderFrame(int frame_index, const Eigen::MatrixX3d* posed_vertices,
+                   const ColorConditions& conditions, Frame* frame,
+                   DepthDiagnostics* diagnostics = nullptr) const;
+  // Depth image only (CV_16UC1), the same as RenderFrame's.
+  cv::Mat RenderDepth(int frame_index, const Eigen::MatrixX3d* posed_vertices,
+                      DepthDiagnostics* diagnostics = nullptr) const;
+  // Empty-scene depth frame `index` for the background model (its own noise stream).
+  cv::Mat RenderBackgroundDepth(int index, DepthDiagnostics* diagnostics = nullptr) const;
+  cv::Mat RenderColor(int frame_index, const Eigen::MatrixX3d* posed_vertices,
+                      const ColorConditions& conditions) const;
+
+  // The scene's static geometry (floor and wall), world frame.
+  const Eigen::MatrixX3d& scene_vertices() const { return scene_vertices_; }
+  const Eigen::MatrixX3i& scene_triangles() const { return scene_triangles_; }
+
+ private:
+  void BuildScene();
+  cv::Mat RenderDepthStream(int frame_index, const Eigen::MatrixX3d* posed, uint64_t stream,
+                            DepthDiagnostics* diagnostics) const;
+  // Subject (posed) first, then the scene: triangle ids < subject triangles are the subject.
+  void Combine(const Eigen::MatrixX3d* posed, Eigen::MatrixX3d* vertices,
+               Eigen::MatrixX3i* triangles) const;
+  Eigen::Vector3d SceneAlbedo(const Eigen::Vector3d& world) const;
+
+  VirtualKinectOptions options_;
+  Template subject_;
+  cv::Mat texture_;
+  Calibration calibration_;
+  PinholeCamera projector_;
+  Eigen::MatrixX3d scene_vertices_;
+  Eigen::MatrixX3i scene_triangles_;
+};
+
+// Default subject body: different from the default tracking template (BodyShapeOptions()).
+BodyShapeOptions DefaultSubjectShape();
+
+struct SynthOptions {
+  VirtualKinectOptions kinect;
+  BodyShapeOptions subject_shape = DefaultSubjectShape();
+  SubjectTextureOptions texture;
+  MotionOptions motion;
+  // Non-empty: the motion is read from this BVH file and retargeted (sensors/bvh.h);
+  // motion.frames then limits the number of frames (0 = all) and motion.type is ignored.
+  std::string bvh_path;
+  // World placement of the motion: poses are rotated by subject_yaw_deg about +Y and then
+  // shifted by subject_position_m (the ground-truth poses include this transform).
+  Eigen::Vector3d subject_position_m = Eigen::Vector3d::Zero();
+  double subject_yaw_deg = 0.0;
+  int background_frames = 10;     // empty-scene depth frames for the background model
+  bool write_subject_glb = true;  // groundtruth/subject.glb (textured)
+
+  bool IsValid(std::string* error) const;
+};
+
+struct SynthProgress {
+  enum class Stage { kSetup, kBackground, kFrames, kFinish } stage = Stage::kSetup;
+  int done = 0;
+  int total = 0;
+};
+
+struct SynthSummary {
+  int frames = 0;
+  int background_frames = 0;
+  double setup_seconds = 0;      // subject, texture, motion
+  double render_seconds = 0;     // all frames incl. background (rendering only)
+  double write_seconds = 0;      // encoding and writing files
+  double total_seconds = 0;
+  double ms_per_frame() const { return frames ? 1000.0 * (render_seconds + write_seconds) / frames : 0; }
+};
+
+// The subject, its texture and the posed frames of a synthesis, without rendering or files.
+struct SynthSubject {
+  Template subject;
+  cv::Mat texture_bgr;
+  std::vector<Pose> poses;  // world poses (placement applied)
+};
+// Throws artex::Error on invalid options, an unknown/unreadable BVH file or a failing
+// generator.
+SynthSubject PrepareSynthSubject(const SynthOptions& options);
+
+// Writes a complete artex sequence to out_folder (created if missing). Throws artex::Error on
+// invalid options or I/O failure; files are written atomically and frames.csv last, so an
+// interrupted run leaves no readable sequence.
+SynthSummary SynthesizeSequence(const SynthOptions& options, const std::string& out_folder,
+                                const std::function<void(const SynthProgress&)>& progress = {});
+
+}  // namespace artex
