@@ -85,8 +85,8 @@ class BvhParser {
   const Token& Next(const std::string& expected) {
     while (token_index_ >= tokens_.size()) {
       if (next_line_ >= lines_.size()) {
-        Fail(static_cast<int>(lines_.size()), "unexpected end of file in HIERARCHY, expected " +
-                                                  expected + OpenBlocksDescription());
+        Fail(static_cast<int>(lines_.size()),
+             "unexpected end of file in HIERARCHY, expected " + expected + OpenBlocksDescription());
       }
       tokens_.clear();
       token_index_ = 0;
@@ -108,8 +108,8 @@ class BvhParser {
   double NextNumber(const std::string& what) {
     const Token& t = Next(what);
     double v = 0.0;
-    if (!ParseDouble(t.text, &v)) Fail(t.line, "expected a number for " + what + ", found '" +
-                                               t.text + "'");
+    if (!ParseDouble(t.text, &v))
+      Fail(t.line, "expected a number for " + what + ", found '" + t.text + "'");
     return v;
   }
 
@@ -126,8 +126,8 @@ class BvhParser {
     joint.first_channel = clip_.num_channels;
     clip_.joints.push_back(joint);
     const Token& brace = Next("'{'");
-    if (brace.text != "{") Fail(brace.line, "expected '{' after '" + name + "', found '" +
-                                            brace.text + "'");
+    if (brace.text != "{")
+      Fail(brace.line, "expected '{' after '" + name + "', found '" + brace.text + "'");
     stack_.push_back(OpenBlock{static_cast<int>(clip_.joints.size()) - 1, brace.line, false});
   }
 
@@ -155,8 +155,8 @@ class BvhParser {
         long count = 0;
         if (!ParseInt(count_token.text, &count) || count < 0 || count > 6) {
           Fail(count_token.line, "CHANNELS of '" + joint.name +
-                                     "': expected a count in [0, 6], found '" +
-                                     count_token.text + "'");
+                                     "': expected a count in [0, 6], found '" + count_token.text +
+                                     "'");
         }
         std::vector<BvhChannel> channels;
         for (long c = 0; c < count; ++c) {
@@ -195,8 +195,8 @@ class BvhParser {
     }
     const Token& motion = Next("'MOTION'");
     if (motion.text == "ROOT") Fail(motion.line, "a second ROOT is not supported");
-    if (motion.text != "MOTION") Fail(motion.line, "expected 'MOTION', found '" + motion.text +
-                                                       "'");
+    if (motion.text != "MOTION")
+      Fail(motion.line, "expected 'MOTION', found '" + motion.text + "'");
     if (token_index_ < tokens_.size()) {
       Fail(motion.line, "unexpected '" + tokens_[token_index_].text + "' after MOTION");
     }
@@ -230,9 +230,9 @@ class BvhParser {
     clip_.frame_time = frame_time;
     const size_t remaining_lines = lines_.size() - next_line_;
     if (clip_.num_channels > 0 && static_cast<size_t>(frames) > remaining_lines) {
-      Fail(static_cast<int>(lines_.size()),
-           "truncated: 'Frames: " + std::to_string(frames) + "' but only " +
-               std::to_string(remaining_lines) + " lines follow");
+      Fail(static_cast<int>(lines_.size()), "truncated: 'Frames: " + std::to_string(frames) +
+                                                "' but only " + std::to_string(remaining_lines) +
+                                                " lines follow");
     }
     clip_.values.resize(frames, clip_.num_channels);
     for (long f = 0; f < frames; ++f) {
@@ -373,9 +373,15 @@ BvhFrame BvhFrameAt(const BvhClip& clip, int f) {
     for (size_t c = 0; c < joint.channels.size(); ++c) {
       const double v = clip.values(f, joint.first_channel + static_cast<int>(c));
       switch (joint.channels[c]) {
-        case BvhChannel::kXposition: frame.translations[j].x() = v; break;
-        case BvhChannel::kYposition: frame.translations[j].y() = v; break;
-        case BvhChannel::kZposition: frame.translations[j].z() = v; break;
+        case BvhChannel::kXposition:
+          frame.translations[j].x() = v;
+          break;
+        case BvhChannel::kYposition:
+          frame.translations[j].y() = v;
+          break;
+        case BvhChannel::kZposition:
+          frame.translations[j].z() = v;
+          break;
         case BvhChannel::kXrotation:
           q = q * Eigen::AngleAxisd(v * kDegToRad, Eigen::Vector3d::UnitX());
           break;
@@ -434,8 +440,7 @@ void BvhForwardKinematics(const BvhClip& clip, const BvhFrame& frame,
       positions->row(j) = frame.translations[j].transpose();
     } else {
       (*rotations)[j] = (*rotations)[p] * local;
-      positions->row(j) =
-          positions->row(p) + ((*rotations)[p] * frame.translations[j]).transpose();
+      positions->row(j) = positions->row(p) + ((*rotations)[p] * frame.translations[j]).transpose();
     }
   }
 }
@@ -446,6 +451,8 @@ bool BvhRetargetOptions::IsValid(std::string* error) const {
       (bvh_to_template * bvh_to_template.transpose() - Eigen::Matrix3d::Identity()).norm();
   if (!(frame_rate > 0.0) || !std::isfinite(frame_rate)) {
     msg << "bvh.frame_rate: expected > 0 Hz, found " << frame_rate;
+  } else if (skip_frames < 0) {
+    msg << "bvh.skip_frames: expected >= 0, found " << skip_frames;
   } else if (!(resample_tolerance >= 0.0 && resample_tolerance < 0.5)) {
     msg << "bvh.resample_tolerance: expected in [0, 0.5), found " << resample_tolerance;
   } else if (!(translation_scale >= 0.0) || !std::isfinite(translation_scale)) {
@@ -477,9 +484,8 @@ std::vector<int> MapBvhJoints(const BvhClip& clip, const Template& tmpl,
       return !clip.joints[j].end_site && !used[j] &&
              (ancestor < 0 || IsDescendant(clip, j, ancestor));
     };
-    const auto override_it =
-        std::find_if(options.joint_map.begin(), options.joint_map.end(),
-                     [&](const auto& entry) { return entry.first == name; });
+    const auto override_it = std::find_if(options.joint_map.begin(), options.joint_map.end(),
+                                          [&](const auto& entry) { return entry.first == name; });
     int chosen = -1;
     if (override_it != options.joint_map.end()) {
       if (!override_it->second.empty()) {
@@ -519,11 +525,23 @@ std::vector<int> MapBvhJoints(const BvhClip& clip, const Template& tmpl,
   return map;
 }
 
-std::vector<Pose> RetargetBvh(const BvhClip& clip, const Template& tmpl,
+std::vector<Pose> RetargetBvh(const BvhClip& full_clip, const Template& tmpl,
                               const BvhRetargetOptions& options) {
   std::string error;
   if (!options.IsValid(&error)) throw Error(error);
-  if (clip.num_frames() == 0) throw Error(clip.source + ": the clip has no frames");
+  if (options.skip_frames >= full_clip.num_frames()) {
+    throw Error(full_clip.source + ": bvh.skip_frames = " + std::to_string(options.skip_frames) +
+                " leaves no frame of " + std::to_string(full_clip.num_frames()));
+  }
+  BvhClip trimmed;
+  if (options.skip_frames > 0) {
+    trimmed.source = full_clip.source;
+    trimmed.joints = full_clip.joints;
+    trimmed.num_channels = full_clip.num_channels;
+    trimmed.frame_time = full_clip.frame_time;
+    trimmed.values = full_clip.values.bottomRows(full_clip.num_frames() - options.skip_frames);
+  }
+  const BvhClip& clip = options.skip_frames > 0 ? trimmed : full_clip;
   if (tmpl.num_joints() == 0) throw Error("RetargetBvh: the template has no joints");
   const std::vector<int> map = MapBvhJoints(clip, tmpl, options);
   const int num_joints = tmpl.num_joints();
@@ -561,21 +579,19 @@ std::vector<Pose> RetargetBvh(const BvhClip& clip, const Template& tmpl,
     if (p < 0 || map[k] < 0 || main_child[k] < 0) continue;
     const int c = main_child[k];
     bvh_rest_dir[k] = (rest_pos.row(map[c]) - rest_pos.row(map[k])).transpose().normalized();
-    align[k] = MinimalRotation(
-        (tmpl.joints[c].center - tmpl.joints[k].center).normalized(), bvh_rest_dir[k]);
+    align[k] = MinimalRotation((tmpl.joints[c].center - tmpl.joints[k].center).normalized(),
+                               bvh_rest_dir[k]);
   }
 
   // Translation scale (metres per BVH unit).
   const int root = map[0];
   double scale = options.translation_scale;
   if (scale == 0.0) {
-    const double tmpl_low = tmpl.num_vertices() > 0 ? tmpl.vertices.col(1).minCoeff()
-                                                    : [&] {
-                                                        double m = tmpl.joints[0].center.y();
-                                                        for (const Joint& j : tmpl.joints)
-                                                          m = std::min(m, j.center.y());
-                                                        return m;
-                                                      }();
+    const double tmpl_low = tmpl.num_vertices() > 0 ? tmpl.vertices.col(1).minCoeff() : [&] {
+      double m = tmpl.joints[0].center.y();
+      for (const Joint& j : tmpl.joints) m = std::min(m, j.center.y());
+      return m;
+    }();
     const double tmpl_height = tmpl.joints[0].center.y() - tmpl_low;
     const double bvh_height = rest_pos(root, 1) - rest_pos.col(1).minCoeff();
     if (!(tmpl_height > kMinBoneLength) || !(bvh_height > kMinBoneLength)) {
@@ -586,8 +602,8 @@ std::vector<Pose> RetargetBvh(const BvhClip& clip, const Template& tmpl,
     scale = tmpl_height / bvh_height;
   }
 
-  const std::vector<BvhFrame> frames = ResampleBvh(clip, options.frame_rate,
-                                                   options.resample_tolerance);
+  const std::vector<BvhFrame> frames =
+      ResampleBvh(clip, options.frame_rate, options.resample_tolerance);
   std::vector<Pose> poses;
   poses.reserve(frames.size());
   std::vector<Eigen::Matrix3d> rot;
@@ -606,8 +622,7 @@ std::vector<Pose> RetargetBvh(const BvhClip& clip, const Template& tmpl,
       if (p < 0) {
         q[k] = g;
       } else if (main_child[k] >= 0) {
-        const Eigen::Vector3d dir =
-            w * (pos.row(map[main_child[k]]) - pos.row(map[k])).transpose();
+        const Eigen::Vector3d dir = w * (pos.row(map[main_child[k]]) - pos.row(map[k])).transpose();
         const Eigen::Matrix3d correction =
             dir.norm() > kMinBoneLength ? MinimalRotation(g * bvh_rest_dir[k], dir.normalized())
                                         : Eigen::Matrix3d::Identity();

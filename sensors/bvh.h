@@ -6,13 +6,12 @@
 // channels replace the matching OFFSET component (root: absolute position).
 #pragma once
 
+#include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <istream>
 #include <string>
 #include <utility>
 #include <vector>
-
-#include <Eigen/Core>
-#include <Eigen/Geometry>
 
 #include "models/pose.h"
 #include "models/template.h"
@@ -23,11 +22,11 @@ namespace artex {
 enum class BvhChannel { kXposition, kYposition, kZposition, kXrotation, kYrotation, kZrotation };
 
 struct BvhJoint {
-  std::string name;             // End Sites are named "<parent name>/End Site"
-  int parent = -1;              // -1 for the root only
+  std::string name;                                  // End Sites are named "<parent name>/End Site"
+  int parent = -1;                                   // -1 for the root only
   Eigen::Vector3d offset = Eigen::Vector3d::Zero();  // rest translation in the parent frame
-  std::vector<BvhChannel> channels;                   // in file order; empty for End Sites
-  int first_channel = 0;        // column of channels[0] in BvhClip::values
+  std::vector<BvhChannel> channels;                  // in file order; empty for End Sites
+  int first_channel = 0;                             // column of channels[0] in BvhClip::values
   bool end_site = false;
 };
 
@@ -57,8 +56,8 @@ struct BvhFrame {
   std::vector<Eigen::Vector3d> translations;  // local translation (offset / position channels)
 };
 
-BvhFrame BvhRestFrame(const BvhClip& clip);              // identity rotations, OFFSETs
-BvhFrame BvhFrameAt(const BvhClip& clip, int frame);     // frame in [0, num_frames)
+BvhFrame BvhRestFrame(const BvhClip& clip);           // identity rotations, OFFSETs
+BvhFrame BvhFrameAt(const BvhClip& clip, int frame);  // frame in [0, num_frames)
 // Time t (s) clamped to [0, duration]: SLERP of local rotations and linear interpolation of
 // translations between the two neighbouring frames.
 BvhFrame SampleBvh(const BvhClip& clip, double time_s);
@@ -66,15 +65,17 @@ BvhFrame SampleBvh(const BvhClip& clip, double time_s);
 // tolerance in output frames (absorbs rounded Frame Time values such as 0.0333333).
 int ResampledFrameCount(const BvhClip& clip, double frame_rate, double tolerance = 1e-3);
 // Frames at times k / frame_rate, k = 0 .. ResampledFrameCount - 1.
-std::vector<BvhFrame> ResampleBvh(const BvhClip& clip, double frame_rate,
-                                  double tolerance = 1e-3);
+std::vector<BvhFrame> ResampleBvh(const BvhClip& clip, double frame_rate, double tolerance = 1e-3);
 
 // Global rotation (J matrices) and position (J x 3, BVH units) of every joint.
 void BvhForwardKinematics(const BvhClip& clip, const BvhFrame& frame,
                           std::vector<Eigen::Matrix3d>* rotations, Eigen::MatrixX3d* positions);
 
 struct BvhRetargetOptions {
-  double frame_rate = 30.0;        // output rate (Hz), > 0
+  double frame_rate = 30.0;  // output rate (Hz), > 0
+  // Leading frames dropped before resampling (>= 0, < frame count). The CMU clips converted
+  // for MakeHuman start with a rest/reference frame unrelated to the motion: use 1 for them.
+  int skip_frames = 0;
   double resample_tolerance = 1e-3;  // see ResampledFrameCount
   // Metres per BVH unit for the root translation; 0 = automatic: the template's pelvis
   // height above its lowest vertex divided by the BVH rest root height above its lowest
@@ -111,8 +112,9 @@ std::vector<int> MapBvhJoints(const BvhClip& clip, const Template& tmpl,
 // bone directions. Leaves (no mapped child) use their parent's A. An all-zero BVH frame
 // therefore poses the template in the BVH's rest pose (a T-pose for CMU clips). The root's
 // rotation goes into Pose::rotation (joint 0 stays identity); the translation puts the
-// pelvis centre on the scaled BVH root. Scale 1. Throws artex::Error on an empty clip or
-// invalid options.
+// pelvis centre on the scaled BVH root. Scale 1. Throws artex::Error on an empty clip
+// (after skip_frames) or invalid options. Output frame k is at time k / frame_rate after the first
+// kept frame.
 std::vector<Pose> RetargetBvh(const BvhClip& clip, const Template& tmpl,
                               const BvhRetargetOptions& options = BvhRetargetOptions());
 std::vector<Pose> LoadBvhMotion(const std::string& path, const Template& tmpl,

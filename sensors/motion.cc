@@ -1,12 +1,11 @@
 #include "sensors/motion.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
 #include <sstream>
-
-#include <Eigen/Geometry>
 
 #include "models/error.h"
 #include "models/so3.h"
@@ -19,9 +18,9 @@ constexpr double kDegToRad = M_PI / 180.0;
 // The default joint names in index order (models/template_generator.h).
 constexpr int kNumMotionJoints = 17;
 constexpr std::array<const char*, kNumMotionJoints> kJointNames = {
-    "pelvis",     "spine",   "chest",   "neck",  "head",   "l_shoulder", "l_elbow", "l_wrist",
-    "r_shoulder", "r_elbow", "r_wrist", "l_hip", "l_knee", "l_ankle",    "r_hip",   "r_knee",
-    "r_ankle"};
+    "pelvis",  "spine",   "chest",      "neck",    "head",    "l_shoulder",
+    "l_elbow", "l_wrist", "r_shoulder", "r_elbow", "r_wrist", "l_hip",
+    "l_knee",  "l_ankle", "r_hip",      "r_knee",  "r_ankle"};
 
 struct MotionName {
   MotionType type;
@@ -51,9 +50,8 @@ Skeleton FindSkeleton(const Template& tmpl) {
     throw Error("GenerateMotion: template joints: expected the default joint names, missing " +
                 missing);
   }
-  return Skeleton{idx[0],  idx[1],  idx[2],  idx[3],  idx[4],  idx[5],
-                  idx[6],  idx[7],  idx[8],  idx[9],  idx[10], idx[11],
-                  idx[12], idx[13], idx[14], idx[15], idx[16]};
+  return Skeleton{idx[0], idx[1],  idx[2],  idx[3],  idx[4],  idx[5],  idx[6],  idx[7], idx[8],
+                  idx[9], idx[10], idx[11], idx[12], idx[13], idx[14], idx[15], idx[16]};
 }
 
 // Minimum-jerk ramp 0 -> 1 on [0, 1] (zero velocity and acceleration at both ends).
@@ -68,8 +66,9 @@ Eigen::Matrix3d Rot(const Eigen::Vector3d& axis, double angle_rad) {
 
 Eigen::Vector3d BoneDirection(const Template& tmpl, int from, int to) {
   const Eigen::Vector3d d = tmpl.joints[to].center - tmpl.joints[from].center;
-  if (d.norm() <= 0.0) throw Error("GenerateMotion: template joints '" + tmpl.joints[from].name +
-                                   "' and '" + tmpl.joints[to].name + "' coincide");
+  if (d.norm() <= 0.0)
+    throw Error("GenerateMotion: template joints '" + tmpl.joints[from].name + "' and '" +
+                tmpl.joints[to].name + "' coincide");
   return d.normalized();
 }
 
@@ -202,8 +201,7 @@ class MotionBuilder {
         u * (s.pelvis_tilt_deg + s.spine_flexion_deg + s.chest_flexion_deg) * kDegToRad;
     const double adduction = -u * s.arm_adduction_deg * kDegToRad;
     r[sk_.l_shoulder] = Rot(x, -s.arm_hang * trunk) * Rot(left_arm_.shoulder_abduction, adduction);
-    r[sk_.r_shoulder] =
-        Rot(x, -s.arm_hang * trunk) * Rot(right_arm_.shoulder_abduction, adduction);
+    r[sk_.r_shoulder] = Rot(x, -s.arm_hang * trunk) * Rot(right_arm_.shoulder_abduction, adduction);
     r[sk_.neck] = Rot(x, -u * s.neck_extension_deg * kDegToRad);
   }
 
@@ -228,8 +226,7 @@ bool MotionOptions::IsValid(std::string* error) const {
   } else if (!(ramp_s >= 0.0) || !std::isfinite(ramp_s)) {
     msg << "motion.ramp_s: expected >= 0 s, found " << ramp_s;
   } else if (!(walk.ankle_compensation >= 0.0 && walk.ankle_compensation <= 1.0)) {
-    msg << "motion.walk.ankle_compensation: expected in [0, 1], found "
-        << walk.ankle_compensation;
+    msg << "motion.walk.ankle_compensation: expected in [0, 1], found " << walk.ankle_compensation;
   } else if (!(bend.arm_hang >= 0.0 && bend.arm_hang <= 1.0)) {
     msg << "motion.bend.arm_hang: expected in [0, 1], found " << bend.arm_hang;
   } else {

@@ -23,18 +23,18 @@ enum class FloorMode { kKeep, kPerFrame, kClipMinimum };
 // y (up) for yaw; the upper arm and forearm rest directions d for the arms (abduction about
 // d x Y, flexion about d x Z, twist about the elbow's twist axis).
 struct WalkShape {
-  double hip_flexion_deg = 25.0;    // peak hip flexion = peak extension (sinusoid)
-  double knee_flexion_deg = 45.0;   // peak knee flexion, reached in mid swing
-  double ankle_compensation = 0.6;  // fraction of the shank's pitch undone at the ankle
-  double arm_swing_deg = 15.0;      // shoulder flexion/extension, opposite to the hip
-  double elbow_flexion_deg = 15.0;  // mean elbow flexion
-  double elbow_swing_deg = 8.0;     // elbow flexion oscillation, in phase with the arm swing
-  double pelvis_yaw_deg = 5.0;      // pelvis rotation about Y (leg side forward)
-  double thorax_counter_yaw = 1.6;  // spine + chest yaw as a multiple of the pelvis yaw,
-                                    // opposite sign (> 1: shoulders counter-rotate)
+  double hip_flexion_deg = 25.0;     // peak hip flexion = peak extension (sinusoid)
+  double knee_flexion_deg = 45.0;    // peak knee flexion, reached in mid swing
+  double ankle_compensation = 0.35;  // fraction of the shank's pitch undone at the ankle
+  double arm_swing_deg = 15.0;       // shoulder flexion/extension, opposite to the hip
+  double elbow_flexion_deg = 15.0;   // mean elbow flexion
+  double elbow_swing_deg = 8.0;      // elbow flexion oscillation, in phase with the arm swing
+  double pelvis_yaw_deg = 5.0;       // pelvis rotation about Y (leg side forward)
+  double thorax_counter_yaw = 1.6;   // spine + chest yaw as a multiple of the pelvis yaw,
+                                     // opposite sign (> 1: shoulders counter-rotate)
 };
 struct ArmRaiseShape {
-  double abduction_deg = 75.0;      // from the A-pose (about 35 degrees above horizontal)
+  double abduction_deg = 75.0;  // from the A-pose (about 35 degrees above horizontal)
   double elbow_flexion_deg = 45.0;
   double forearm_twist_deg = 40.0;  // mirror-symmetric left/right
 };
@@ -43,20 +43,20 @@ struct TurnShape {
   double head_follow = 0.3;  // extra head yaw (neck + head, relative) as a fraction of the yaw
 };
 struct BendShape {
-  double pelvis_tilt_deg = 25.0;    // pelvis forward; the hips flex by the same angle
+  double pelvis_tilt_deg = 25.0;  // pelvis forward; the hips flex by the same angle
   double spine_flexion_deg = 20.0;
   double chest_flexion_deg = 15.0;
-  double arm_hang = 0.9;            // fraction of the trunk pitch undone at the shoulders
-  double arm_adduction_deg = 30.0;  // arms towards the vertical while hanging
-  double neck_extension_deg = 10.0; // head lifted against the trunk's flexion
+  double arm_hang = 0.9;             // fraction of the trunk pitch undone at the shoulders
+  double arm_adduction_deg = 30.0;   // arms towards the vertical while hanging
+  double neck_extension_deg = 10.0;  // head lifted against the trunk's flexion
 };
 
 struct MotionOptions {
   MotionType type = MotionType::kWalk;
-  int frames = 60;             // number of frames; >= 1
-  double frame_rate = 30.0;    // Hz
-  double amplitude = 1.0;      // scales every joint angle of the motion; [0, 1.5]
-  double period_s = 2.0;       // duration of one cycle (s); > 0
+  int frames = 60;           // number of frames; >= 1
+  double frame_rate = 30.0;  // Hz
+  double amplitude = 1.0;    // scales every joint angle of the motion; [0, 1.5]
+  double period_s = 2.0;     // duration of one cycle (s); > 0
   // Minimum-jerk fade-in (s) of the periodic motions (walk, turn), so frame 0 is the rest
   // pose and the first frames stay slow; >= 0. Arm raise and bend start at rest by design.
   double ramp_s = 1.0;
