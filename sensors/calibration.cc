@@ -1,6 +1,8 @@
 #include "sensors/calibration.h"
 
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <set>
 #include <sstream>
 
@@ -158,27 +160,40 @@ void ReadCamera(const std::string& file, const YAML::Node& root, const std::stri
   camera->world_to_camera.translation() = t;
 }
 
+// Shortest decimal text that reads back as exactly `v`.
+std::string Num(double v) {
+  char buf[40];
+  std::snprintf(buf, sizeof(buf), "%.17g", v);
+  const bool exponent_ok = std::string(buf).find('e') != std::string::npos;
+  for (int precision = 1; precision <= 17; ++precision) {
+    std::snprintf(buf, sizeof(buf), "%.*g", precision, v);
+    if (std::strtod(buf, nullptr) != v) continue;
+    if (exponent_ok || std::string(buf).find('e') == std::string::npos) break;
+  }
+  return buf;
+}
+
 void EmitCamera(YAML::Emitter& out, const char* name, const PinholeCamera& c,
                 const Distortion& d) {
   out << YAML::Key << name << YAML::Value << YAML::BeginMap;
   out << YAML::Key << "width" << YAML::Value << c.width << YAML::Comment("pixels");
   out << YAML::Key << "height" << YAML::Value << c.height << YAML::Comment("pixels");
-  out << YAML::Key << "fx" << YAML::Value << c.fx << YAML::Comment("pixels");
-  out << YAML::Key << "fy" << YAML::Value << c.fy << YAML::Comment("pixels");
-  out << YAML::Key << "cx" << YAML::Value << c.cx << YAML::Comment("pixels, column");
-  out << YAML::Key << "cy" << YAML::Value << c.cy << YAML::Comment("pixels, row");
+  out << YAML::Key << "fx" << YAML::Value << Num(c.fx) << YAML::Comment("pixels");
+  out << YAML::Key << "fy" << YAML::Value << Num(c.fy) << YAML::Comment("pixels");
+  out << YAML::Key << "cx" << YAML::Value << Num(c.cx) << YAML::Comment("pixels, column");
+  out << YAML::Key << "cy" << YAML::Value << Num(c.cy) << YAML::Comment("pixels, row");
   out << YAML::Key << "distortion" << YAML::Value << YAML::Flow << YAML::BeginMap;
-  out << YAML::Key << "k1" << YAML::Value << d.k1 << YAML::Key << "k2" << YAML::Value << d.k2;
-  out << YAML::Key << "p1" << YAML::Value << d.p1 << YAML::Key << "p2" << YAML::Value << d.p2;
-  out << YAML::Key << "k3" << YAML::Value << d.k3 << YAML::EndMap;
+  out << YAML::Key << "k1" << YAML::Value << Num(d.k1) << YAML::Key << "k2" << YAML::Value << Num(d.k2);
+  out << YAML::Key << "p1" << YAML::Value << Num(d.p1) << YAML::Key << "p2" << YAML::Value << Num(d.p2);
+  out << YAML::Key << "k3" << YAML::Value << Num(d.k3) << YAML::EndMap;
   out << YAML::Key << "world_to_camera" << YAML::Value << YAML::BeginMap;
   out << YAML::Key << "rotation" << YAML::Value << YAML::Flow << YAML::BeginSeq;
   for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) out << c.world_to_camera.linear()(i, j);
+    for (int j = 0; j < 3; ++j) out << Num(c.world_to_camera.linear()(i, j));
   }
   out << YAML::EndSeq << YAML::Comment("row-major");
   out << YAML::Key << "translation" << YAML::Value << YAML::Flow << YAML::BeginSeq;
-  for (int i = 0; i < 3; ++i) out << c.world_to_camera.translation()[i];
+  for (int i = 0; i < 3; ++i) out << Num(c.world_to_camera.translation()[i]);
   out << YAML::EndSeq << YAML::Comment("metres");
   out << YAML::EndMap;
   out << YAML::EndMap;
@@ -230,9 +245,9 @@ void WriteCalibration(const Calibration& calibration, const std::string& path) {
   out << YAML::Comment("artex RGB-D rig calibration (docs/formats.md)");
   out << YAML::BeginMap;
   out << YAML::Key << "version" << YAML::Value << kCalibrationVersion;
-  out << YAML::Key << "depth_scale" << YAML::Value << calibration.depth_scale
+  out << YAML::Key << "depth_scale" << YAML::Value << Num(calibration.depth_scale)
       << YAML::Comment("16-bit depth units per metre");
-  out << YAML::Key << "frame_rate" << YAML::Value << calibration.frame_rate << YAML::Comment("Hz");
+  out << YAML::Key << "frame_rate" << YAML::Value << Num(calibration.frame_rate) << YAML::Comment("Hz");
   EmitCamera(out, "depth", calibration.depth, calibration.depth_distortion);
   EmitCamera(out, "color", calibration.color, calibration.color_distortion);
   out << YAML::EndMap;

@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "models/error.h"
+#include "models/normals.h"
 #include "sensors/image_io.h"
 
 namespace artex {
@@ -250,22 +251,12 @@ void DepthMesher::Build(const cv::Mat& depth, double depth_scale, const cv::Mat&
 void ComputeOrientedVertexNormals(const Eigen::MatrixX3d& vertices,
                                   const Eigen::MatrixX3i& triangles,
                                   const Eigen::Vector3d& viewpoint, Eigen::MatrixX3d* normals) {
-  std::vector<Eigen::Vector3d> p(vertices.rows()), n;
-  for (int i = 0; i < vertices.rows(); ++i) p[i] = vertices.row(i).transpose();
-  std::vector<Eigen::Vector3i> t(triangles.rows());
-  for (int i = 0; i < triangles.rows(); ++i) {
-    t[i] = triangles.row(i).transpose();
-    for (int k = 0; k < 3; ++k) {
-      if (t[i][k] < 0 || t[i][k] >= vertices.rows()) {
-        throw Error("normals: triangle " + std::to_string(i) + " refers to vertex " +
-                    std::to_string(t[i][k]) + ", expected 0.." +
-                    std::to_string(vertices.rows() - 1));
-      }
+  ComputeVertexNormals(vertices, triangles, normals);
+  for (int i = 0; i < vertices.rows(); ++i) {
+    if (normals->row(i).dot(viewpoint.transpose() - vertices.row(i)) < 0) {
+      normals->row(i) *= -1.0;
     }
   }
-  AccumulateNormals(p, t, viewpoint, &n);
-  normals->resize(vertices.rows(), 3);
-  for (int i = 0; i < vertices.rows(); ++i) normals->row(i) = n[i].transpose();
 }
 
 }  // namespace artex

@@ -88,8 +88,9 @@ class DepthMesher {
   std::vector<Eigen::Vector3d> points_, normals_;
 };
 
-// Vertex normals (normalised mean of incident unit triangle normals; zero where no triangle),
-// flipped where needed to face `viewpoint`. vertices: V x 3, triangles: F x 3.
+// models/normals.h ComputeVertexNormals (normalised mean of incident unit triangle normals;
+// zero where no triangle), flipped where needed to face `viewpoint`. DepthMesher computes the
+// same normals with its own buffers. vertices: V x 3, triangles: F x 3.
 void ComputeOrientedVertexNormals(const Eigen::MatrixX3d& vertices,
                                   const Eigen::MatrixX3i& triangles,
                                   const Eigen::Vector3d& viewpoint, Eigen::MatrixX3d* normals);
