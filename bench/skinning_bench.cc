@@ -2,7 +2,8 @@
 // human tree of models/template_generator.h, each bone wrapped by a 16 x 46 cylinder grid
 // (12,512 vertices, 24,480 triangles), w_l and tau ramping along each bone.
 // Median figures: --benchmark_repetitions=10 --benchmark_report_aggregates_only=true
-// Argument 0: SkinningOptions::parallel = false (calling thread only); 1: TBB default threads.
+// Arguments: generated = 0 for that synthetic template, 1 for GenerateTemplate() (~12.5k
+// vertices); parallel = SkinningOptions::parallel (0: calling thread only, 1: TBB threads).
 #include <benchmark/benchmark.h>
 
 #include <Eigen/Geometry>
@@ -13,6 +14,7 @@
 #include "models/normals.h"
 #include "models/skinning.h"
 #include "models/so3.h"
+#include "models/template_generator.h"
 
 namespace artex {
 namespace {
@@ -107,32 +109,45 @@ Pose BenchPose(const Template& t) {
   return pose;
 }
 
-const Template& SharedTemplate() {
+// Built once per process (outside the timed loops).
+const Template& SyntheticTemplate() {
   static const Template t = BodySizedTemplate();
   return t;
+}
+const Template& GeneratedTemplate() {
+  static const Template t = GenerateTemplate();
+  return t;
+}
+// Argument "generated": 0 = synthetic body-sized template, 1 = GenerateTemplate().
+const Template& SharedTemplate(const benchmark::State& state) {
+  return state.range(0) == 0 ? SyntheticTemplate() : GeneratedTemplate();
 }
 
 SkinningOptions OptionsFor(const benchmark::State& state) {
   SkinningOptions options;
-  options.parallel = state.range(0) != 0;
+  options.parallel = state.range(1) != 0;
   return options;
 }
 
 void BM_Apply(benchmark::State& state) {
-  const Skinning skinning(SharedTemplate(), OptionsFor(state));
-  const Pose pose = BenchPose(SharedTemplate());
+  const Skinning skinning(SharedTemplate(state), OptionsFor(state));
+  const Pose pose = BenchPose(SharedTemplate(state));
   Eigen::MatrixX3d posed;
   for (auto _ : state) {
     skinning.Apply(pose, &posed);
     benchmark::DoNotOptimize(posed.data());
   }
-  state.counters["vertices"] = SharedTemplate().num_vertices();
+  state.counters["vertices"] = SharedTemplate(state).num_vertices();
 }
-BENCHMARK(BM_Apply)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Apply)
+    ->ArgNames({"generated", "parallel"})
+    ->ArgsProduct({{0, 1}, {0, 1}})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 void BM_ApplyWithJacobian(benchmark::State& state) {
-  const Skinning skinning(SharedTemplate(), OptionsFor(state));
-  const Pose pose = BenchPose(SharedTemplate());
+  const Skinning skinning(SharedTemplate(state), OptionsFor(state));
+  const Pose pose = BenchPose(SharedTemplate(state));
   Eigen::MatrixX3d posed;
   SkinningJacobian jacobian;
   for (auto _ : state) {
@@ -141,19 +156,28 @@ void BM_ApplyWithJacobian(benchmark::State& state) {
     benchmark::DoNotOptimize(jacobian.Block(0).data());
   }
 }
-BENCHMARK(BM_ApplyWithJacobian)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ApplyWithJacobian)
+    ->ArgNames({"generated", "parallel"})
+    ->ArgsProduct({{0, 1}, {0, 1}})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 void BM_ComputeVertexNormals(benchmark::State& state) {
-  const Skinning skinning(SharedTemplate());
+  const Skinning skinning(SharedTemplate(state));
   Eigen::MatrixX3d posed, normals;
-  skinning.Apply(BenchPose(SharedTemplate()), &posed);
+  skinning.Apply(BenchPose(SharedTemplate(state)), &posed);
   for (auto _ : state) {
-    ComputeVertexNormals(posed, SharedTemplate().triangles, &normals);
+    ComputeVertexNormals(posed, SharedTemplate(state).triangles, &normals);
     benchmark::DoNotOptimize(normals.data());
   }
-  state.counters["triangles"] = SharedTemplate().num_triangles();
+  state.counters["triangles"] = SharedTemplate(state).num_triangles();
 }
-BENCHMARK(BM_ComputeVertexNormals)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ComputeVertexNormals)
+    ->ArgNames({"generated"})
+    ->Arg(0)
+    ->Arg(1)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 }  // namespace
 }  // namespace artex
