@@ -14,6 +14,7 @@ MrfSummary AlphaBetaSwapSolver::Solve(const MrfProblem& problem, std::vector<int
   const int n = problem.num_nodes();
   const int num_labels = problem.num_labels();
   const MrfAdjacency adjacency = BuildMrfAdjacency(problem);
+  const MrfLabelIndex label_index = BuildMrfLabelIndex(problem);
 
   double energy = summary.initial_energy;
   std::vector<int> var_of(n, -1);
@@ -30,27 +31,28 @@ MrfSummary AlphaBetaSwapSolver::Solve(const MrfProblem& problem, std::vector<int
     bool converged = num_pairs == 0;
     for (int alpha = 0; alpha < num_labels && !converged; ++alpha) {
       for (int beta = alpha + 1; beta < num_labels && !converged; ++beta) {
+        for (int i : vars) var_of[i] = -1;
         vars.clear();
         k_alpha.clear();
         k_beta.clear();
         y_now.clear();
-        for (int i = 0; i < n; ++i) {
-          var_of[i] = -1;
+        // Every move variable has alpha as a candidate.
+        for (int p = label_index.offsets[alpha]; p < label_index.offsets[alpha + 1]; ++p) {
+          const int i = label_index.nodes[p];
           const int label = problem.candidate_labels(i)[x[i]];
           if (label != alpha && label != beta) continue;
-          const int ka = problem.CandidateIndex(i, alpha);
           const int kb = problem.CandidateIndex(i, beta);
-          if (ka < 0 || kb < 0) continue;
+          if (kb < 0) continue;
           var_of[i] = static_cast<int>(vars.size());
           vars.push_back(i);
-          k_alpha.push_back(ka);
+          k_alpha.push_back(label_index.local[p]);
           k_beta.push_back(kb);
           y_now.push_back(label == beta);
         }
         bool accepted = false;
         const int num_vars = static_cast<int>(vars.size());
         if (num_vars > 0) {
-          cut.Reset(num_vars, 0);
+          cut.Reset(num_vars);
           auto move_label = [&](int v, bool to_beta) { return to_beta ? k_beta[v] : k_alpha[v]; };
           for (int v = 0; v < num_vars; ++v) {
             const int i = vars[v];

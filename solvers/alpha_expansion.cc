@@ -25,10 +25,9 @@ struct BinaryMoveCut::Impl {
 BinaryMoveCut::BinaryMoveCut() : impl_(std::make_unique<Impl>()) {}
 BinaryMoveCut::~BinaryMoveCut() = default;
 
-void BinaryMoveCut::Reset(int num_vars, int expected_pairs) {
-  impl_->graph.reset();
+void BinaryMoveCut::Reset(int num_vars) {
+  impl_->graph.reset();  // keeps the node and arc arrays allocated across moves
   if (num_vars > 0) impl_->graph.add_node(num_vars);
-  (void)expected_pairs;  // the graph grows its arc array on demand and keeps it across resets
 }
 
 void BinaryMoveCut::AddUnary(int v, double cost0, double cost1) {
@@ -78,10 +77,11 @@ MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<in
   const int n = problem.num_nodes();
   const int num_labels = problem.num_labels();
   const MrfAdjacency adjacency = BuildMrfAdjacency(problem);
+  const MrfLabelIndex label_index = BuildMrfLabelIndex(problem);
 
   double energy = summary.initial_energy;
   std::vector<int> var_of(n, -1);   // move variable of node i, -1 when fixed
-  std::vector<int> alpha_k(n, -1);  // local index of alpha at node i, -1 if not a candidate
+  std::vector<int> alpha_k(n, -1);  // local index of alpha at the move variables
   std::vector<int> vars;
   std::vector<char> y;
   mrf_internal::BinaryMoveCut cut;
@@ -92,18 +92,19 @@ MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<in
     const double sweep_start = energy;
     bool converged = false;
     for (int alpha = 0; alpha < num_labels; ++alpha) {
+      for (int i : vars) var_of[i] = -1;
       vars.clear();
-      for (int i = 0; i < n; ++i) {
-        alpha_k[i] = problem.CandidateIndex(i, alpha);
-        var_of[i] = -1;
-        if (alpha_k[i] >= 0 && alpha_k[i] != x[i]) {
+      for (int p = label_index.offsets[alpha]; p < label_index.offsets[alpha + 1]; ++p) {
+        const int i = label_index.nodes[p];
+        alpha_k[i] = label_index.local[p];
+        if (alpha_k[i] != x[i]) {
           var_of[i] = static_cast<int>(vars.size());
           vars.push_back(i);
         }
       }
       bool accepted = false;
       if (!vars.empty()) {
-        cut.Reset(static_cast<int>(vars.size()), 0);
+        cut.Reset(static_cast<int>(vars.size()));
         for (int v = 0; v < static_cast<int>(vars.size()); ++v) {
           const int i = vars[v];
           const double* d = problem.candidate_unaries(i);

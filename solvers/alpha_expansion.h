@@ -33,7 +33,7 @@ class BinaryMoveCut {
   BinaryMoveCut();
   ~BinaryMoveCut();
   // Starts a new move with num_vars variables (all-zero unaries, no pair terms).
-  void Reset(int num_vars, int expected_pairs);
+  void Reset(int num_vars);
   void AddUnary(int v, double cost0, double cost1);
   // Pair term with E(0,0) = a, E(0,1) = b, E(1,0) = c, E(1,1) = d. Returns true when the term
   // was not submodular and had to be majorised.

@@ -181,15 +181,6 @@ double MrfProblem::UnaryCost(int node, int label) const {
   return k < 0 ? kInf : candidate_unaries(node)[k];
 }
 
-double MrfProblem::PairwiseLocal(int e, int a, int b) const {
-  const double scale = lambda_ * edge_weights_[e];
-  const std::int64_t offset = table_offsets_[e];
-  if (offset < 0) {
-    return candidate_labels(edge_first(e))[a] == candidate_labels(edge_second(e))[b] ? 0.0 : scale;
-  }
-  return scale * tables_[offset + a * num_candidates(edge_second(e)) + b];
-}
-
 double MrfProblem::EnergyLocal(const std::vector<int>& local) const {
   double energy = 0.0;
   for (int i = 0; i < num_nodes(); ++i) energy += candidate_unaries(i)[local[i]];
@@ -278,6 +269,29 @@ MrfAdjacency BuildMrfAdjacency(const MrfProblem& problem) {
     adjacency.edges[fill[problem.edge_second(e)]++] = e;
   }
   return adjacency;
+}
+
+MrfLabelIndex BuildMrfLabelIndex(const MrfProblem& problem) {
+  MrfLabelIndex index;
+  const int num_labels = problem.num_labels();
+  index.offsets.assign(num_labels + 1, 0);
+  for (int i = 0; i < problem.num_nodes(); ++i) {
+    for (int k = 0; k < problem.num_candidates(i); ++k) {
+      ++index.offsets[problem.candidate_labels(i)[k] + 1];
+    }
+  }
+  for (int l = 0; l < num_labels; ++l) index.offsets[l + 1] += index.offsets[l];
+  index.nodes.resize(index.offsets[num_labels]);
+  index.local.resize(index.offsets[num_labels]);
+  std::vector<int> fill(index.offsets.begin(), index.offsets.end() - 1);
+  for (int i = 0; i < problem.num_nodes(); ++i) {
+    for (int k = 0; k < problem.num_candidates(i); ++k) {
+      const int p = fill[problem.candidate_labels(i)[k]]++;
+      index.nodes[p] = i;
+      index.local[p] = k;
+    }
+  }
+  return index;
 }
 
 namespace {

@@ -70,7 +70,7 @@ class MrfProblem {
     return table_offsets_[e] < 0 ? nullptr : &tables_[table_offsets_[e]];
   }
   // lambda * w_e * c_e at local candidate indices a (of edge_first) and b (of edge_second).
-  double PairwiseLocal(int e, int a, int b) const;
+  inline double PairwiseLocal(int e, int a, int b) const;
 
   // E(x) for a labelling in global labels. Throws artex::Error when labels.size() != N or a
   // label is outside [0, L); returns +inf when some label is not a candidate of its node.
@@ -100,12 +100,32 @@ class MrfProblem {
   std::vector<float> tables_;                // sum over table edges of K_i K_j
 };
 
+inline double MrfProblem::PairwiseLocal(int e, int a, int b) const {
+  const double scale = lambda_ * edge_weights_[e];
+  const std::int64_t offset = table_offsets_[e];
+  const int t = edge_nodes_[2 * e + 1];
+  if (offset < 0) {
+    return labels_[node_offsets_[edge_nodes_[2 * e]] + a] == labels_[node_offsets_[t] + b] ? 0.0
+                                                                                           : scale;
+  }
+  return scale * tables_[offset + static_cast<std::int64_t>(a) * num_candidates(t) + b];
+}
+
 // Incident edges per node (CSR): edges of node i are edges[offsets[i] .. offsets[i+1]).
 struct MrfAdjacency {
   std::vector<int> offsets;
   std::vector<int> edges;
 };
 MrfAdjacency BuildMrfAdjacency(const MrfProblem& problem);
+
+// Nodes having each label as a candidate (CSR over labels): entries offsets[l] .. offsets[l+1]
+// of nodes / local hold the node and the label's local index at that node, nodes ascending.
+struct MrfLabelIndex {
+  std::vector<int> offsets;
+  std::vector<int> nodes;
+  std::vector<int> local;
+};
+MrfLabelIndex BuildMrfLabelIndex(const MrfProblem& problem);
 
 enum class MrfSolverType { kAlphaExpansion, kAlphaBetaSwap, kIcm, kTrws };
 // "alpha_expansion", "swap", "icm", "trws".
