@@ -8,6 +8,8 @@
 #include <sstream>
 #include <thread>
 
+// GCC reports a false -Wmaybe-uninitialized inside OpenMesh's PropertyT<Vec3uc>::push_back.
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 #include <unistd.h>

@@ -91,4 +91,39 @@ Template ImportGltfSkinnedMesh(const std::string& path,
                                const GltfImportOptions& options = GltfImportOptions(),
                                VertexJointWeights* lbs_weights = nullptr);
 
+// Facts about a template for `artex template info` and import reports.
+struct TemplateSummaryOptions {
+  int uv_grid = 1024;  // UV coverage is measured on a uv_grid x uv_grid raster of [0,1]^2; >= 16
+};
+
+struct TemplateSummary {
+  int num_vertices = 0;
+  int num_triangles = 0;
+  int num_joints = 0;
+  int num_pose_parameters = 0;
+  std::vector<int> vertices_per_joint;  // J: vertices whose joint k is j
+  Eigen::Vector3d bbox_min = Eigen::Vector3d::Zero();
+  Eigen::Vector3d bbox_max = Eigen::Vector3d::Zero();
+  // UV atlas (zeros without one).
+  int num_uvs = 0;
+  int num_charts = 0;          // distinct triangle_chart values (0 when absent)
+  double uv_coverage = 0.0;    // fraction of the unit square covered by UV triangles
+  double uv_overlap = 0.0;     // fraction of the covered raster cells covered more than once
+  // Topology.
+  int boundary_edges = 0;      // edges with one incident triangle
+  int non_manifold_edges = 0;  // edges with more than two incident triangles
+  int misoriented_edges = 0;   // interior edges traversed in the same direction by both sides
+  int components = 0;          // connected components (over triangles' vertices)
+  int unreferenced_vertices = 0;
+  int euler_characteristic = 0;  // V - E + F over referenced vertices
+  bool closed_manifold() const {
+    return boundary_edges == 0 && non_manifold_edges == 0 && misoriented_edges == 0;
+  }
+};
+
+// The template must pass Template::IsValid (throws artex::Error otherwise, or for a uv_grid
+// below 16).
+TemplateSummary SummarizeTemplate(const Template& tmpl,
+                                  const TemplateSummaryOptions& options = TemplateSummaryOptions());
+
 }  // namespace artex

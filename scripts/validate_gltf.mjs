@@ -49,12 +49,19 @@ for (const file of files) {
     failed = true;
     continue;
   }
-  const report = await validator.validateBytes(bytes, {
-    uri: file,
-    maxIssues: 100,
-    externalResourceFunction: (uri) =>
-        Promise.reject(new Error(`external resource ${uri} not supported`)),
-  });
+  let report;
+  try {
+    report = await validator.validateBytes(bytes, {
+      uri: file,
+      maxIssues: 100,
+      externalResourceFunction: (uri) =>
+          Promise.reject(new Error(`external resource ${uri} not supported`)),
+    });
+  } catch (e) {
+    console.log(`${file}: 1 errors (cannot validate: ${e && e.message ? e.message : e})`);
+    failed = true;
+    continue;
+  }
   const issues = report.issues;
   if (printJson) console.log(JSON.stringify(report, null, 2));
   console.log(`${file}: ${issues.numErrors} errors, ${issues.numWarnings} warnings, ` +

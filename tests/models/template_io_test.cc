@@ -765,6 +765,52 @@ TEST_F(TemplateIoTest, KhronosValidatorAcceptsTheFiles) {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Summary (artex template info).
+
+TEST(TemplateSummaryTest, CountsTopologyAndUvCoverage) {
+  const Template tube = MakeTube(4, 6);
+  const TemplateSummary s = SummarizeTemplate(tube);
+  EXPECT_EQ(s.num_vertices, tube.num_vertices());
+  EXPECT_EQ(s.num_pose_parameters, 7 + 3 * 4);
+  EXPECT_EQ(s.boundary_edges, 2 * 6);  // the two open ends
+  EXPECT_EQ(s.non_manifold_edges, 0);
+  EXPECT_EQ(s.misoriented_edges, 0);
+  EXPECT_EQ(s.components, 1);
+  EXPECT_EQ(s.unreferenced_vertices, 1);
+  EXPECT_EQ(s.euler_characteristic, 0);  // an open cylinder
+  EXPECT_FALSE(s.closed_manifold());
+  EXPECT_NEAR(s.uv_coverage, 0.81, 0.01);  // the UV rectangle is 0.9 x 0.9
+  EXPECT_EQ(s.uv_overlap, 0.0);
+  EXPECT_EQ(s.num_charts, 2);
+  EXPECT_EQ(s.vertices_per_joint[3], 0);
+
+  // A closed tetrahedron; then one triangle flipped.
+  Template tet = tube;
+  tet.vertices.resize(4, 3);
+  tet.vertices << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1;
+  tet.triangles.resize(4, 3);
+  tet.triangles << 0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3;
+  tet.uvs.resize(3, 2);
+  tet.uvs << 0, 0, 1, 0, 0, 1;
+  tet.uv_triangles.resize(4, 3);
+  tet.uv_triangles << 0, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2;  // four copies of one UV triangle
+  tet.triangle_chart.resize(0);
+  tet.vertex_joint = Eigen::VectorXi::Zero(4);
+  tet.lbs_weight = Eigen::VectorXd::Ones(4);
+  tet.slerp_tau = Eigen::VectorXd::Zero(4);
+  const TemplateSummary closed = SummarizeTemplate(tet);
+  EXPECT_TRUE(closed.closed_manifold());
+  EXPECT_EQ(closed.euler_characteristic, 2);
+  EXPECT_NEAR(closed.uv_coverage, 0.5, 0.01);
+  EXPECT_NEAR(closed.uv_overlap, 1.0, 1e-12);
+  tet.triangles.row(3) << 1, 3, 2;
+  EXPECT_EQ(SummarizeTemplate(tet).misoriented_edges, 3);
+  TemplateSummaryOptions bad;
+  bad.uv_grid = 4;
+  EXPECT_THROW(SummarizeTemplate(tet, bad), Error);
+}
+
+// ---------------------------------------------------------------------------------------------
 // Posed mesh export.
 
 TEST_F(TemplateIoTest, PosedMeshExportWritesPlyObjAndGlb) {
