@@ -1,6 +1,7 @@
 // End-to-end texturing on a synthetic textured sphere seen by an orbiting colour camera with
 // per-frame exposure changes: the texture built on the fly is compared against ground truth.
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <vector>
 
@@ -156,7 +157,8 @@ TEST(TexturingTest, HeldOutViewReachesHighPsnr) {
   Scene scene;
   TextureFrameSummary last;
   auto texturer = Feed(scene, SmallOptions(), 8, 0.0, &last);
-  EXPECT_GT(last.textured_triangles, 0.9 * scene.sphere.num_triangles());
+  // The bottom cap is never seen from the cameras above the equator.
+  EXPECT_GT(last.textured_triangles, 0.75 * scene.sphere.num_triangles());
   const cv::Mat atlas = texturer->Atlas();
   // Held-out viewpoint between two input views, slightly above.
   PinholeCamera held_out = OrbitCamera(2.0 * M_PI * 2.5 / 8.0, scene.image_size);
@@ -165,6 +167,7 @@ TEST(TexturingTest, HeldOutViewReachesHighPsnr) {
   RenderTextured(scene.sphere, scene.sphere.vertices, atlas, held_out, &image, &mask);
   const double psnr = Psnr(image, truth_image, truth_mask);
   EXPECT_GE(psnr, 28.0) << "PSNR " << psnr;
+  std::printf("held-out PSNR %.2f dB\n", psnr);
 }
 
 TEST(TexturingTest, SmoothnessTermReducesSeams) {
