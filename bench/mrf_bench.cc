@@ -182,6 +182,7 @@ MrfProblem MakeProblem(const Scene& scene, std::uint64_t perturb_seed) {
 }
 
 void Report(benchmark::State& state, const MrfProblem& problem, const MrfSummary& summary) {
+  state.counters["initial"] = summary.initial_energy;
   state.counters["energy"] = summary.energy;
   state.counters["sweeps"] = summary.iterations;
   if (summary.lower_bound > -std::numeric_limits<double>::infinity()) {
