@@ -418,6 +418,24 @@ int ResampledFrameCount(const BvhClip& clip, double frame_rate, double tolerance
   return static_cast<int>(std::floor(clip.duration() * frame_rate + tolerance)) + 1;
 }
 
+int CountLeadingJumpFrames(const BvhClip& clip, double max_deg_per_s) {
+  const double max_step = max_deg_per_s * kDegToRad * clip.frame_time;
+  int n = 0;
+  if (clip.num_frames() < 2) return 0;
+  BvhFrame prev = BvhFrameAt(clip, 0);
+  for (int f = 0; f + 1 < clip.num_frames(); ++f) {
+    const BvhFrame next = BvhFrameAt(clip, f + 1);
+    double step = 0.0;
+    for (size_t j = 0; j < next.rotations.size(); ++j) {
+      step = std::max(step, prev.rotations[j].angularDistance(next.rotations[j]));
+    }
+    if (step <= max_step) break;
+    n = f + 1;
+    prev = next;
+  }
+  return n;
+}
+
 std::vector<BvhFrame> ResampleBvh(const BvhClip& clip, double frame_rate, double tolerance) {
   if (!(frame_rate > 0.0)) throw Error("BVH resampling: frame_rate must be > 0");
   std::vector<BvhFrame> frames;
@@ -451,8 +469,10 @@ bool BvhRetargetOptions::IsValid(std::string* error) const {
       (bvh_to_template * bvh_to_template.transpose() - Eigen::Matrix3d::Identity()).norm();
   if (!(frame_rate > 0.0) || !std::isfinite(frame_rate)) {
     msg << "bvh.frame_rate: expected > 0 Hz, found " << frame_rate;
-  } else if (skip_frames < 0) {
-    msg << "bvh.skip_frames: expected >= 0, found " << skip_frames;
+  } else if (skip_frames < -1) {
+    msg << "bvh.skip_frames: expected >= 0 or -1 (automatic), found " << skip_frames;
+  } else if (!(leading_jump_deg_per_s > 0.0)) {
+    msg << "bvh.leading_jump_deg_per_s: expected > 0, found " << leading_jump_deg_per_s;
   } else if (!(resample_tolerance >= 0.0 && resample_tolerance < 0.5)) {
     msg << "bvh.resample_tolerance: expected in [0, 0.5), found " << resample_tolerance;
   } else if (!(translation_scale >= 0.0) || !std::isfinite(translation_scale)) {
@@ -529,19 +549,23 @@ std::vector<Pose> RetargetBvh(const BvhClip& full_clip, const Template& tmpl,
                               const BvhRetargetOptions& options) {
   std::string error;
   if (!options.IsValid(&error)) throw Error(error);
-  if (options.skip_frames >= full_clip.num_frames()) {
-    throw Error(full_clip.source + ": bvh.skip_frames = " + std::to_string(options.skip_frames) +
+  if (full_clip.num_frames() == 0) throw Error(full_clip.source + ": the clip has no frames");
+  const int skip = options.skip_frames >= 0
+                       ? options.skip_frames
+                       : CountLeadingJumpFrames(full_clip, options.leading_jump_deg_per_s);
+  if (skip >= full_clip.num_frames()) {
+    throw Error(full_clip.source + ": bvh.skip_frames = " + std::to_string(skip) +
                 " leaves no frame of " + std::to_string(full_clip.num_frames()));
   }
   BvhClip trimmed;
-  if (options.skip_frames > 0) {
+  if (skip > 0) {
     trimmed.source = full_clip.source;
     trimmed.joints = full_clip.joints;
     trimmed.num_channels = full_clip.num_channels;
     trimmed.frame_time = full_clip.frame_time;
-    trimmed.values = full_clip.values.bottomRows(full_clip.num_frames() - options.skip_frames);
+    trimmed.values = full_clip.values.bottomRows(full_clip.num_frames() - skip);
   }
-  const BvhClip& clip = options.skip_frames > 0 ? trimmed : full_clip;
+  const BvhClip& clip = skip > 0 ? trimmed : full_clip;
   if (tmpl.num_joints() == 0) throw Error("RetargetBvh: the template has no joints");
   const std::vector<int> map = MapBvhJoints(clip, tmpl, options);
   const int num_joints = tmpl.num_joints();

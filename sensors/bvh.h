@@ -64,6 +64,10 @@ BvhFrame SampleBvh(const BvhClip& clip, double time_s);
 // Number of frames at `frame_rate` covering the clip: floor(duration * rate + tolerance) + 1,
 // tolerance in output frames (absorbs rounded Frame Time values such as 0.0333333).
 int ResampledFrameCount(const BvhClip& clip, double frame_rate, double tolerance = 1e-3);
+// Number n of leading frames such that for every f < n some joint's local rotation turns
+// faster than max_deg_per_s from frame f to f + 1 (a reference pose or a jump at the start);
+// at most num_frames - 1.
+int CountLeadingJumpFrames(const BvhClip& clip, double max_deg_per_s);
 // Frames at times k / frame_rate, k = 0 .. ResampledFrameCount - 1.
 std::vector<BvhFrame> ResampleBvh(const BvhClip& clip, double frame_rate, double tolerance = 1e-3);
 
@@ -73,10 +77,13 @@ void BvhForwardKinematics(const BvhClip& clip, const BvhFrame& frame,
 
 struct BvhRetargetOptions {
   double frame_rate = 30.0;  // output rate (Hz), > 0
-  // Leading frames dropped before resampling (>= 0, < frame count). The CMU clips converted
-  // for MakeHuman start with a rest/reference frame unrelated to the motion: use 1 for them.
-  int skip_frames = 0;
-  double resample_tolerance = 1e-3;  // see ResampledFrameCount
+  // Leading frames dropped before resampling: >= 0 (< frame count), or -1 = automatic,
+  // CountLeadingJumpFrames(clip, leading_jump_deg_per_s). The CMU clips converted for
+  // MakeHuman start with a reference pose (and some with a fast blend out of it) that is not
+  // part of the motion; a real motion starting faster than the threshold would lose frames.
+  int skip_frames = -1;
+  double leading_jump_deg_per_s = 1500.0;  // > 0
+  double resample_tolerance = 1e-3;        // see ResampledFrameCount
   // Metres per BVH unit for the root translation; 0 = automatic: the template's pelvis
   // height above its lowest vertex divided by the BVH rest root height above its lowest
   // joint / End Site.

@@ -256,6 +256,7 @@ BvhRetargetOptions RawOptions() {
   BvhRetargetOptions options;
   options.center_first_frame = false;
   options.floor = FloorMode::kKeep;
+  options.skip_frames = 0;
   return options;
 }
 
@@ -335,6 +336,26 @@ TEST(BvhRetargetTest, TPoseRestMapsTheArmsToHorizontal) {
   EXPECT_LT(LogSO3(poses[0].joint_rotations[J("l_hip")]).norm(), 1e-9);
 }
 
+TEST(BvhRetargetTest, AutomaticSkipDropsALeadingReferencePose) {
+  // Frame 0: rest; frames 1..9: a slow elbow flexion starting at 60 degrees (a jump of
+  // 60 degrees in 1/30 s = 1800 degrees/s, above the 1500 degrees/s threshold).
+  std::vector<SyntheticFrame> frames(10);
+  for (int f = 1; f < 10; ++f) frames[f].zxy_deg["l_elbow"] = Eigen::Vector3d(0, 60 + f, 0);
+  const BvhClip clip = Parse(TemplateBvh(frames, 1.0 / 30.0));
+  EXPECT_EQ(CountLeadingJumpFrames(clip, 1500.0), 1);
+  EXPECT_EQ(CountLeadingJumpFrames(clip, 2000.0), 0);
+  BvhRetargetOptions automatic = RawOptions();
+  automatic.skip_frames = -1;
+  const std::vector<Pose> poses = RetargetBvh(clip, Model(), automatic);
+  ASSERT_EQ(poses.size(), 9u);
+  EXPECT_LT((poses[0].joint_rotations[J("l_elbow")] - RotX(61)).norm(), 1e-9);
+  EXPECT_EQ(RetargetBvh(clip, Model(), RawOptions()).size(), 10u);
+  // Every step a jump: at least one frame is kept.
+  std::vector<SyntheticFrame> jumpy(4);
+  for (int f = 0; f < 4; ++f) jumpy[f].zxy_deg["l_elbow"] = Eigen::Vector3d(0, 80 * (f % 2), 0);
+  EXPECT_EQ(CountLeadingJumpFrames(Parse(TemplateBvh(jumpy, 1.0 / 30.0)), 1500.0), 3);
+}
+
 TEST(BvhRetargetTest, FloorCentringAndOptions) {
   std::vector<SyntheticFrame> frames(3);
   for (int f = 0; f < 3; ++f) frames[f].root_position = Eigen::Vector3d(100 + 10 * f, 20, 30);
@@ -352,6 +373,8 @@ TEST(BvhRetargetTest, FloorCentringAndOptions) {
   options.frame_rate = 0.0;
   EXPECT_THROW(RetargetBvh(clip, Model(), options), Error);
   options = BvhRetargetOptions();
+  options.skip_frames = -2;
+  EXPECT_THROW(RetargetBvh(clip, Model(), options), Error);
   options.skip_frames = 3;  // all frames
   EXPECT_THROW(RetargetBvh(clip, Model(), options), Error);
   options.skip_frames = 2;
@@ -438,14 +461,13 @@ TEST(BvhCmuTest, ClipsRetargetWithMatchingBoneDirections) {
       {"r_hip", "r_knee"},       {"r_knee", "r_ankle"},  {"spine", "chest"},
       {"chest", "neck"},         {"neck", "head"}};
   // These clips start with a reference pose; 02_02 and 03_03 then blend into the motion
-  // within 4 frames at 120 Hz (up to 15 degrees per frame), which is skipped as well.
+  // within 4 frames at 120 Hz (up to 25 degrees per frame): the automatic skip drops them.
   for (const auto& [file, skip] : std::vector<std::pair<std::string, int>>{
-           {"12_03.bvh", 1}, {"02_02.bvh", 5}, {"03_03.bvh", 5}, {"10_01.bvh", 1}}) {
+           {"12_03.bvh", 1}, {"02_02.bvh", 4}, {"03_03.bvh", 4}, {"10_01.bvh", 1}}) {
     SCOPED_TRACE(file);
     BvhClip clip = ReadBvh(SharedClip(file));
-    BvhRetargetOptions options;
-    options.skip_frames = skip;
-    const std::vector<Pose> poses = LoadBvhMotion(SharedClip(file), Model(), options);
+    EXPECT_EQ(CountLeadingJumpFrames(clip, BvhRetargetOptions().leading_jump_deg_per_s), skip);
+    const std::vector<Pose> poses = LoadBvhMotion(SharedClip(file), Model());
     clip.values = clip.values.bottomRows(clip.num_frames() - skip).eval();
     const int expected_frames = static_cast<int>(std::floor(clip.duration() * 30.0 + 1e-3)) + 1;
     ASSERT_EQ(static_cast<int>(poses.size()), expected_frames);
