@@ -603,8 +603,7 @@ TEST_F(TemplateIoTest, ImportOfAPlainSkinRecoversTheSkinningConstants) {
   for (int j = 0; j < tmpl.num_joints(); ++j) {
     EXPECT_LT((imported.joints[j + 1].center - tmpl.joints[j].center).norm(), 1e-12);
   }
-  // Welding merges the seam copies; the loose vertex stays out of the welded surface order
-  // only if it is unreferenced, so compare referenced vertices by position.
+  // Welding merges the seam copies back into one vertex each; compare corner by corner.
   ASSERT_EQ(imported.num_vertices(), tmpl.num_vertices());
   ASSERT_EQ(imported.num_triangles(), tmpl.num_triangles());
   int checked = 0;
