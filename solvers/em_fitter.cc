@@ -104,10 +104,16 @@ bool EMFitterOptions::IsValid(std::string* error) const {
     msg << "max_iterations: expected >= 1, found " << max_iterations;
   } else if (!(relative_cost_tolerance >= 0.0) || !(parameter_tolerance >= 0.0)) {
     msg << "relative_cost_tolerance/parameter_tolerance: expected values >= 0";
+  } else if (!(over_relaxation > 0.0 && over_relaxation < 2.0)) {
+    msg << "over_relaxation: expected a value in (0, 2), found " << over_relaxation;
   } else if (scale_estimation_frames < 1) {
     msg << "scale_estimation_frames: expected >= 1, found " << scale_estimation_frames;
   } else if (!(std::isfinite(scale_prior_weight) && scale_prior_weight >= 0.0)) {
     msg << "scale_prior_weight: expected a finite value >= 0, found " << scale_prior_weight;
+  } else if (!(std::isfinite(scale_max_radius) && scale_max_radius > 0.0)) {
+    msg << "scale_max_radius: expected a finite value > 0 (m), found " << scale_max_radius;
+  } else if (max_fit_vertices < 0) {
+    msg << "max_fit_vertices: expected >= 0 (0: all), found " << max_fit_vertices;
   } else if (min_scan_points < 0) {
     msg << "min_scan_points: expected >= 0, found " << min_scan_points;
   } else if (!(max_mean_motion > 0.0) || !(max_scale_change > 0.0)) {
@@ -148,7 +154,8 @@ struct EMFitter::FrameState {
   bool converged = false;
   FitSummary summary;
   // Buffers reused across iterations.
-  Eigen::MatrixX3d posed, normals;
+  Eigen::MatrixX3d full_posed, full_normals;  // whole template
+  Eigen::MatrixX3d posed, normals, colors;    // fitted vertices
   CorrespondenceTargets targets;
   NearestTargets nearest;
   Pose previous;  // temporal prior reference (valid when has_previous)
@@ -163,6 +170,32 @@ EMFitter::EMFitter(const Template& tmpl, const EMFitterOptions& options) : optio
     throw Error("fitting options: joint_limits." + error);
   }
   skinning_ = std::make_unique<Skinning>(tmpl);
+  fit_skinning_ = skinning_.get();
+  const int v = tmpl.num_vertices();
+  if (options.max_fit_vertices > 0 && v > options.max_fit_vertices) {
+    const int stride = (v + options.max_fit_vertices - 1) / options.max_fit_vertices;
+    for (int i = 0; i < v; i += stride) fit_vertices_.push_back(i);
+    // Skinning constants are per vertex, so the subset skins exactly like the full template.
+    Template subset;
+    const int n = static_cast<int>(fit_vertices_.size());
+    subset.vertices.resize(n, 3);
+    subset.vertex_joint.resize(n);
+    subset.lbs_weight.resize(n);
+    subset.slerp_tau.resize(n);
+    for (int i = 0; i < n; ++i) {
+      subset.vertices.row(i) = tmpl.vertices.row(fit_vertices_[i]);
+      subset.vertex_joint[i] = tmpl.vertex_joint[fit_vertices_[i]];
+      subset.lbs_weight[i] = tmpl.lbs_weight[fit_vertices_[i]];
+      subset.slerp_tau[i] = tmpl.slerp_tau[fit_vertices_[i]];
+    }
+    subset.triangles.resize(1, 3);
+    subset.triangles << 0, std::min(1, n - 1), std::min(2, n - 1);  // unused placeholder
+    subset.joints = tmpl.joints;
+    subset_skinning_ = std::make_unique<Skinning>(subset);
+    fit_skinning_ = subset_skinning_.get();
+  } else {
+    for (int i = 0; i < v; ++i) fit_vertices_.push_back(i);
+  }
   solver_ = FitSolver::Create(options.solver);
   initial_pose_ = Pose::Identity(tmpl.num_joints());
   pose_ = initial_pose_;
@@ -249,6 +282,13 @@ void EMFitter::BeginFrame(const Scan& scan, const Pose& initial_guess) {
     st.done = true;
     return;
   }
+  const bool finite = scan.points.allFinite() && scan.normals.allFinite() &&
+                      (scan.colors.rows() == 0 || scan.colors.allFinite());
+  if (!finite) {
+    st.summary.non_finite = true;
+    st.done = true;
+    return;
+  }
   if (scan.size() < std::max(options_.min_scan_points, 1)) {
     st.summary.too_few_points = true;
     st.done = true;
@@ -293,18 +333,29 @@ EMIterationInfo EMFitter::Iterate() {
 
   // Pose the template and its normals.
   auto start = Clock::now();
-  skinning_->Apply(pose_, &st.posed);
-  ComputeVertexNormals(st.posed, model.triangles, &st.normals);
+  skinning_->Apply(pose_, &st.full_posed);
+  ComputeVertexNormals(st.full_posed, model.triangles, &st.full_normals);
+  const bool subset = fit_skinning_ != skinning_.get();
+  const bool colored = !st.first_frame && template_colors_.rows() == model.num_vertices();
+  if (subset) {
+    const int n = static_cast<int>(fit_vertices_.size());
+    st.posed.resize(n, 3);
+    st.normals.resize(n, 3);
+    if (colored) st.colors.resize(n, 3);
+    for (int i = 0; i < n; ++i) {
+      st.posed.row(i) = st.full_posed.row(fit_vertices_[i]);
+      st.normals.row(i) = st.full_normals.row(fit_vertices_[i]);
+      if (colored) st.colors.row(i) = template_colors_.row(fit_vertices_[i]);
+    }
+  }
   st.summary.skinning_seconds += SecondsSince(start);
 
   // E-step (colour only once a texture exists and never on the first frame).
   start = Clock::now();
   PosedTemplateView view;
-  view.vertices = &st.posed;
-  view.normals = &st.normals;
-  if (!st.first_frame && template_colors_.rows() == model.num_vertices()) {
-    view.colors = &template_colors_;
-  }
+  view.vertices = subset ? &st.posed : &st.full_posed;
+  view.normals = subset ? &st.normals : &st.full_normals;
+  if (colored) view.colors = subset ? &st.colors : &template_colors_;
   const double radius = st.radii.empty() ? 0.0 : st.radii[st.stage];
   info.radius = radius;
   double total_weight = 0.0, constant = 0.0;
@@ -347,16 +398,20 @@ EMIterationInfo EMFitter::Iterate() {
                            accepted_frames_ >= options_.scale_estimation_frames;
   ScalePriorTerm scale_prior(options_.scale_prior_weight, scale_estimate_);
   FitProblem problem;
-  problem.skinning = skinning_.get();
+  problem.skinning = fit_skinning_;
   problem.anchor = pose_;
   problem.terms.push_back(data_term.get());
   problem.terms.push_back(&tikhonov);
   if (options_.joint_limits.weight > 0.0) problem.terms.push_back(&joint_limits);
   if (st.smoothness) problem.terms.push_back(st.smoothness.get());
   if (prior_scale) problem.terms.push_back(&scale_prior);
-  if (!st.scale_free) problem.constant_parameters.push_back(kScaleIndex);
+  const bool scale_free = st.scale_free && (st.radii.empty() || radius <= options_.scale_max_radius);
+  if (!scale_free) problem.constant_parameters.push_back(kScaleIndex);
 
   const FitSolverSummary m = solver_->Solve(problem, &pose_);
+  if (options_.over_relaxation != 1.0 && m.termination != FitTermination::kFailure) {
+    pose_ = problem.anchor.Retracted(options_.over_relaxation * m.delta);
+  }
   st.summary.mstep_seconds += m.seconds;
   st.summary.skinning_seconds += m.skinning_seconds;
 

@@ -57,6 +57,10 @@ struct EMFitterOptions {
   int tracking_iterations_per_stage = 6;      // max EM iterations per stage, later frames
   int max_iterations = 30;                    // per frame, over all stages (first frame: 2x)
 
+  // Over-relaxed EM: the M-step update is scaled by this factor before it is applied
+  // (1: plain EM; values in (1, 2) accelerate the slow linear convergence of EM).
+  double over_relaxation = 1.5;
+
   // Convergence (per stage; the frame converges when its last stage does):
   double relative_cost_tolerance = 1e-3;  // |cost change| / cost between EM iterations
   double parameter_tolerance = 2e-4;      // max |M-step update| component (m, rad)
@@ -70,14 +74,23 @@ struct EMFitterOptions {
 
   ScaleMode scale_mode = ScaleMode::kEstimateThenFix;
   int scale_estimation_frames = 1;
+  // Radius E-step: the scale is held during stages with a radius above this (m); at wide radii
+  // mu_t lies inside curved surfaces (chord means), which biases a free scale downwards.
+  double scale_max_radius = 0.05;
   double scale_prior_weight = 1.0;     // kEstimateThenPrior (cost units per unit^2)
 
   bool icp_first_frame = true;         // pre-align the first frame's pose by similarity ICP
   IcpInitOptions icp;
   bool constant_velocity_prediction = true;  // initial guess of frame f from f-1 and f-2
 
+  // Fit on a uniform subset (index stride) of at most this many template vertices (0: all).
+  // E-step, Jacobians and normal equations scale with it; normals use the full mesh.
+  int max_fit_vertices = 4000;
+
   // Robustness.
   int min_scan_points = 100;           // fewer: frame flagged too_few_points, pose kept
+                                       // (also when no correspondence is found)
+                                       // non-finite scan values flag non_finite
   double max_mean_motion = 0.5;        // mean vertex displacement (m) from the frame's initial
                                        // guess beyond which the frame is flagged diverged
   double max_scale_change = 0.5;       // relative scale change within a frame: diverged
@@ -134,6 +147,8 @@ class EMFitter {
 
   const EMFitterOptions& options() const { return options_; }
   const Skinning& skinning() const { return *skinning_; }
+  // Template vertex indices the fit uses (all, or the max_fit_vertices subset).
+  const std::vector<int>& fit_vertices() const { return fit_vertices_; }
 
   // Fits the next frame and returns its summary; pose() is the result (the previous pose when
   // the frame failed). The first frame starts from initial_pose() (rest pose unless set),
@@ -169,6 +184,9 @@ class EMFitter {
 
   EMFitterOptions options_;
   std::unique_ptr<Skinning> skinning_;
+  std::unique_ptr<Skinning> subset_skinning_;  // the fitted vertex subset (when subsampled)
+  const Skinning* fit_skinning_ = nullptr;     // skinning_ or subset_skinning_
+  std::vector<int> fit_vertices_;              // template indices of the fitted vertices
   std::unique_ptr<FitSolver> solver_;
   Eigen::MatrixX3d template_colors_;
   Pose initial_pose_;

@@ -21,6 +21,8 @@ namespace artex {
 namespace testing_util {
 
 // A capped tube from joint `j`'s centre along `dir` (length, radius), vertices skinned to j.
+// The cross-section is an ellipse (semi-axes radius and 0.6 radius) so that twist about the
+// bone is observable.
 inline void AddTube(Template* t, int joint, const Eigen::Vector3d& start,
                     const Eigen::Vector3d& dir, double length, double radius, int rings,
                     int segments, std::vector<Eigen::Vector3i>* tris) {
@@ -34,7 +36,8 @@ inline void AddTube(Template* t, int joint, const Eigen::Vector3d& start,
     const double f = (r + 0.5) / rings;
     for (int s = 0; s < segments; ++s) {
       const double phi = 2.0 * M_PI * s / segments;
-      verts.push_back(start + f * length * a + radius * (std::cos(phi) * u + std::sin(phi) * w));
+      verts.push_back(start + f * length * a +
+                      radius * (std::cos(phi) * u + 0.6 * std::sin(phi) * w));
       taus.push_back(f);
     }
   }
