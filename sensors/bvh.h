@@ -119,9 +119,9 @@ std::vector<int> MapBvhJoints(const BvhClip& clip, const Template& tmpl,
 // bone directions. Leaves (no mapped child) use their parent's A. An all-zero BVH frame
 // therefore poses the template in the BVH's rest pose (a T-pose for CMU clips). The root's
 // rotation goes into Pose::rotation (joint 0 stays identity); the translation puts the
-// pelvis centre on the scaled BVH root. Scale 1. Throws artex::Error on an empty clip
-// (after skip_frames) or invalid options. Output frame k is at time k / frame_rate after the first
-// kept frame.
+// pelvis centre on the scaled BVH root. Scale 1. Output frame k is at time k / frame_rate
+// after the first kept frame. Throws artex::Error on an empty clip (after skip_frames) or
+// invalid options.
 std::vector<Pose> RetargetBvh(const BvhClip& clip, const Template& tmpl,
                               const BvhRetargetOptions& options = BvhRetargetOptions());
 std::vector<Pose> LoadBvhMotion(const std::string& path, const Template& tmpl,

@@ -13,6 +13,7 @@
 #include "models/error.h"
 #include "models/skinning.h"
 #include "models/so3.h"
+#include "models/template_generator.h"
 #include "tests/sensors/test_skeleton.h"
 
 namespace artex {
@@ -503,6 +504,45 @@ TEST(BvhCmuTest, ClipsRetargetWithMatchingBoneDirections) {
     EXPECT_GT(p0.y(), 0.5 * pelvis.y());
     EXPECT_LT(p0.y(), 1.5 * pelvis.y());
   }
+}
+
+TEST(BvhCmuTest, GeneratedTemplateFollowsTheBvhBones) {
+  if (!std::filesystem::exists(SharedClip("12_03.bvh"))) GTEST_SKIP() << "no shared data";
+  BodyShapeOptions shape;
+  shape.resolution = 0;
+  const Template body = GenerateTemplate(shape);
+  const Skinning skinning(body);
+  const BvhClip clip = ReadBvh(SharedClip("12_03.bvh"));
+  const std::vector<Pose> poses = RetargetBvh(clip, body);
+  BvhClip trimmed = clip;
+  const int skip = CountLeadingJumpFrames(clip, BvhRetargetOptions().leading_jump_deg_per_s);
+  trimmed.values = clip.values.bottomRows(clip.num_frames() - skip).eval();
+  const std::vector<BvhFrame> frames = ResampleBvh(trimmed, 30.0);
+  ASSERT_EQ(poses.size(), frames.size());
+  const std::vector<int> map = MapBvhJoints(clip, body);
+  auto b = [&](const char* name) { return body.FindJoint(name); };
+  double worst = 0.0, lowest = 1e9;
+  for (size_t f = 0; f < poses.size(); ++f) {
+    std::vector<Eigen::Matrix3d> rot;
+    Eigen::MatrixX3d pos, centers, posed;
+    BvhForwardKinematics(trimmed, frames[f], &rot, &pos);
+    skinning.PosedJointCenters(poses[f], &centers);
+    for (const auto& [from, to] :
+         std::vector<std::pair<const char*, const char*>>{{"l_shoulder", "l_elbow"},
+                                                          {"r_elbow", "r_wrist"},
+                                                          {"l_hip", "l_knee"},
+                                                          {"r_knee", "r_ankle"},
+                                                          {"spine", "chest"},
+                                                          {"neck", "head"}}) {
+      const Eigen::Vector3d t = (centers.row(b(to)) - centers.row(b(from))).transpose();
+      const Eigen::Vector3d m = (pos.row(map[b(to)]) - pos.row(map[b(from)])).transpose();
+      worst = std::max(worst, AngleBetween(t, m));
+    }
+    skinning.Apply(poses[f], &posed);
+    lowest = std::min(lowest, posed.col(1).minCoeff());
+  }
+  EXPECT_LT(worst, 2.0 * kDeg);
+  EXPECT_NEAR(lowest, 0.0, 0.02);  // skinned feet touch the floor somewhere in the clip
 }
 
 }  // namespace

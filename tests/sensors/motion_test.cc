@@ -11,6 +11,7 @@
 #include "models/error.h"
 #include "models/skinning.h"
 #include "models/so3.h"
+#include "models/template_generator.h"
 #include "tests/sensors/test_skeleton.h"
 
 namespace artex {
@@ -329,6 +330,30 @@ TEST(MotionTest, LowestFootHeightFollowsTheGlobalTransform) {
   p.joint_rotations[J("r_knee")] = ExpSO3(Eigen::Vector3d(M_PI / 2, 0, 0));
   EXPECT_GT(LowestFootHeight(Model(), p), 0.3);
   EXPECT_THROW(LowestFootHeight(Model(), Pose::Identity(3)), Error);
+}
+
+// The generated body (coarse resolution): real skinning weights and proportions.
+TEST(MotionTest, GeneratedTemplateKeepsFeetOnTheFloorWithSmallSteps) {
+  BodyShapeOptions shape;
+  shape.resolution = 0;
+  const Template body = GenerateTemplate(shape);
+  const Skinning skinning(body);
+  for (MotionType type : kMoving) {
+    SCOPED_TRACE(MotionTypeName(type));
+    MotionOptions options;
+    options.type = type;
+    options.frames = 90;
+    const std::vector<Pose> poses = GenerateMotion(body, options);
+    Eigen::MatrixX3d prev, cur;
+    double max_step = 0.0;
+    for (size_t f = 0; f < poses.size(); ++f) {
+      skinning.Apply(poses[f], &cur);
+      EXPECT_NEAR(cur.col(1).minCoeff(), 0.0, 0.02) << "frame " << f;
+      if (f > 0) max_step = std::max(max_step, (cur - prev).rowwise().norm().maxCoeff());
+      prev = cur;
+    }
+    EXPECT_LT(max_step, 0.06);
+  }
 }
 
 }  // namespace
