@@ -458,6 +458,8 @@ EMIterationInfo EMFitter::Iterate() {
   return info;
 }
 
+bool EMFitter::frame_done() const { return !state_ || state_->done; }
+
 FitSummary EMFitter::EndFrame() {
   if (!state_) throw Error("EM fitter: EndFrame() called before BeginFrame()");
   FrameState& st = *state_;

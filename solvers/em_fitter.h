@@ -159,6 +159,8 @@ class EMFitter {
   // Iterate runs one EM iteration (E-step + M-step) and advances the radius schedule.
   void BeginFrame(const Scan& scan, const Pose& initial_guess);
   EMIterationInfo Iterate();
+  // True once the frame begun by BeginFrame has converged, hit its limits or failed.
+  bool frame_done() const;
   // Completes the frame begun by BeginFrame: robustness checks, history update.
   FitSummary EndFrame();
 
