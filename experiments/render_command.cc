@@ -1,8 +1,145 @@
-// placeholder until the subcommand is implemented
+// artex render RUN/ -o OUT/: renders the tracked, textured model of a run (RUN/tracked.glb)
+// from novel viewpoints (an orbit) and re-animated in new poses (a built-in motion or a pose
+// file), as in the paper's Fig. 2.
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
 #include <CLI/CLI.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "experiments/commands.h"
+#include "models/error.h"
+#include "models/mesh_export.h"
+#include "models/skinning.h"
+#include "models/template_io.h"
+#include "sensors/motion.h"
+#include "texture/texturer.h"
 
 namespace artex {
-void RegisterRenderCommand(CLI::App* app) { (void)app; }
+namespace {
+
+namespace fs = std::filesystem;
+
+// Last pose of RUN/poses.csv.
+Pose LastPose(const std::string& path, int num_joints) {
+  std::ifstream in(path);
+  if (!in) throw Error(path + ": cannot open the pose file");
+  std::string line, last;
+  int number = 0, last_number = 0;
+  while (std::getline(in, line)) {
+    ++number;
+    if (number == 1 || line.empty()) continue;  // header
+    last = line;
+    last_number = number;
+  }
+  if (last.empty()) throw Error(path + ": no pose rows");
+  std::stringstream ss(last);
+  std::string cell;
+  std::vector<double> values;
+  std::getline(ss, cell, ',');  // frame index
+  while (std::getline(ss, cell, ',')) {
+    try {
+      values.push_back(std::stod(cell));
+    } catch (const std::exception&) {
+      throw Error(path + ":" + std::to_string(last_number) + ": expected a number, found '" + cell + "'");
+    }
+  }
+  return Pose::FromVector(Eigen::Map<Eigen::VectorXd>(values.data(), values.size()), num_joints,
+                          path + ":" + std::to_string(last_number));
+}
+
+PinholeCamera OrbitCamera(const Eigen::Vector3d& center, double radius, double angle, int width,
+                          int height, double elevation) {
+  PinholeCamera camera;
+  camera.width = width;
+  camera.height = height;
+  camera.fx = camera.fy = 1.1 * height;
+  camera.cx = (width - 1) / 2.0;
+  camera.cy = (height - 1) / 2.0;
+  const Eigen::Vector3d eye =
+      center + radius * Eigen::Vector3d(std::sin(angle), elevation, std::cos(angle));
+  camera.world_to_camera = PinholeCamera::LookAt(eye, center, Eigen::Vector3d::UnitY());
+  return camera;
+}
+
+void WriteImage(const std::string& path, const cv::Mat& image) {
+  std::vector<unsigned char> bytes;
+  if (!cv::imencode(".png", image, bytes)) throw Error(path + ": PNG encoding failed");
+  WriteFileAtomically(path, std::string(bytes.begin(), bytes.end()));
+}
+
+}  // namespace
+
+void RegisterRenderCommand(CLI::App* app) {
+  struct Args {
+    std::string run, out, motion, view = "orbit";
+    int frames = 8, width = 480, height = 640;
+    double distance = 2.8, elevation = 0.15;
+  };
+  auto args = std::make_shared<Args>();
+  CLI::App* cmd = app->add_subcommand(
+      "render", "Render a tracked, textured model from new viewpoints and in new poses");
+  cmd->add_option("run", args->run, "output folder of `artex track` (reads tracked.glb, poses.csv)")
+      ->required();
+  cmd->add_option("-o,--output", args->out, "output folder for PNG images")->required();
+  cmd->add_option("--view", args->view, "orbit: views around the model in its last tracked pose");
+  cmd->add_option("--frames", args->frames, "number of orbit views / re-animated frames");
+  cmd->add_option("--motion", args->motion,
+                  "re-animate with a built-in motion (walk, arm_raise, turn, bend) instead");
+  cmd->add_option("--width", args->width, "image width (pixels)");
+  cmd->add_option("--height", args->height, "image height (pixels)");
+  cmd->add_option("--distance", args->distance, "camera distance (m)");
+  cmd->callback([args] {
+    if (args->view != "orbit") throw Error("--view: unknown value '" + args->view + "'; valid: orbit");
+    if (args->frames < 1) throw Error("--frames: expected >= 1, found " + std::to_string(args->frames));
+    if (args->width < 16 || args->height < 16) throw Error("--width/--height: expected >= 16 pixels");
+    const std::string glb = args->run + "/tracked.glb";
+    GlbTexture texture;
+    const Template tmpl = ReadTemplateGlb(glb, &texture);
+    if (texture.png.empty()) throw Error(glb + ": no embedded texture (was the run made with --no-texture?)");
+    const cv::Mat atlas = cv::imdecode(texture.png, cv::IMREAD_COLOR);
+    if (atlas.empty()) throw Error(glb + ": the embedded texture is not a readable PNG");
+    const Skinning skinning(tmpl);
+    std::vector<Pose> poses;
+    if (!args->motion.empty()) {
+      MotionOptions motion;
+      motion.type = ParseMotionType(args->motion);
+      motion.frames = args->frames;
+      poses = GenerateMotion(tmpl, motion);
+      // Keep the tracked subject's place and scale.
+      const Pose tracked = LastPose(args->run + "/poses.csv", tmpl.num_joints());
+      for (Pose& p : poses) {
+        p.scale = tracked.scale;
+        p.translation += tracked.translation;
+      }
+    } else {
+      poses.assign(args->frames, LastPose(args->run + "/poses.csv", tmpl.num_joints()));
+    }
+    std::error_code ec;
+    fs::create_directories(args->out, ec);
+    if (ec) throw Error(args->out + ": cannot create the output folder: " + ec.message());
+    Eigen::MatrixX3d posed;
+    for (int i = 0; i < args->frames; ++i) {
+      skinning.Apply(poses[i], &posed);
+      const Eigen::Vector3d center = 0.5 * (posed.colwise().minCoeff() + posed.colwise().maxCoeff()).transpose();
+      const double angle = args->motion.empty() ? 2.0 * M_PI * i / args->frames : 0.35;
+      const PinholeCamera camera =
+          OrbitCamera(center, args->distance, angle, args->width, args->height, args->elevation);
+      cv::Mat image, mask;
+      RenderTextured(tmpl, posed, atlas, camera, &image, &mask);
+      image.setTo(cv::Scalar(60, 60, 60), mask == 0);
+      char name[64];
+      std::snprintf(name, sizeof(name), "/%s_%03d.png", args->motion.empty() ? "view" : "pose", i);
+      WriteImage(args->out + name, image);
+    }
+    std::printf("%d images in %s\n", args->frames, args->out.c_str());
+  });
+}
+
 }  // namespace artex

@@ -1,8 +1,78 @@
-// placeholder until the subcommand is implemented
+// artex track SEQUENCE --config FILE -o OUT/: preprocessing, EM fitting and on-the-fly
+// texturing of every frame (experiments/pipeline.h), with a progress line on stderr.
+#include <cstdio>
+#include <string>
+#include <vector>
+
 #include <CLI/CLI.hpp>
 
 #include "experiments/commands.h"
+#include "experiments/config.h"
+#include "experiments/pipeline.h"
+#include "models/error.h"
 
 namespace artex {
-void RegisterTrackCommand(CLI::App* app) { (void)app; }
+
+void RegisterTrackCommand(CLI::App* app) {
+  struct Args {
+    std::string sequence, config, out, template_path;
+    std::vector<std::string> overrides;
+    bool export_meshes = false;
+    bool no_texture = false;
+    int max_frames = 0;
+    bool quiet = false;
+  };
+  auto args = std::make_shared<Args>();
+  CLI::App* cmd = app->add_subcommand(
+      "track", "Fit the template to every frame of a sequence and texture it on the fly");
+  cmd->add_option("sequence", args->sequence, "artex sequence folder")->required();
+  cmd->add_option("-c,--config", args->config, "configuration file (YAML); default: built-in defaults");
+  cmd->add_option("-o,--output", args->out, "output folder")->required();
+  cmd->add_option("-t,--template", args->template_path,
+                  "tracking template (.glb); default: the generated default template");
+  cmd->add_option("-s,--set", args->overrides, "override an option: key=value (e.g. texture.lambda=0)");
+  cmd->add_flag("--export-meshes", args->export_meshes, "write the posed mesh of every frame (PLY)");
+  cmd->add_flag("--no-texture", args->no_texture, "fitting only");
+  cmd->add_option("--max-frames", args->max_frames, "process at most this many frames (0: all)");
+  cmd->add_flag("-q,--quiet", args->quiet, "no progress line");
+  cmd->callback([args] {
+    Config config = args->config.empty() ? Config() : Config::Load(args->config);
+    for (const auto& o : args->overrides) {
+      const auto eq = o.find('=');
+      if (eq == std::string::npos || eq == 0)
+        throw Error("--set " + o + ": expected key=value (e.g. texture.lambda=0)");
+      config.Set(o.substr(0, eq), o.substr(eq + 1));
+    }
+    if (args->export_meshes) config.Set("pipeline.export_meshes", "true");
+    if (args->no_texture) config.Set("pipeline.texture", "false");
+    if (args->max_frames > 0) config.Set("pipeline.max_frames", std::to_string(args->max_frames));
+    const PipelineOptions options = LoadPipelineOptions(config);
+    const bool quiet = args->quiet;
+    const PipelineResult result = RunPipeline(
+        args->sequence, args->template_path, options, config, args->out,
+        [quiet](const PipelineProgress& p) {
+          if (quiet) return;
+          std::fprintf(stderr, "\rtrack: frame %d/%d  %.1f frames/s  EM iterations %d", p.done,
+                       p.total, p.frames_per_second, p.last ? p.last->fit.iterations : 0);
+          if (p.last && p.last->mean_vertex_error_mm == p.last->mean_vertex_error_mm)
+            std::fprintf(stderr, "  error %.1f mm", p.last->mean_vertex_error_mm);
+          std::fprintf(stderr, "   ");
+          std::fflush(stderr);
+        });
+    if (!quiet) std::fprintf(stderr, "\n");
+    for (const auto& w : result.warnings) std::fprintf(stderr, "track: warning: %s\n", w.c_str());
+    std::printf("frames: %zu (%d skipped)\n", result.frames.size(), result.skipped_frames);
+    std::printf("EM iterations per frame: %.1f\n", result.mean_em_iterations);
+    std::printf("fitting: %.1f ms/frame, texturing: %.1f ms/frame\n", result.fit_ms_per_frame,
+                result.texture_ms_per_frame);
+    std::printf("stream: %.1f kbit/s (pose + texture updates)\n", result.stream_kbit_per_s);
+    if (result.has_ground_truth) {
+      std::printf("mean vertex error: %.2f mm (max %.2f mm), mean joint error: %.2f mm, lost: %.1f%%\n",
+                  result.mean_vertex_error_mm, result.max_vertex_error_mm,
+                  result.mean_joint_error_mm, 100.0 * result.lost_fraction);
+    }
+    std::printf("results in %s\n", args->out.c_str());
+  });
+}
+
 }  // namespace artex

@@ -95,10 +95,12 @@ TextureFrameSummary Texturer::AddFrame(int frame, const cv::Mat& color_bgr,
 
   const auto t_sample = std::chrono::steady_clock::now();
   const int f_count = template_.num_triangles();
+  changed_.clear();
   for (int f = 0; f < f_count; ++f) {
     // Resample only where the source image changed (labels always name pooled images).
     if (result.frames[f] == frames_[f]) continue;
     ++s.changed_triangles;
+    changed_.push_back(f);
     if (result.frames[f] < 0) {
       ClearTriangle(*map_, f, &base_);
     } else {

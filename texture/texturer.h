@@ -73,6 +73,8 @@ class Texturer {
   void VertexColors(Eigen::MatrixX3d* rgb, std::vector<uint8_t>* valid) const;
   // A label map for inspection: every triangle's UV footprint coloured by its source frame.
   cv::Mat LabelMap() const;
+  // Triangles whose source image changed in the last AddFrame (their texels were resampled).
+  const std::vector<int>& last_changed_triangles() const { return changed_; }
   const ImagePool& pool() const { return *pool_; }
   const TextureMesh& mesh() const { return mesh_; }
   const AtlasMap& atlas_map() const { return *map_; }
@@ -89,6 +91,7 @@ class Texturer {
   std::vector<double> seam_distance_;
   std::vector<double> edge_weight_;
   Eigen::MatrixX3f corrections_;     // 3F x 3
+  std::vector<int> changed_;
   int frames_seen_ = 0;
 };
 

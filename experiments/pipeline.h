@@ -1,0 +1,81 @@
+// The per-sequence pipeline behind `artex track` and the experiment runner: preprocess every
+// frame, fit the template (EM), texture it on the fly, and write the results of a run into
+// one folder (poses, per-frame summaries, texture, metrics against ground truth, exports).
+#pragma once
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "experiments/config.h"
+#include "sensors/preprocess.h"
+#include "solvers/em_fitter.h"
+#include "texture/texturer.h"
+
+namespace artex {
+
+struct PipelineOptions {
+  PreprocessOptions preprocess;
+  EMFitterOptions fitting;
+  TexturingOptions texturing;
+  bool texture = true;            // on-the-fly texturing on/off
+  bool colour_term = true;        // feed the texture's colours back into the E-step
+  int first_frame = 0;            // first frame index of the sequence to process
+  int max_frames = 0;             // 0: all frames
+  bool export_meshes = false;     // posed meshes per frame (meshes/NNNNNN.ply)
+  bool export_glb = true;         // animated, textured tracked.glb at the end
+  std::vector<int> atlas_frames;  // also write the atlas after these frames
+  double lost_threshold_mm = 50.0;  // a frame is lost when its mean vertex error exceeds this
+
+  bool IsValid(std::string* error) const;
+};
+
+// Reads the sections preprocess, fitting, texture and pipeline of a configuration; unknown
+// keys are errors listing the valid ones.
+PipelineOptions LoadPipelineOptions(const Config& config);
+
+struct FrameRecord {
+  int frame = 0;
+  bool skipped = false;          // unreadable input frame (counted, not fitted)
+  FitSummary fit;
+  TextureFrameSummary texture;
+  double preprocess_seconds = 0.0;
+  int scan_points = 0;
+  // Ground truth metrics (NaN without ground truth).
+  double mean_vertex_error_mm = 0.0;
+  double max_vertex_error_mm = 0.0;
+  double mean_joint_error_mm = 0.0;
+};
+
+struct PipelineResult {
+  std::vector<FrameRecord> frames;
+  int skipped_frames = 0;
+  bool has_ground_truth = false;
+  double mean_vertex_error_mm = 0.0;
+  double max_vertex_error_mm = 0.0;
+  double mean_joint_error_mm = 0.0;
+  double lost_fraction = 0.0;
+  double mean_em_iterations = 0.0;
+  double fit_ms_per_frame = 0.0;
+  double texture_ms_per_frame = 0.0;
+  double stream_kbit_per_s = 0.0;  // pose + texture updates, compressed, at the frame rate
+  std::vector<std::string> warnings;
+};
+
+struct PipelineProgress {
+  int done = 0;
+  int total = 0;
+  double frames_per_second = 0.0;
+  const FrameRecord* last = nullptr;
+};
+
+// Runs the pipeline on a sequence folder with the tracking template at template_path (.glb;
+// "" = the default generated template) and writes into out_dir (created): config.yaml
+// (resolved), poses.csv, frames.csv, summary.json, metrics.json (with ground truth),
+// texture.png, labels.png, tracked.glb, meshes/ on request. Throws artex::Error on bad input.
+PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& template_path,
+                           const PipelineOptions& options, const Config& resolved_config,
+                           const std::string& out_dir,
+                           const std::function<void(const PipelineProgress&)>& progress = {});
+
+}  // namespace artex

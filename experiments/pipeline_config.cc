@@ -1,0 +1,176 @@
+// Configuration keys of the pipeline (docs/configuration.md lists them with their defaults).
+#include <map>
+#include <sstream>
+#include <string>
+
+#include "experiments/pipeline.h"
+#include "models/error.h"
+
+namespace artex {
+namespace {
+
+void BindWeights(const Config& c, PoseGroupWeights* w) {
+  c.CheckKeys({"scale", "translation", "rotation", "joints"});
+  c.Get("scale", &w->scale);
+  c.Get("translation", &w->translation);
+  c.Get("rotation", &w->rotation);
+  c.Get("joints", &w->joints);
+}
+
+void BindPreprocess(const Config& c, PreprocessOptions* o) {
+  c.CheckKeys({"background", "mesh"});
+  const Config b = c.Section("background");
+  b.CheckKeys({"min_valid_samples", "noise_sigma_at_1m", "use_mad", "threshold_sigmas",
+               "min_foreground_distance", "min_depth", "max_depth", "opening_radius",
+               "closing_radius", "keep_largest_component"});
+  b.Get("min_valid_samples", &o->background.min_valid_samples);
+  b.Get("noise_sigma_at_1m", &o->background.noise_sigma_at_1m);
+  b.Get("use_mad", &o->background.use_mad);
+  b.Get("threshold_sigmas", &o->background.threshold_sigmas);
+  b.Get("min_foreground_distance", &o->background.min_foreground_distance);
+  b.Get("min_depth", &o->background.min_depth);
+  b.Get("max_depth", &o->background.max_depth);
+  b.Get("opening_radius", &o->background.opening_radius);
+  b.Get("closing_radius", &o->background.closing_radius);
+  b.Get("keep_largest_component", &o->background.keep_largest_component);
+  const Config m = c.Section("mesh");
+  m.CheckKeys({"step", "max_relative_jump", "drop_isolated_points"});
+  m.Get("step", &o->mesh.step);
+  m.Get("max_relative_jump", &o->mesh.max_relative_jump);
+  m.Get("drop_isolated_points", &o->mesh.drop_isolated_points);
+}
+
+void BindFitting(const Config& c, EMFitterOptions* o) {
+  c.CheckKeys({"correspondence", "solver", "estep", "k", "voxel_fraction", "epsilon",
+               "lambda_color", "use_color", "normalize_per_scan_point", "icp_metric",
+               "icp_max_distance", "icp_min_normal_dot", "first_frame_radii", "tracking_radii",
+               "first_frame_iterations_per_stage", "tracking_iterations_per_stage",
+               "max_iterations", "over_relaxation", "relative_cost_tolerance",
+               "parameter_tolerance", "normalize_data_term", "tikhonov", "temporal",
+               "smoothness", "joint_limit_weight", "scale_mode", "scale_estimation_frames",
+               "scale_max_radius", "scale_prior_weight", "icp_first_frame",
+               "constant_velocity_prediction", "max_fit_vertices", "min_scan_points",
+               "max_mean_motion", "ceres_max_iterations", "solver_threads"});
+  c.GetEnum("correspondence", CorrespondenceModelNames(), &o->correspondence);
+  c.GetEnum("solver", FitSolverTypeNames(), &o->solver.type);
+  c.GetEnum("estep", std::map<std::string, EStepMode>{{"dense", EStepMode::kDense},
+                                                      {"truncated", EStepMode::kRadius},
+                                                      {"radius", EStepMode::kRadius},
+                                                      {"knn", EStepMode::kKNearest}},
+            &o->estep.mode);
+  c.Get("k", &o->estep.k);
+  c.Get("voxel_fraction", &o->estep.voxel_fraction);
+  c.Get("epsilon", &o->estep.weights.epsilon);
+  c.Get("lambda_color", &o->estep.weights.lambda_color);
+  c.Get("use_color", &o->estep.weights.use_color);
+  c.Get("normalize_per_scan_point", &o->estep.weights.normalize_per_scan_point);
+  c.GetEnum("icp_metric", std::map<std::string, IcpMetric>{{"point_to_point", IcpMetric::kPointToPoint},
+                                                           {"point_to_plane", IcpMetric::kPointToPlane}},
+            &o->one_to_one.metric);
+  c.Get("icp_max_distance", &o->one_to_one.max_distance);
+  c.Get("icp_min_normal_dot", &o->one_to_one.min_normal_dot);
+  c.Get("first_frame_radii", &o->first_frame_radii);
+  c.Get("tracking_radii", &o->tracking_radii);
+  c.Get("first_frame_iterations_per_stage", &o->first_frame_iterations_per_stage);
+  c.Get("tracking_iterations_per_stage", &o->tracking_iterations_per_stage);
+  c.Get("max_iterations", &o->max_iterations);
+  c.Get("over_relaxation", &o->over_relaxation);
+  c.Get("relative_cost_tolerance", &o->relative_cost_tolerance);
+  c.Get("parameter_tolerance", &o->parameter_tolerance);
+  c.Get("normalize_data_term", &o->normalize_data_term);
+  BindWeights(c.Section("tikhonov"), &o->tikhonov.update);
+  BindWeights(c.Section("temporal"), &o->tikhonov.temporal);
+  BindWeights(c.Section("smoothness"), &o->smoothness);
+  c.Get("joint_limit_weight", &o->joint_limits.weight);
+  c.GetEnum("scale_mode", ScaleModeNames(), &o->scale_mode);
+  c.Get("scale_estimation_frames", &o->scale_estimation_frames);
+  c.Get("scale_max_radius", &o->scale_max_radius);
+  c.Get("scale_prior_weight", &o->scale_prior_weight);
+  c.Get("icp_first_frame", &o->icp_first_frame);
+  c.Get("constant_velocity_prediction", &o->constant_velocity_prediction);
+  c.Get("max_fit_vertices", &o->max_fit_vertices);
+  c.Get("min_scan_points", &o->min_scan_points);
+  c.Get("max_mean_motion", &o->max_mean_motion);
+  c.Get("ceres_max_iterations", &o->solver.max_iterations);
+  c.Get("solver_threads", &o->solver.num_threads);
+}
+
+void BindTexture(const Config& c, TexturingOptions* o) {
+  c.CheckKeys({"beta", "t_max", "alpha", "lambda", "seam_distance_scale", "min_quality",
+               "untextured_cost", "max_candidates", "solver", "mrf_max_iterations",
+               "trws_max_iterations", "warm_start", "max_images", "hard_max_images",
+               "histogram_bins", "edge_samples", "atlas_size", "padding_texels",
+               "seam_levelling", "levelling_smoothness", "add_every", "depth_tolerance"});
+  TextureTermOptions& t = o->selection.terms;
+  c.Get("beta", &t.beta);
+  c.Get("t_max", &t.t_max);
+  c.Get("alpha", &t.alpha);
+  c.Get("lambda", &t.lambda);
+  c.Get("seam_distance_scale", &t.seam_distance_scale);
+  c.Get("min_quality", &t.min_quality);
+  c.Get("untextured_cost", &o->selection.untextured_cost);
+  c.Get("max_candidates", &o->selection.max_candidates);
+  if (c.Has("solver")) {
+    std::string name;
+    c.Get("solver", &name);
+    try {
+      o->mrf.type = ParseMrfSolverType(name);
+    } catch (const Error& e) {
+      throw Error(c.Path("solver") + ": " + e.what());
+    }
+  }
+  c.Get("mrf_max_iterations", &o->mrf.max_iterations);
+  c.Get("trws_max_iterations", &o->mrf.trws_max_iterations);
+  c.Get("warm_start", &o->mrf.warm_start);
+  c.Get("max_images", &o->pool.max_images);
+  c.Get("hard_max_images", &o->pool.hard_max_images);
+  c.Get("histogram_bins", &o->pool.histogram_bins);
+  c.Get("edge_samples", &o->pool.edge_samples);
+  c.Get("atlas_size", &o->atlas_size);
+  c.Get("padding_texels", &o->padding_texels);
+  c.Get("seam_levelling", &o->seam_levelling);
+  c.Get("levelling_smoothness", &o->levelling.smoothness);
+  c.Get("add_every", &o->add_every);
+  c.Get("depth_tolerance", &o->visibility.depth_tolerance);
+}
+
+void BindPipeline(const Config& c, PipelineOptions* o) {
+  c.CheckKeys({"texture", "colour_term", "first_frame", "max_frames", "export_meshes",
+               "export_glb", "lost_threshold_mm"});
+  c.Get("texture", &o->texture);
+  c.Get("colour_term", &o->colour_term);
+  c.Get("first_frame", &o->first_frame);
+  c.Get("max_frames", &o->max_frames);
+  c.Get("export_meshes", &o->export_meshes);
+  c.Get("export_glb", &o->export_glb);
+  c.Get("lost_threshold_mm", &o->lost_threshold_mm);
+}
+
+}  // namespace
+
+bool PipelineOptions::IsValid(std::string* error) const {
+  if (!preprocess.IsValid(error) || !fitting.IsValid(error)) return false;
+  if (texture && !texturing.IsValid(error)) return false;
+  std::ostringstream msg;
+  if (first_frame < 0) msg << "pipeline.first_frame: expected >= 0, found " << first_frame;
+  else if (max_frames < 0) msg << "pipeline.max_frames: expected >= 0, found " << max_frames;
+  else if (!(lost_threshold_mm > 0))
+    msg << "pipeline.lost_threshold_mm: expected > 0, found " << lost_threshold_mm;
+  if (msg.str().empty()) return true;
+  if (error) *error = msg.str();
+  return false;
+}
+
+PipelineOptions LoadPipelineOptions(const Config& config) {
+  config.CheckKeys({"preprocess", "fitting", "texture", "pipeline"});
+  PipelineOptions o;
+  BindPreprocess(config.Section("preprocess"), &o.preprocess);
+  BindFitting(config.Section("fitting"), &o.fitting);
+  BindTexture(config.Section("texture"), &o.texturing);
+  BindPipeline(config.Section("pipeline"), &o);
+  std::string why;
+  if (!o.IsValid(&why)) throw Error(config.Path("") + " " + why);
+  return o;
+}
+
+}  // namespace artex
