@@ -1,8 +1,250 @@
-// placeholder until the subcommand is implemented
+// `artex experiment FILE -o OUT`: runs every (sequence, configuration) of an experiment file in
+// child processes with a progress display, then writes results.csv, summary.md and the plots
+// (scripts/plot_results.py). Hidden subcommands `experiment-run` and `experiment-synth` are
+// the children's entry points; `artex overlay` draws fitted meshes over input depth frames.
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
 #include <CLI/CLI.hpp>
 
 #include "experiments/commands.h"
+#include "experiments/runner.h"
+#include "models/error.h"
 
 namespace artex {
-void RegisterExperimentCommand(CLI::App* app) { (void)app; }
+namespace {
+namespace fs = std::filesystem;
+
+struct ExperimentCliOptions {
+  std::string file;
+  std::string output;
+  int jobs = 0;
+  int threads = 0;
+  bool dry_run = false;
+  bool no_plots = false;
+};
+
+// A python3 that can import matplotlib ("" when none).
+std::string FindPlottingPython() {
+  for (const char* candidate : {"python3", "/usr/bin/python3"}) {
+    const std::string cmd = std::string(candidate) + " -c 'import matplotlib' >/dev/null 2>&1";
+    if (std::system(cmd.c_str()) == 0) return candidate;
+  }
+  return "";
+}
+
+std::string Quote(const std::string& s) {
+  std::string out = "'";
+  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+
+// Status display: one rewritten line on a terminal, one line per event otherwise.
+class ProgressDisplay {
+ public:
+  ProgressDisplay() : tty_(isatty(STDERR_FILENO)) {}
+
+  void Handle(const RunnerEvent& e) {
+    using K = RunnerEvent::Kind;
+    switch (e.kind) {
+      case K::kPlan:
+        Line("experiment: " + std::to_string(e.runs_total) + " runs, " +
+             std::to_string(e.runs_skipped) + " already complete (skipped), " +
+             std::to_string(e.total) + " to run");
+        total_ = e.runs_total;
+        done_ = e.runs_skipped;
+        break;
+      case K::kSequenceStarted:
+        Line("experiment: generating sequence " + e.label);
+        break;
+      case K::kSequenceReady:
+        Line("experiment: sequence " + e.label + " ready" +
+             (e.seconds > 0 ? " (" + Seconds(e.seconds) + ")" : " (reused)"));
+        break;
+      case K::kRunStarted:
+        active_[e.label] = "start";
+        Status(e);
+        break;
+      case K::kRunProgress:
+        active_[e.label] = std::to_string(e.done) + "/" + std::to_string(e.total);
+        Status(e);
+        break;
+      case K::kRunSkipped:
+        if (!tty_) Line("experiment: skip " + e.label + " (complete)");
+        break;
+      case K::kRunFinished:
+        active_.erase(e.label);
+        done_ = e.runs_done;
+        Line("experiment: [" + std::to_string(e.runs_done) + "/" + std::to_string(e.runs_total) +
+             "] done " + e.label + " in " + Seconds(e.seconds));
+        break;
+      case K::kRunFailed:
+        active_.erase(e.label);
+        Line("experiment: FAILED " + e.label + ": " + e.message);
+        break;
+    }
+  }
+
+ private:
+  static std::string Seconds(double s) {
+    char buf[32];
+    std::snprintf(buf, sizeof(buf), "%.1f s", s);
+    return buf;
+  }
+  void Line(const std::string& text) {
+    if (tty_ && status_shown_) std::fprintf(stderr, "\r\033[K");
+    std::fprintf(stderr, "%s\n", text.c_str());
+    status_shown_ = false;
+    std::fflush(stderr);
+  }
+  void Status(const RunnerEvent& e) {
+    if (!tty_) {
+      if (e.kind == RunnerEvent::Kind::kRunStarted) std::fprintf(stderr, "experiment: start %s\n", e.label.c_str());
+      return;
+    }
+    std::string s = "[" + std::to_string(e.runs_done) + "/" + std::to_string(e.runs_total) +
+                    " done, " + std::to_string(active_.size()) + " running]";
+    for (const auto& kv : active_) s += "  " + kv.first + " " + kv.second;
+    if (s.size() > 160) s = s.substr(0, 157) + "...";
+    std::fprintf(stderr, "\r\033[K%s", s.c_str());
+    status_shown_ = true;
+    std::fflush(stderr);
+  }
+
+  bool tty_;
+  bool status_shown_ = false;
+  int total_ = 0, done_ = 0;
+  std::map<std::string, std::string> active_;
+};
+
+void RunExperimentCli(const ExperimentCliOptions& cli) {
+  if (cli.output.empty()) throw Error("-o/--output: an output folder is required");
+  const Experiment experiment = LoadExperiment(cli.file);
+  std::fprintf(stderr, "experiment %s: %zu sequences x %zu configurations (validated)\n",
+               experiment.name.c_str(), experiment.sequences.size(),
+               experiment.combinations.size());
+  if (cli.dry_run) {
+    for (const auto& s : experiment.sequences) {
+      for (const auto& c : experiment.combinations) {
+        std::printf("%s\n", RunFolder(cli.output, s.name, c.id).c_str());
+      }
+    }
+  }
+  RunnerOptions options;
+  options.jobs = cli.jobs;
+  options.threads_per_run = cli.threads;
+  options.dry_run = cli.dry_run;
+  ProgressDisplay display;
+  const ExperimentSummary summary =
+      RunExperiment(experiment, cli.output, options, [&](const RunnerEvent& e) { display.Handle(e); });
+  if (cli.dry_run) return;
+  std::fprintf(stderr,
+               "experiment: %d runs: %d completed now, %d skipped (complete before), %d failed; "
+               "%.1f s\n",
+               summary.runs_total, summary.runs_completed, summary.runs_skipped, summary.runs_failed,
+               summary.seconds);
+  std::fprintf(stderr, "experiment: wrote %s/results.csv and %s/summary.md\n", cli.output.c_str(),
+               cli.output.c_str());
+  const std::string script = (fs::path(SourceDirectory()) / "scripts" / "plot_results.py").string();
+  if (!cli.no_plots) {
+    const std::string python = FindPlottingPython();
+    if (python.empty() || !fs::exists(script)) {
+      std::fprintf(stderr,
+                   "experiment: plots not made (needs python3 with matplotlib); run:\n"
+                   "  python3 %s %s\n",
+                   script.c_str(), cli.output.c_str());
+    } else {
+      const std::string cmd = python + " " + Quote(script) + " " + Quote(cli.output);
+      if (std::system(cmd.c_str()) != 0) {
+        std::fprintf(stderr, "experiment: plotting failed; rerun: %s\n", cmd.c_str());
+      }
+    }
+  }
+  if (summary.runs_failed > 0) {
+    std::string msg = std::to_string(summary.runs_failed) + " run(s) failed (rerun to retry):";
+    for (const auto& f : summary.failures) msg += "\n  " + f;
+    throw Error(msg);
+  }
+}
+
+void PrintProgress(int done, int total) {
+  std::printf("progress %d %d\n", done, total);
+  std::fflush(stdout);
+}
+
+}  // namespace
+
+void RegisterExperimentCommand(CLI::App* app) {
+  auto cli = std::make_shared<ExperimentCliOptions>();
+  CLI::App* sub = app->add_subcommand(
+      "experiment",
+      "Run every sequence x configuration of an experiment file (resumable), then write "
+      "results.csv, summary.md and plots");
+  sub->add_option("file", cli->file, "Experiment file (YAML; docs/experiments.md)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  sub->add_option("-o,--output", cli->output, "Output folder (runs, sequences, results)")->required();
+  sub->add_option("-j,--jobs", cli->jobs, "Runs at a time (0: number of cores)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 256));
+  sub->add_option("--threads-per-run", cli->threads,
+                  "Worker threads per run (0: cores / jobs, at least 1)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 256));
+  sub->add_flag("--dry-run", cli->dry_run, "Validate and list the run folders; run nothing");
+  sub->add_flag("--no-plots", cli->no_plots, "Do not call scripts/plot_results.py");
+  sub->callback([cli]() { RunExperimentCli(*cli); });
+
+  // Child entry points (not listed in the help).
+  struct RunArgs {
+    std::string config, sequence, template_path, out;
+    int threads = 0;
+  };
+  auto run = std::make_shared<RunArgs>();
+  CLI::App* run_sub = app->add_subcommand("experiment-run", "One run of an experiment (internal)");
+  run_sub->group("");
+  run_sub->add_option("--config", run->config)->required();
+  run_sub->add_option("--sequence", run->sequence)->required();
+  run_sub->add_option("--template", run->template_path);
+  run_sub->add_option("--out", run->out)->required();
+  run_sub->add_option("--threads", run->threads);
+  run_sub->callback([run]() {
+    RunSingle(run->config, run->sequence, run->template_path, run->out, run->threads, PrintProgress);
+  });
+
+  struct SynthArgs {
+    std::string spec, name, out;
+  };
+  auto synth = std::make_shared<SynthArgs>();
+  CLI::App* synth_sub =
+      app->add_subcommand("experiment-synth", "Generate an experiment's synthetic sequence (internal)");
+  synth_sub->group("");
+  synth_sub->add_option("--spec", synth->spec)->required();
+  synth_sub->add_option("--name", synth->name);
+  synth_sub->add_option("--out", synth->out)->required();
+  synth_sub->callback([synth]() {
+    std::string text;
+    {
+      FILE* f = std::fopen(synth->spec.c_str(), "rb");
+      if (!f) throw Error(synth->spec + ": cannot open the synthesis spec");
+      char buf[4096];
+      std::size_t n;
+      while ((n = std::fread(buf, 1, sizeof(buf), f)) > 0) text.append(buf, n);
+      std::fclose(f);
+    }
+    while (!text.empty() && text.back() == '\n') text.pop_back();
+    GenerateSyntheticSequence(text, synth->name.empty() ? synth->spec : synth->name, synth->out,
+                              PrintProgress);
+  });
+
+}
+
 }  // namespace artex
