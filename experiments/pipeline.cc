@@ -83,26 +83,13 @@ void WritePng(const std::string& path, const cv::Mat& image) {
   WriteFileAtomically(path, std::string(bytes.begin(), bytes.end()));
 }
 
-// Bytes to send the texels that changed in the last frame: the changed texels' bounding box of
-// the atlas as a JPEG (quality 90); 0 when nothing changed.
-std::size_t TextureUpdateBytes(const Texturer& texturer, const cv::Mat& atlas) {
-  const auto& changed = texturer.last_changed_triangles();
-  if (changed.empty()) return 0;
-  const AtlasMap& map = texturer.atlas_map();
-  int x0 = map.size(), y0 = map.size(), x1 = -1, y1 = -1;
-  for (int f : changed) {
-    for (const int* t = map.texels_begin(f); t != map.texels_end(f); ++t) {
-      const int x = *t % map.size(), y = *t / map.size();
-      x0 = std::min(x0, x);
-      y0 = std::min(y0, y);
-      x1 = std::max(x1, x);
-      y1 = std::max(y1, y);
-    }
-  }
-  if (x1 < x0) return 0;
+// Bytes to send the texels that changed in the last frame: their bounding box of the atlas
+// as a JPEG (quality 90); 0 when nothing changed.
+std::size_t TextureUpdateBytes(const Texturer& texturer) {
+  const cv::Mat patch = texturer.ChangedPatch();
+  if (patch.empty()) return 0;
   std::vector<unsigned char> bytes;
-  cv::imencode(".jpg", atlas(cv::Rect(x0, y0, x1 - x0 + 1, y1 - y0 + 1)), bytes,
-               {cv::IMWRITE_JPEG_QUALITY, 90});
+  cv::imencode(".jpg", patch, bytes, {cv::IMWRITE_JPEG_QUALITY, 90});
   return bytes.size();
 }
 
@@ -193,9 +180,7 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
     if (texturer) {
       record.texture = texturer->AddFrame(i, frame.color, calibration.color, posed);
       texture_seconds += record.texture.seconds_total;
-      if (!texturer->last_changed_triangles().empty()) {
-        stream_bytes += TextureUpdateBytes(*texturer, texturer->Atlas());
-      }
+      stream_bytes += TextureUpdateBytes(*texturer);
       if (options.colour_term) {
         std::vector<uint8_t> valid;
         texturer->VertexColors(&colours, &valid);

@@ -177,6 +177,23 @@ void Texturer::VertexColors(Eigen::MatrixX3d* rgb, std::vector<uint8_t>* valid) 
   }
 }
 
+cv::Mat Texturer::ChangedPatch() const {
+  const int size = map_->size();
+  int x0 = size, y0 = size, x1 = -1, y1 = -1;
+  for (int f : changed_) {
+    for (const int* t = map_->texels_begin(f); t != map_->texels_end(f); ++t) {
+      x0 = std::min(x0, *t % size);
+      x1 = std::max(x1, *t % size);
+      y0 = std::min(y0, *t / size);
+      y1 = std::max(y1, *t / size);
+    }
+  }
+  if (x1 < x0) return cv::Mat();
+  cv::Mat patch;
+  base_.color(cv::Rect(x0, y0, x1 - x0 + 1, y1 - y0 + 1)).convertTo(patch, CV_8UC3, 255.0);
+  return patch;
+}
+
 cv::Mat Texturer::LabelMap() const {
   const int size = map_->size();
   cv::Mat out(size, size, CV_8UC3, cv::Scalar(0, 0, 0));

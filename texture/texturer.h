@@ -75,6 +75,9 @@ class Texturer {
   cv::Mat LabelMap() const;
   // Triangles whose source image changed in the last AddFrame (their texels were resampled).
   const std::vector<int>& last_changed_triangles() const { return changed_; }
+  // The bounding box of the last frame's resampled texels, cut from the unlevelled atlas
+  // (CV_8UC3; empty when nothing changed): what a receiver needs to update its texture.
+  cv::Mat ChangedPatch() const;
   const ImagePool& pool() const { return *pool_; }
   const TextureMesh& mesh() const { return mesh_; }
   const AtlasMap& atlas_map() const { return *map_; }
