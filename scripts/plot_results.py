@@ -144,7 +144,12 @@ def plot_against_key(runs, key, all_keys, path, dpi):
     if not metrics:
         return
     others = [k for k in all_keys if k != key]
-    fig, axes = plt.subplots(1, len(metrics), figsize=(3.6 * len(metrics), 3.2), squeeze=False)
+    cols = min(3, len(metrics))
+    rows = (len(metrics) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 2.9 * rows), squeeze=False)
+    axes = [[ax for row in axes for ax in row]]
+    for ax in axes[0][len(metrics):]:
+        ax.axis("off")
     groups = {}
     for r in runs:
         if key not in r["overrides"]:
@@ -158,7 +163,7 @@ def plot_against_key(runs, key, all_keys, path, dpi):
         ax.set_xlabel(key)
         ax.set_title(title, fontsize=9)
         ax.grid(alpha=0.3)
-    axes[0][-1].legend(fontsize=7)
+    axes[0][len(metrics) - 1].legend(fontsize=7)
     save(fig, path, dpi)
 
 
@@ -168,7 +173,7 @@ def plot_stage_times(runs, path, dpi):
     for c in combos:
         rows = [row for r in runs if r["combination"] == c for row in r["trace"] if row["skipped"] == "0"]
         means[c] = [sum(to_float(row.get(s, "nan")) for row in rows) / max(1, len(rows)) for s, _ in STAGES]
-    fig, ax = plt.subplots(figsize=(7.5, 0.45 * len(combos) + 1.6))
+    fig, ax = plt.subplots(figsize=(9, 0.4 * len(combos) + 1.4))
     labels = []
     for c in combos:
         r = next(r for r in runs if r["combination"] == c)
@@ -183,7 +188,7 @@ def plot_stage_times(runs, path, dpi):
     ax.set_yticks(range(len(combos)))
     ax.set_yticklabels(labels, fontsize=7)
     ax.set_xlabel("time per frame (ms), mean over sequences and frames")
-    ax.legend(fontsize=7, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.25))
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     ax.grid(axis="x", alpha=0.3)
     save(fig, path, dpi)
 
