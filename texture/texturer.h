@@ -81,6 +81,10 @@ class Texturer {
   const ImagePool& pool() const { return *pool_; }
   const TextureMesh& mesh() const { return mesh_; }
   const AtlasMap& atlas_map() const { return *map_; }
+  // V: distance (m, along the rest mesh) to the current labelling's seams (Psi of the next
+  // frame; +inf without seams). E: rest edge lengths over their mean (the MRF edge weights).
+  const std::vector<double>& seam_distance() const { return seam_distance_; }
+  const std::vector<double>& edge_weight() const { return edge_weight_; }
 
  private:
   Template template_;

@@ -1,0 +1,196 @@
+// On-the-fly texturing (DESIGN.md "Texture", paper sec. 4) on realistic inputs: the default
+// template (GenerateTemplate(), ~12.5k vertices, ~25k triangles) posed by a walk
+// (GenerateMotion + Skinning), seen by the virtual Kinect's colour camera (800 x 1016, 2.5 m in
+// front; procedural subject texture, Lambert shading, exposure drift, sensor noise, floor and
+// wall behind), textured into a 2048^2 atlas.
+//
+// BM_AddFrame: the texturer is warmed up with kWarmupFrames frames, then every iteration is one
+//   incremental AddFrame (visibility, pool, MRF with warm start, resampling of the changed
+//   triangles, levelling) on the next frame. Counters: medians over the timed frames of the wall
+//   time, of the process CPU time (all threads) and of each stage; changed triangles and seam
+//   edges per frame.
+// BM_ViewSelection/<solver>: the MRF of one frame (pool after kWarmupFrames + 1 images, warm start
+//   and Psi from the previous frame's labelling) built and solved by SelectViews with each
+//   solver: energy, TRW-S lower bound, iterations, solve time.
+// Median figures: --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
+#include <time.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <vector>
+
+#include <benchmark/benchmark.h>
+
+#include "energies/texture_terms.h"
+#include "models/skinning.h"
+#include "models/template_generator.h"
+#include "sensors/motion.h"
+#include "sensors/subject_texture.h"
+#include "sensors/virtual_kinect.h"
+#include "texture/texturer.h"
+
+namespace artex {
+namespace {
+
+constexpr int kWarmupFrames = 10;
+constexpr int kTimedFrames = 30;
+constexpr int kAtlasSize = 2048;
+constexpr int kSubjectTextureSize = 1024;  // the true texture (rendering only)
+constexpr double kMotionRampSeconds = 0.3;
+
+double ProcessCpuSeconds() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return t.tv_sec + 1e-9 * t.tv_nsec;
+}
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+// The walk sequence: posed template and colour image per frame (built once).
+struct Sequence {
+  Template body;
+  PinholeCamera camera;
+  std::vector<Eigen::MatrixX3d> posed;
+  std::vector<cv::Mat> color;
+};
+
+const Sequence& Walk() {
+  static const Sequence seq = [] {
+    Sequence s;
+    s.body = GenerateTemplate();
+    SubjectTextureOptions texture_options;
+    texture_options.size = kSubjectTextureSize;
+    const cv::Mat texture = GenerateSubjectTexture(s.body, texture_options);
+    MotionOptions motion;
+    motion.type = MotionType::kWalk;
+    motion.frames = kWarmupFrames + kTimedFrames + 1;
+    motion.ramp_s = kMotionRampSeconds;
+    const std::vector<Pose> poses = GenerateMotion(s.body, motion);
+    const Skinning skinning(s.body);
+    const VirtualKinect kinect(VirtualKinectOptions(), s.body, texture);
+    s.camera = kinect.calibration().color;
+    const std::vector<ColorConditions> conditions = GenerateColorConditions(
+        kinect.options().color_model, kinect.options().seed, static_cast<int>(poses.size()));
+    for (std::size_t f = 0; f < poses.size(); ++f) {
+      Eigen::MatrixX3d posed;
+      skinning.Apply(poses[f], &posed);
+      s.color.push_back(kinect.RenderColor(static_cast<int>(f), &posed, conditions[f]));
+      s.posed.push_back(std::move(posed));
+    }
+    return s;
+  }();
+  return seq;
+}
+
+TexturingOptions BenchOptions() {
+  TexturingOptions o;
+  o.atlas_size = kAtlasSize;
+  return o;
+}
+
+void BM_AddFrame(benchmark::State& state) {
+  const Sequence& seq = Walk();
+  Texturer texturer(seq.body, BenchOptions());
+  for (int f = 0; f < kWarmupFrames; ++f) texturer.AddFrame(f, seq.color[f], seq.camera, seq.posed[f]);
+  std::vector<double> wall, cpu, pool, mrf, sampling, levelling, changed, seams, pool_size;
+  int frame = kWarmupFrames;
+  for (auto _ : state) {
+    const double cpu0 = ProcessCpuSeconds();
+    const auto t0 = std::chrono::steady_clock::now();
+    const TextureFrameSummary s =
+        texturer.AddFrame(frame, seq.color[frame], seq.camera, seq.posed[frame]);
+    wall.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    cpu.push_back(ProcessCpuSeconds() - cpu0);
+    pool.push_back(s.seconds_pool);
+    mrf.push_back(s.seconds_mrf);
+    sampling.push_back(s.seconds_sampling);
+    levelling.push_back(s.seconds_levelling);
+    changed.push_back(s.changed_triangles);
+    seams.push_back(s.seam_edges);
+    pool_size.push_back(s.pool_size);
+    ++frame;
+  }
+  state.counters["median_ms"] = 1e3 * Median(wall);
+  state.counters["median_cpu_ms"] = 1e3 * Median(cpu);
+  state.counters["pool_ms"] = 1e3 * Median(pool);
+  state.counters["mrf_ms"] = 1e3 * Median(mrf);
+  state.counters["sampling_ms"] = 1e3 * Median(sampling);
+  state.counters["levelling_ms"] = 1e3 * Median(levelling);
+  state.counters["changed_tris"] = Median(changed);
+  state.counters["seam_edges"] = Median(seams);
+  state.counters["pool_size"] = Median(pool_size);
+}
+BENCHMARK(BM_AddFrame)->Iterations(kTimedFrames)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// The view-selection input of frame kWarmupFrames + 1 for any solver.
+struct SelectionSetup {
+  std::unique_ptr<TextureMesh> mesh;
+  std::unique_ptr<ImagePool> pool;
+  ViewSelectionInput input;
+};
+
+const SelectionSetup& Selection() {
+  static const SelectionSetup setup = [] {
+    const Sequence& seq = Walk();
+    const TexturingOptions options = BenchOptions();
+    Texturer texturer(seq.body, options);
+    for (int f = 0; f < kWarmupFrames; ++f)
+      texturer.AddFrame(f, seq.color[f], seq.camera, seq.posed[f]);
+    SelectionSetup s;
+    s.mesh = std::make_unique<TextureMesh>(texturer.mesh());
+    s.pool = std::make_unique<ImagePool>(s.mesh.get(), options.pool, options.visibility);
+    for (int f = 0; f <= kWarmupFrames; ++f) {
+      s.pool->Add(f, seq.color[f], seq.camera, seq.posed[f]);
+      s.pool->Prune();
+    }
+    s.input.mesh = s.mesh.get();
+    s.input.pool = s.pool.get();
+    s.input.current_frame = kWarmupFrames;
+    s.input.previous_frames = texturer.triangle_frames();
+    s.input.seam_distance = texturer.seam_distance();
+    s.input.edge_weight = texturer.edge_weight();
+    return s;
+  }();
+  return setup;
+}
+
+void BM_ViewSelection(benchmark::State& state) {
+  const SelectionSetup& setup = Selection();
+  const TexturingOptions options = BenchOptions();
+  MrfSolverOptions mrf = options.mrf;
+  mrf.type = static_cast<MrfSolverType>(state.range(0));
+  state.SetLabel(MrfSolverTypeToString(mrf.type));
+  const std::unique_ptr<MrfSolver> solver = MrfSolver::Create(mrf);
+  ViewSelectionResult result;
+  std::vector<double> solve_seconds;
+  for (auto _ : state) {
+    result = SelectViews(setup.input, options.selection, solver.get());
+    solve_seconds.push_back(result.mrf.seconds);
+  }
+  int changed = 0;
+  for (std::size_t f = 0; f < result.frames.size(); ++f)
+    changed += result.frames[f] != setup.input.previous_frames[f];
+  state.counters["energy"] = result.mrf.energy;
+  state.counters["initial_energy"] = result.mrf.initial_energy;
+  state.counters["lower_bound"] =
+      std::isfinite(result.mrf.lower_bound) ? result.mrf.lower_bound : 0.0;
+  state.counters["iterations"] = result.mrf.iterations;
+  state.counters["solve_ms"] = 1e3 * Median(solve_seconds);
+  state.counters["changed_tris"] = changed;
+  state.counters["candidates"] = result.num_candidates;
+}
+BENCHMARK(BM_ViewSelection)
+    ->DenseRange(0, 3)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(0.5);
+
+}  // namespace
+}  // namespace artex
