@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
+#include <limits>
 #include <cmath>
 #include <random>
 #include <sstream>
@@ -360,14 +362,19 @@ cv::Mat GenerateSubjectTexture(const Template& subject, const SubjectTextureOpti
   const int n = options.size;
   const int num_triangles = subject.num_triangles();
 
-  // Texel -> triangle map (serial, in triangle order: deterministic), then dilation.
-  std::vector<int32_t> owner(static_cast<size_t>(n) * n, -1);
-  for (int f = 0; f < num_triangles; ++f) {
+  // Texel -> triangle map: the lowest-index triangle covering the texel centre (an atomic
+  // minimum, so the parallel result is deterministic), then dilation into the gutter.
+  constexpr int32_t kNone = std::numeric_limits<int32_t>::max();
+  std::vector<std::atomic<int32_t>> cover(static_cast<size_t>(n) * n);
+  tbb::parallel_for(size_t{0}, cover.size(), [&](size_t i) {
+    cover[i].store(kNone, std::memory_order_relaxed);
+  });
+  tbb::parallel_for(0, num_triangles, [&](int f) {
     Eigen::Vector2d uv[3];
     for (int k = 0; k < 3; ++k) uv[k] = subject.uvs.row(subject.uv_triangles(f, k)).transpose() * n;
     const double area = (uv[1] - uv[0]).x() * (uv[2] - uv[0]).y() -
                         (uv[1] - uv[0]).y() * (uv[2] - uv[0]).x();
-    if (area == 0) continue;
+    if (area == 0) return;
     const int x0 = std::max(0, static_cast<int>(std::floor(std::min({uv[0].x(), uv[1].x(), uv[2].x()}))));
     const int x1 = std::min(n - 1, static_cast<int>(std::ceil(std::max({uv[0].x(), uv[1].x(), uv[2].x()}))));
     const int y0 = std::max(0, static_cast<int>(std::floor(std::min({uv[0].y(), uv[1].y(), uv[2].y()}))));
@@ -381,10 +388,19 @@ cv::Mat GenerateSubjectTexture(const Template& subject, const SubjectTextureOpti
           const double e = (b - a).x() * (q - a).y() - (b - a).y() * (q - a).x();
           inside = area > 0 ? e >= 0 : e <= 0;
         }
-        if (inside) owner[static_cast<size_t>(y) * n + x] = f;
+        if (!inside) continue;
+        std::atomic<int32_t>& c = cover[static_cast<size_t>(y) * n + x];
+        int32_t current = c.load(std::memory_order_relaxed);
+        while (f < current && !c.compare_exchange_weak(current, f, std::memory_order_relaxed)) {
+        }
       }
     }
-  }
+  });
+  std::vector<int32_t> owner(cover.size());
+  tbb::parallel_for(size_t{0}, cover.size(), [&](size_t i) {
+    const int32_t c = cover[i].load(std::memory_order_relaxed);
+    owner[i] = c == kNone ? -1 : c;
+  });
   std::vector<int32_t> next = owner;
   for (int pass = 0; pass < options.padding_texels; ++pass) {
     tbb::parallel_for(0, n, [&](int y) {

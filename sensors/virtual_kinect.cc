@@ -7,6 +7,7 @@
 #include <random>
 #include <sstream>
 
+#include <opencv2/core.hpp>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -312,6 +313,32 @@ VirtualKinect::VirtualKinect(const VirtualKinectOptions& options, const Template
   projector_.world_to_camera =
       Translation(-options.depth_noise.projector_offset_m) * calibration_.depth.world_to_camera;
   BuildScene();
+
+  // Scene-only buffers of the three views, and the scene's shaded albedo in the colour view.
+  RasterOptions raster_options;
+  raster_options.near_plane = options.near_plane_m;
+  Rasterize(scene_vertices_, scene_triangles_, calibration_.depth, raster_options, &depth_scene_);
+  if (options.depth_noise.projector_shadow) {
+    Rasterize(scene_vertices_, scene_triangles_, projector_, raster_options, &projector_scene_);
+  }
+  Rasterize(scene_vertices_, scene_triangles_, calibration_.color, raster_options, &color_scene_);
+  ComputeTriangleNormals(scene_vertices_, scene_triangles_, &scene_normals_);
+  const ColorModelOptions& c = options.color_model;
+  const Eigen::Vector3d light = c.light_direction.normalized();
+  color_scene_radiance_.resize(color_scene_.depth.size());
+  tbb::parallel_for(size_t{0}, color_scene_.depth.size(), [&](size_t i) {
+    const int f = color_scene_.triangle_id[i];
+    if (f < 0) {
+      color_scene_radiance_[i] = c.background_rgb.cast<float>();
+      return;
+    }
+    const double b1 = color_scene_.barycentric[i].x(), b2 = color_scene_.barycentric[i].y();
+    const Eigen::Vector3d p = (1 - b1 - b2) * scene_vertices_.row(scene_triangles_(f, 0)).transpose() +
+                              b1 * scene_vertices_.row(scene_triangles_(f, 1)).transpose() +
+                              b2 * scene_vertices_.row(scene_triangles_(f, 2)).transpose();
+    const double shade = c.ambient + (1 - c.ambient) * std::max(0.0, scene_normals_.row(f).dot(light));
+    color_scene_radiance_[i] = (SceneAlbedo(p) * shade).cast<float>();
+  });
 }
 
 void VirtualKinect::BuildScene() {
@@ -354,18 +381,27 @@ void VirtualKinect::BuildScene() {
   for (size_t i = 0; i < t.size(); ++i) scene_triangles_.row(i) = t[i].transpose();
 }
 
-void VirtualKinect::Combine(const Eigen::MatrixX3d* posed, Eigen::MatrixX3d* vertices,
-                            Eigen::MatrixX3i* triangles) const {
-  const int vs = posed ? static_cast<int>(posed->rows()) : 0;
-  const int fs = posed ? subject_.num_triangles() : 0;
-  vertices->resize(vs + scene_vertices_.rows(), 3);
-  triangles->resize(fs + scene_triangles_.rows(), 3);
+void VirtualKinect::RenderView(const PinholeCamera& camera, const RasterBuffers& scene,
+                               const Eigen::MatrixX3d* posed, RasterBuffers* out) const {
+  const int32_t offset = subject_.num_triangles();
   if (posed) {
-    vertices->topRows(vs) = *posed;
-    triangles->topRows(fs) = subject_.triangles;
+    RasterOptions raster_options;
+    raster_options.near_plane = options_.near_plane_m;
+    Rasterize(*posed, subject_.triangles, camera, raster_options, out);
+  } else {
+    out->width = scene.width;
+    out->height = scene.height;
+    out->depth.assign(scene.depth.size(), std::numeric_limits<float>::infinity());
+    out->triangle_id.assign(scene.depth.size(), -1);
+    out->barycentric.resize(scene.depth.size());
   }
-  vertices->bottomRows(scene_vertices_.rows()) = scene_vertices_;
-  triangles->bottomRows(scene_triangles_.rows()) = scene_triangles_.array() + vs;
+  // The subject wins ties, as when rasterising subject triangles before scene triangles.
+  tbb::parallel_for(size_t{0}, scene.depth.size(), [&](size_t i) {
+    if (out->triangle_id[i] >= 0 && out->depth[i] <= scene.depth[i]) return;
+    out->depth[i] = scene.depth[i];
+    out->triangle_id[i] = scene.triangle_id[i] >= 0 ? scene.triangle_id[i] + offset : -1;
+    out->barycentric[i] = scene.barycentric[i];
+  });
 }
 
 Eigen::Vector3d VirtualKinect::SceneAlbedo(const Eigen::Vector3d& x) const {
@@ -423,17 +459,12 @@ cv::Mat VirtualKinect::RenderDepthStream(int frame_index, const Eigen::MatrixX3d
   }
   const DepthNoiseOptions& o = options_.depth_noise;
   const PinholeCamera& cam = calibration_.depth;
-  Eigen::MatrixX3d vertices;
-  Eigen::MatrixX3i triangles;
-  Combine(posed, &vertices, &triangles);
-  const int subject_triangles = posed ? subject_.num_triangles() : 0;
-  RasterOptions raster_options;
-  raster_options.near_plane = options_.near_plane_m;
+  const int subject_triangles = subject_.num_triangles();
   RasterBuffers view, light;
-  Rasterize(vertices, triangles, cam, raster_options, &view);
-  if (o.projector_shadow) Rasterize(vertices, triangles, projector_, raster_options, &light);
-  Eigen::MatrixX3d face_normals;
-  ComputeTriangleNormals(vertices, triangles, &face_normals);
+  RenderView(cam, depth_scene_, posed, &view);
+  if (o.projector_shadow) RenderView(projector_, projector_scene_, posed, &light);
+  Eigen::MatrixX3d subject_normals;
+  if (posed) ComputeTriangleNormals(*posed, subject_.triangles, &subject_normals);
 
   const int w = cam.width, h = cam.height;
   cv::Mat depth(h, w, CV_16UC1, cv::Scalar(0));
@@ -450,15 +481,13 @@ cv::Mat VirtualKinect::RenderDepthStream(int frame_index, const Eigen::MatrixX3d
   const float inf = std::numeric_limits<float>::infinity();
 
   tbb::parallel_for(0, h, [&](int y) {
-    std::mt19937_64 rng(MixSeed(options_.seed, stream, static_cast<uint64_t>(frame_index), y));
-    std::normal_distribution<double> normal(0.0, 1.0);
-    std::uniform_real_distribution<double> uniform(0.0, 1.0);
+    cv::RNG rng(MixSeed(options_.seed, stream, static_cast<uint64_t>(frame_index), y));
     auto* out = depth.ptr<uint16_t>(y);
     for (int x = 0; x < w; ++x) {
       // Draw the same numbers for every pixel whatever its fate: streams stay aligned.
-      const double n_disparity = normal(rng);
-      const double u_edge = uniform(rng);
-      const double u_drop = uniform(rng);
+      const double n_disparity = rng.gaussian(1.0);
+      const double u_edge = rng.uniform(0.0, 1.0);
+      const double u_drop = rng.uniform(0.0, 1.0);
       const int i = view.index(x, y);
       const int f = view.triangle_id[i];
       const float z = view.depth[i];
@@ -469,8 +498,10 @@ cv::Mat VirtualKinect::RenderDepthStream(int frame_index, const Eigen::MatrixX3d
         s = DepthStatus::kOutOfRange;
       } else {
         const Eigen::Vector3d xc((x - cam.cx) / cam.fx * z, (y - cam.cy) / cam.fy * z, z);
-        const Eigen::Vector3d nc = rotation * face_normals.row(f).transpose();
-        if (std::abs(nc.dot(xc.normalized())) < cos_grazing) {
+        const Eigen::Vector3d normal = f < subject_triangles
+                                           ? Eigen::Vector3d(subject_normals.row(f))
+                                           : Eigen::Vector3d(scene_normals_.row(f - subject_triangles));
+        if (std::abs((rotation * normal).dot(xc.normalized())) < cos_grazing) {
           s = DepthStatus::kGrazing;
         }
         if (s == DepthStatus::kValid && o.projector_shadow) {
@@ -541,53 +572,38 @@ cv::Mat VirtualKinect::RenderColor(int frame_index, const Eigen::MatrixX3d* pose
   }
   const ColorModelOptions& o = options_.color_model;
   const PinholeCamera& cam = calibration_.color;
-  Eigen::MatrixX3d vertices;
-  Eigen::MatrixX3i triangles;
-  Combine(posed, &vertices, &triangles);
-  const int subject_triangles = posed ? subject_.num_triangles() : 0;
-  RasterOptions raster_options;
-  raster_options.near_plane = options_.near_plane_m;
+  const int subject_triangles = subject_.num_triangles();
   RasterBuffers view;
-  Rasterize(vertices, triangles, cam, raster_options, &view);
-  Eigen::MatrixX3d vertex_normals, face_normals;
+  RenderView(cam, color_scene_, posed, &view);
+  Eigen::MatrixX3d vertex_normals;
   if (posed) ComputeVertexNormals(*posed, subject_.triangles, &vertex_normals);
-  ComputeTriangleNormals(vertices, triangles, &face_normals);
   const Eigen::Vector3d light = o.light_direction.normalized();
 
   const int w = cam.width, h = cam.height;
   cv::Mat image(h, w, CV_8UC3);
   tbb::parallel_for(0, h, [&](int y) {
-    std::mt19937_64 rng(MixSeed(options_.seed, kStreamColor, static_cast<uint64_t>(frame_index), y));
-    std::normal_distribution<double> normal(0.0, 1.0);
+    cv::RNG rng(MixSeed(options_.seed, kStreamColor, static_cast<uint64_t>(frame_index), y));
     auto* out = image.ptr<cv::Vec3b>(y);
     for (int x = 0; x < w; ++x) {
       const int i = view.index(x, y);
       const int f = view.triangle_id[i];
-      Eigen::Vector3d rgb = o.background_rgb;
-      if (f >= 0) {
+      Eigen::Vector3d rgb;
+      if (f >= 0 && f < subject_triangles) {
         const double b1 = view.barycentric[i].x(), b2 = view.barycentric[i].y(), b0 = 1 - b1 - b2;
-        Eigen::Vector3d albedo, n;
-        if (f < subject_triangles) {
-          const Eigen::Vector2d uv = b0 * subject_.uvs.row(subject_.uv_triangles(f, 0)).transpose() +
-                                     b1 * subject_.uvs.row(subject_.uv_triangles(f, 1)).transpose() +
-                                     b2 * subject_.uvs.row(subject_.uv_triangles(f, 2)).transpose();
-          albedo = SampleTextureBilinear(texture_, uv);
-          n = b0 * vertex_normals.row(subject_.triangles(f, 0)).transpose() +
-              b1 * vertex_normals.row(subject_.triangles(f, 1)).transpose() +
-              b2 * vertex_normals.row(subject_.triangles(f, 2)).transpose();
-          if (n.norm() > 0) n.normalize();
-        } else {
-          const Eigen::Vector3d p = b0 * vertices.row(triangles(f, 0)).transpose() +
-                                    b1 * vertices.row(triangles(f, 1)).transpose() +
-                                    b2 * vertices.row(triangles(f, 2)).transpose();
-          albedo = SceneAlbedo(p);
-          n = face_normals.row(f).transpose();
-        }
+        const Eigen::Vector2d uv = b0 * subject_.uvs.row(subject_.uv_triangles(f, 0)).transpose() +
+                                   b1 * subject_.uvs.row(subject_.uv_triangles(f, 1)).transpose() +
+                                   b2 * subject_.uvs.row(subject_.uv_triangles(f, 2)).transpose();
+        Eigen::Vector3d n = b0 * vertex_normals.row(subject_.triangles(f, 0)).transpose() +
+                            b1 * vertex_normals.row(subject_.triangles(f, 1)).transpose() +
+                            b2 * vertex_normals.row(subject_.triangles(f, 2)).transpose();
+        if (n.norm() > 0) n.normalize();
         const double shade = o.ambient + (1 - o.ambient) * std::max(0.0, n.dot(light));
-        rgb = albedo * shade;
+        rgb = SampleTextureBilinear(texture_, uv) * shade;
+      } else {
+        rgb = color_scene_radiance_[i].cast<double>();  // the same scene point as when cached
       }
       for (int c = 0; c < 3; ++c) {
-        const double value = rgb[c] * conditions.gain[c] + o.noise_std * normal(rng);
+        const double value = rgb[c] * conditions.gain[c] + (o.noise_std > 0 ? rng.gaussian(o.noise_std) : 0.0);
         out[x][2 - c] = static_cast<uint8_t>(std::lround(255.0 * std::clamp(value, 0.0, 1.0)));
       }
     }
@@ -636,6 +652,23 @@ SynthSubject PrepareSynthSubject(const SynthOptions& options) {
 
 SynthSummary SynthesizeSequence(const SynthOptions& options, const std::string& out_folder,
                                 const std::function<void(const SynthProgress&)>& progress) {
+  if (progress) {
+    SynthProgress p;
+    progress(p);  // kSetup, 0 of 1: the subject is being generated
+  }
+  const auto start = std::chrono::steady_clock::now();
+  const SynthSubject subject = PrepareSynthSubject(options);
+  SynthSummary summary = SynthesizeSequence(options, subject, out_folder, progress);
+  const double setup = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() -
+                       summary.total_seconds;
+  summary.setup_seconds += setup;
+  summary.total_seconds += setup;
+  return summary;
+}
+
+SynthSummary SynthesizeSequence(const SynthOptions& options, const SynthSubject& s,
+                                const std::string& out_folder,
+                                const std::function<void(const SynthProgress&)>& progress) {
   using Clock = std::chrono::steady_clock;
   auto seconds = [](Clock::time_point a, Clock::time_point b) {
     return std::chrono::duration<double>(b - a).count();
@@ -650,8 +683,9 @@ SynthSummary SynthesizeSequence(const SynthOptions& options, const std::string& 
   };
   const Clock::time_point start = Clock::now();
   SynthSummary summary;
-  report(SynthProgress::Stage::kSetup, 0, 1);
-  const SynthSubject s = PrepareSynthSubject(options);
+  std::string why;
+  if (!options.IsValid(&why)) throw Error("synthesis options: " + why);
+  if (s.poses.empty()) throw Error("SynthesizeSequence: the prepared subject has no poses");
   VirtualKinectOptions kinect_options = options.kinect;
   kinect_options.frame_rate = options.motion.frame_rate;
   const VirtualKinect kinect(kinect_options, s.subject, s.texture_bgr);

@@ -18,6 +18,7 @@
 #include "models/template.h"
 #include "models/template_generator.h"
 #include "render/camera.h"
+#include "render/rasterizer.h"
 #include "sensors/calibration.h"
 #include "sensors/motion.h"
 #include "sensors/sequence.h"
@@ -182,9 +183,11 @@ class VirtualKinect {
   void BuildScene();
   cv::Mat RenderDepthStream(int frame_index, const Eigen::MatrixX3d* posed, uint64_t stream,
                             DepthDiagnostics* diagnostics) const;
-  // Subject (posed) first, then the scene: triangle ids < subject triangles are the subject.
-  void Combine(const Eigen::MatrixX3d* posed, Eigen::MatrixX3d* vertices,
-               Eigen::MatrixX3i* triangles) const;
+  // Subject and scene seen by `camera`: the subject is rasterised and z-composited over the
+  // cached scene-only buffers (equal to rasterising both together). Triangle ids below
+  // subject_.num_triangles() are the subject's; scene triangle s has id num_triangles() + s.
+  void RenderView(const PinholeCamera& camera, const RasterBuffers& scene,
+                  const Eigen::MatrixX3d* posed, RasterBuffers* out) const;
   Eigen::Vector3d SceneAlbedo(const Eigen::Vector3d& world) const;
 
   VirtualKinectOptions options_;
@@ -194,6 +197,10 @@ class VirtualKinect {
   PinholeCamera projector_;
   Eigen::MatrixX3d scene_vertices_;
   Eigen::MatrixX3i scene_triangles_;
+  Eigen::MatrixX3d scene_normals_;  // per scene triangle
+  // The static scene is rendered once per camera.
+  RasterBuffers depth_scene_, projector_scene_, color_scene_;
+  std::vector<Eigen::Vector3f> color_scene_radiance_;  // albedo * shading per colour pixel
 };
 
 // Default subject body: different from the default tracking template (BodyShapeOptions()).
@@ -247,6 +254,11 @@ SynthSubject PrepareSynthSubject(const SynthOptions& options);
 // invalid options or I/O failure; files are written atomically and frames.csv last, so an
 // interrupted run leaves no readable sequence.
 SynthSummary SynthesizeSequence(const SynthOptions& options, const std::string& out_folder,
+                                const std::function<void(const SynthProgress&)>& progress = {});
+// As above with a prepared subject (PrepareSynthSubject(options), e.g. reused across noise
+// settings); options.subject_shape, texture, motion and placement are then not consulted.
+SynthSummary SynthesizeSequence(const SynthOptions& options, const SynthSubject& subject,
+                                const std::string& out_folder,
                                 const std::function<void(const SynthProgress&)>& progress = {});
 
 }  // namespace artex
