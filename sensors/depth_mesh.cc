@@ -1,43 +1,15 @@
 #include "sensors/depth_mesh.h"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 
 #include "models/error.h"
 #include "models/normals.h"
 #include "sensors/image_io.h"
 
 namespace artex {
-namespace {
-
-// Accumulates unit triangle normals into per-vertex sums, normalises them and flips those that
-// face away from `viewpoint`. points/normals: V entries; normals are overwritten.
-void AccumulateNormals(const std::vector<Eigen::Vector3d>& points,
-                       const std::vector<Eigen::Vector3i>& triangles,
-                       const Eigen::Vector3d& viewpoint, std::vector<Eigen::Vector3d>* normals) {
-  normals->assign(points.size(), Eigen::Vector3d::Zero());
-  for (const Eigen::Vector3i& t : triangles) {
-    const Eigen::Vector3d& a = points[t[0]];
-    const Eigen::Vector3d n = (points[t[1]] - a).cross(points[t[2]] - a);
-    const double len = n.norm();
-    if (!(len > 0)) continue;
-    const Eigen::Vector3d u = n / len;
-    (*normals)[t[0]] += u;
-    (*normals)[t[1]] += u;
-    (*normals)[t[2]] += u;
-  }
-  for (size_t i = 0; i < points.size(); ++i) {
-    Eigen::Vector3d& n = (*normals)[i];
-    const double len = n.norm();
-    if (!(len > 0)) {
-      n.setZero();
-      continue;
-    }
-    n /= len;
-    if (n.dot(viewpoint - points[i]) < 0) n = -n;
-  }
-}
-
-}  // namespace
 
 bool DepthMeshOptions::IsValid(std::string* error) const {
   if (step < 1) {
@@ -137,50 +109,83 @@ void DepthMesher::Build(const cv::Mat& depth, double depth_scale, const cv::Mat&
   const int gh = (cam.height - 1) / step + 1;
   const float inv_scale = static_cast<float>(1.0 / depth_scale);
 
-  // 1. Grid nodes with a valid, masked depth get provisional vertex ids.
-  grid_index_.resize(static_cast<size_t>(gw) * gh);
+  // 1. Grid nodes with a valid, masked depth get provisional vertex ids and camera points.
+  const float* rays = projector_.rays();
+  grid_index_.assign(static_cast<size_t>(gw) * gh, -1);
+  row_range_.assign(2 * static_cast<size_t>(gh), 0);  // [first, last + 1) valid gx per row
   grid_z_.clear();
   grid_pixel_.clear();
+  camera_points_.clear();
   for (int gy = 0; gy < gh; ++gy) {
     const int v = gy * step;
     const uint16_t* d = depth.ptr<uint16_t>(v);
     const uint8_t* m = mask.empty() ? nullptr : mask.ptr<uint8_t>(v);
     int* idx = &grid_index_[static_cast<size_t>(gy) * gw];
+    int first = gw, last = -1;
     for (int gx = 0; gx < gw; ++gx) {
       const int u = gx * step;
-      if (d[u] == 0 || (m && !m[u])) {
-        idx[gx] = -1;
-        continue;
+      if (m && step == 1 && gx + 8 <= gw) {
+        // Skip 8 background pixels at once (most of the mask is empty).
+        uint64_t word;
+        std::memcpy(&word, m + u, sizeof(word));
+        if (word == 0) {
+          gx += 7;
+          continue;
+        }
       }
+      if (d[u] == 0 || (m && !m[u])) continue;
+      const int pixel = v * cam.width + u;
+      const float z = d[u] * inv_scale;
       idx[gx] = static_cast<int>(grid_z_.size());
-      grid_z_.push_back(d[u] * inv_scale);
-      grid_pixel_.push_back(v * cam.width + u);
+      grid_z_.push_back(z);
+      grid_pixel_.push_back(pixel);
+      camera_points_.push_back(rays[2 * pixel] * z);
+      camera_points_.push_back(rays[2 * pixel + 1] * z);
+      camera_points_.push_back(z);
+      first = std::min(first, gx);
+      last = gx;
     }
+    row_range_[2 * gy] = first;
+    row_range_[2 * gy + 1] = last + 1;
   }
   const int candidates = static_cast<int>(grid_z_.size());
 
-  // 2. Triangles of each 2x2 block whose depth differences stay below the threshold.
+  // 2. Triangles of each 2x2 block whose depth differences stay below the threshold. A block
+  // with >= 3 valid nodes has a valid top-left or bottom-right node, so there are at most
+  // 2 x candidates such blocks and 4 x candidates triangles.
   const float jump = static_cast<float>(options_.max_relative_jump * step);
-  auto connected = [&](int a, int b) {
-    const float za = grid_z_[a], zb = grid_z_[b];
-    return std::abs(za - zb) <= jump * std::min(za, zb);
-  };
+  triangles_.resize(12 * static_cast<size_t>(candidates));
+  remap_.assign(candidates, options_.drop_isolated_points ? -1 : 0);
+  int* tri = triangles_.data();
+  int* used = remap_.data();
+  const float* zs = grid_z_.data();
+  // Pairwise |z_a - z_b| <= jump min(z_a, z_b) for all pairs <=> z_max - z_min <= jump z_min.
   auto try_add = [&](int a, int b, int c) {
-    if (connected(a, b) && connected(b, c) && connected(a, c)) triangles_.emplace_back(a, b, c);
+    const float za = zs[a], zb = zs[b], zc = zs[c];
+    const float lo = std::min(za, std::min(zb, zc)), hi = std::max(za, std::max(zb, zc));
+    if (hi - lo > jump * lo) return;
+    tri[0] = a;
+    tri[1] = b;
+    tri[2] = c;
+    tri += 3;
+    used[a] = used[b] = used[c] = 0;
   };
-  triangles_.clear();
   for (int gy = 0; gy + 1 < gh; ++gy) {
     const int* row0 = &grid_index_[static_cast<size_t>(gy) * gw];
     const int* row1 = row0 + gw;
-    for (int gx = 0; gx + 1 < gw; ++gx) {
+    // Blocks with a valid node in both rows lie within both rows' valid ranges.
+    const int begin = std::max(row_range_[2 * gy], row_range_[2 * gy + 2]) - 1;
+    const int end = std::min(row_range_[2 * gy + 1], row_range_[2 * gy + 3]);
+    for (int gx = std::max(begin, 0); gx + 1 < gw && gx < end; ++gx) {
       const int tl = row0[gx], tr = row0[gx + 1], bl = row1[gx], br = row1[gx + 1];
-      const int valid = (tl >= 0) + (tr >= 0) + (bl >= 0) + (br >= 0);
-      if (valid < 3) continue;
-      // Counter-clockwise as seen from the camera (x right, y down, z forward).
-      if (valid == 4) {
+      if ((tl | tr | bl | br) >= 0) {
+        // Counter-clockwise as seen from the camera (x right, y down, z forward).
         try_add(tl, bl, tr);
         try_add(tr, bl, br);
-      } else if (tl < 0) {
+        continue;
+      }
+      if ((tl < 0) + (tr < 0) + (bl < 0) + (br < 0) > 1) continue;
+      if (tl < 0) {
         try_add(tr, bl, br);
       } else if (tr < 0) {
         try_add(tl, bl, br);
@@ -191,54 +196,83 @@ void DepthMesher::Build(const cv::Mat& depth, double depth_scale, const cv::Mat&
       }
     }
   }
+  const int num_triangles = static_cast<int>((tri - triangles_.data()) / 3);
 
-  // 3. Final vertex ids (dropping vertices without triangles when asked).
-  remap_.assign(candidates, options_.drop_isolated_points ? -1 : 0);
-  int num_vertices = candidates;
-  if (options_.drop_isolated_points) {
-    for (const Eigen::Vector3i& t : triangles_) remap_[t[0]] = remap_[t[1]] = remap_[t[2]] = 0;
-  }
-  num_vertices = 0;
+  // 3. Final vertex ids (vertices without triangles were left at -1 when they are dropped).
+  int num_vertices = 0;
   for (int i = 0; i < candidates; ++i) {
     if (remap_[i] == 0) remap_[i] = num_vertices++;
   }
-  for (Eigen::Vector3i& t : triangles_) t = Eigen::Vector3i(remap_[t[0]], remap_[t[1]], remap_[t[2]]);
 
-  // 4. World points.
-  points_.resize(num_vertices);
-  vertex_pixels_.resize(num_vertices);
-  const float* rays = projector_.rays();
+  // 4. Normals (camera frame): sums of unit triangle normals, normalised, facing the camera.
+  normal_sums_.assign(3 * static_cast<size_t>(candidates), 0.0f);
+  const float* cp = camera_points_.data();
+  float* ns = normal_sums_.data();
+  for (int f = 0; f < num_triangles; ++f) {
+    const int* t = &triangles_[3 * static_cast<size_t>(f)];
+    const float* a = cp + 3 * t[0];
+    const float* b = cp + 3 * t[1];
+    const float* c = cp + 3 * t[2];
+    const float e1x = b[0] - a[0], e1y = b[1] - a[1], e1z = b[2] - a[2];
+    const float e2x = c[0] - a[0], e2y = c[1] - a[1], e2z = c[2] - a[2];
+    float nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x;
+    const float len2 = nx * nx + ny * ny + nz * nz;
+    if (!(len2 > 0)) continue;
+    const float inv = 1.0f / std::sqrt(len2);
+    nx *= inv;
+    ny *= inv;
+    nz *= inv;
+    for (int k = 0; k < 3; ++k) {
+      float* n = ns + 3 * t[k];
+      n[0] += nx;
+      n[1] += ny;
+      n[2] += nz;
+    }
+  }
+
+  // 5. World points and normals of the kept vertices; triangles renumbered.
   const Eigen::Isometry3d camera_to_world = cam.world_to_camera.inverse();
   const Eigen::Matrix3d r = camera_to_world.linear();
   const Eigen::Vector3d t = camera_to_world.translation();
+  scan->points.resize(num_vertices, 3);
+  scan->normals.resize(num_vertices, 3);
+  vertex_pixels_.resize(num_vertices);
+  double* px = scan->points.col(0).data();
+  double* py = scan->points.col(1).data();
+  double* pz = scan->points.col(2).data();
+  double* nx = scan->normals.col(0).data();
+  double* ny = scan->normals.col(1).data();
+  double* nz = scan->normals.col(2).data();
   for (int i = 0; i < candidates; ++i) {
     const int k = remap_[i];
     if (k < 0) continue;
-    const int p = grid_pixel_[i];
-    const double z = grid_z_[i];
-    const Eigen::Vector3d c(rays[2 * p] * z, rays[2 * p + 1] * z, z);
-    points_[k] = r * c + t;
-    vertex_pixels_[k] = p;
-  }
-
-  // 5. Normals towards the camera centre.
-  AccumulateNormals(points_, triangles_, t, &normals_);
-
-  scan->points.resize(num_vertices, 3);
-  scan->normals.resize(num_vertices, 3);
-  for (int k = 0; k < 3; ++k) {
-    double* pc = scan->points.col(k).data();
-    double* nc = scan->normals.col(k).data();
-    for (int i = 0; i < num_vertices; ++i) {
-      pc[i] = points_[i][k];
-      nc[i] = normals_[i][k];
+    const Eigen::Vector3d c(cp[3 * i], cp[3 * i + 1], cp[3 * i + 2]);
+    const Eigen::Vector3d w = r * c + t;
+    px[k] = w.x();
+    py[k] = w.y();
+    pz[k] = w.z();
+    Eigen::Vector3d n(ns[3 * i], ns[3 * i + 1], ns[3 * i + 2]);
+    const double len = n.norm();
+    if (len > 0) {
+      n /= len;
+      if (n.dot(c) > 0) n = -n;  // the camera centre is the origin of the camera frame
+      n = r * n;
+    } else {
+      n.setZero();
     }
+    nx[k] = n.x();
+    ny[k] = n.y();
+    nz[k] = n.z();
+    vertex_pixels_[k] = grid_pixel_[i];
   }
-  const int num_triangles = static_cast<int>(triangles_.size());
   scan->triangles.resize(num_triangles, 3);
-  for (int k = 0; k < 3; ++k) {
-    int* tc = scan->triangles.col(k).data();
-    for (int i = 0; i < num_triangles; ++i) tc[i] = triangles_[i][k];
+  int* t0 = scan->triangles.col(0).data();
+  int* t1 = scan->triangles.col(1).data();
+  int* t2 = scan->triangles.col(2).data();
+  for (int i = 0; i < num_triangles; ++i) {
+    t0[i] = remap_[triangles_[3 * i]];
+    t1[i] = remap_[triangles_[3 * i + 1]];
+    t2[i] = remap_[triangles_[3 * i + 2]];
   }
   if (stats) {
     stats->candidate_pixels = candidates;
