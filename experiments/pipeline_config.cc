@@ -50,7 +50,7 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
                "smoothness", "joint_limit_weight", "scale_mode", "scale_estimation_frames",
                "scale_max_radius", "scale_prior_weight", "icp_first_frame",
                "constant_velocity_prediction", "max_fit_vertices", "min_scan_points",
-               "max_mean_motion", "ceres_max_iterations", "solver_threads"});
+               "max_mean_motion", "max_scale_change", "ceres_max_iterations", "solver_threads"});
   c.GetEnum("correspondence", CorrespondenceModelNames(), &o->correspondence);
   c.GetEnum("solver", FitSolverTypeNames(), &o->solver.type);
   c.GetEnum("estep", std::map<std::string, EStepMode>{{"dense", EStepMode::kDense},
@@ -91,6 +91,7 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   c.Get("max_fit_vertices", &o->max_fit_vertices);
   c.Get("min_scan_points", &o->min_scan_points);
   c.Get("max_mean_motion", &o->max_mean_motion);
+  c.Get("max_scale_change", &o->max_scale_change);
   c.Get("ceres_max_iterations", &o->solver.max_iterations);
   c.Get("solver_threads", &o->solver.num_threads);
 }
