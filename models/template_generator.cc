@@ -29,6 +29,25 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kPi = 3.14159265358979323846;
 // Lengths of SkinningBands are given for this stature and scaled with the height.
 constexpr double kReferenceStature = 1.75;
+// Lower bound of the loft field's ratio to the true distance (its cross-section distance is an
+// approximation and its sections change with height); used to cull it safely.
+constexpr double kLoftLipschitz = 0.5;
+// Primitives are culled beyond blend + this many grid cells (see Body::Field).
+constexpr double kCullMarginCells = 3.0;
+// Iso-surface vertices stay this far (fraction of the edge) from grid points, so that marching
+// tetrahedra produce no zero-length edges.
+constexpr double kEdgeClamp = 0.02;
+// Isotropic remeshing (Botsch & Kobbelt 2004): split above 4/3, collapse below 4/5 of the target.
+constexpr double kSplitFactor = 4.0 / 3.0;
+constexpr double kCollapseFactor = 4.0 / 5.0;
+// A collapse may turn no incident face normal by more than acos(0.2) ~ 78 degrees; no edge is
+// flipped across a dihedral angle above 60 degrees (cos 0.5).
+constexpr double kCollapseNormalCosine = 0.2;
+constexpr double kFlipCreaseCosine = 0.5;
+// Newton projection onto f = 0: step cap (fraction of the target edge length) and the forward
+// difference step (fraction of the stature).
+constexpr double kMaxProjectionStep = 0.5;
+constexpr double kGradientStep = 1e-5;
 
 constexpr const char* kJointNames[kDefaultNumJoints] = {
     "pelvis",     "spine",   "chest",   "neck",  "head",   "l_shoulder",
@@ -221,7 +240,8 @@ Primitive MakeEllipsoid(Group group, double blend, const Vec3& centre, const Vec
 }
 
 // sections: (y, half width, half depth, centre z) in metres, increasing y.
-Primitive MakeLoft(Group group, double blend, const std::vector<std::array<double, 4>>& sections) {
+Primitive MakeLoft(Group group, double blend, const std::vector<std::array<double, 4>>& sections,
+                   double cap_rounding) {
   Primitive p;
   p.kind = Primitive::Kind::kLoft;
   p.group = group;
@@ -235,9 +255,9 @@ Primitive MakeLoft(Group group, double blend, const std::vector<std::array<doubl
       p.slopes[i][c] = (sections[hi][c] - sections[lo][c]) / (sections[hi][0] - sections[lo][0]);
     }
   }
-  // Rounded caps: most of the end sections' smaller half axis.
-  p.rounding = 0.8 * std::min(sections.front()[1], sections.front()[2]);
-  p.rounding_top = 0.8 * std::min(sections.back()[1], sections.back()[2]);
+  // Rounded caps: a fraction of the end sections' smaller half axis.
+  p.rounding = cap_rounding * std::min(sections.front()[1], sections.front()[2]);
+  p.rounding_top = cap_rounding * std::min(sections.back()[1], sections.back()[2]);
   double max_extent = 0.0, z_mid = 0.0;
   for (const auto& s : sections) z_mid += s[3] / n;
   for (const auto& s : sections) {
@@ -246,7 +266,7 @@ Primitive MakeLoft(Group group, double blend, const std::vector<std::array<doubl
   const double half_height = 0.5 * (sections.back()[0] - sections.front()[0]);
   p.bound_centre = Vec3(0.0, sections.front()[0] + half_height, z_mid);
   p.bound_radius = std::hypot(max_extent, half_height);
-  p.lipschitz = 0.5;
+  p.lipschitz = kLoftLipschitz;
   return p;
 }
 
@@ -335,7 +355,7 @@ Body BuildBody(const BodyShapeOptions& shape, const BodyProportions& bp, double 
   c[kPelvis] = Vec3(0, y_of(bp.pelvis_height), 0);
   c[kSpine] = Vec3(0, y_of(bp.spine_height), 0);
   c[kChest] = Vec3(0, y_of(bp.chest_height), 0);
-  c[kNeck] = Vec3(0, y_of(bp.neck_height), -0.012 * h);
+  c[kNeck] = Vec3(0, y_of(bp.neck_height), bp.neck_base_z * h);
   c[kHead] = Vec3(0, y_of(bp.head_joint_height), 0.0);
   const double shoulder_x =
       h * (bp.shoulder_half_breadth * shape.shoulder_width + (g - 1.0) * bp.girth_shoulder_shift);
@@ -373,7 +393,7 @@ Body BuildBody(const BodyShapeOptions& shape, const BodyProportions& bp, double 
       sections.push_back({y_of(sec.y), sec.half_width * h * g * width, sec.half_depth * h * g,
                           sec.centre_z * h});
     }
-    prims.push_back(MakeLoft(Group::kTrunk, blend_trunk, sections));
+    prims.push_back(MakeLoft(Group::kTrunk, blend_trunk, sections, bp.torso_cap_rounding));
   }
   for (int side = 0; side < 2; ++side) {
     const double sx = side == 0 ? 1.0 : -1.0;
@@ -387,8 +407,8 @@ Body BuildBody(const BodyShapeOptions& shape, const BodyProportions& bp, double 
   const Vec3 head_semi(bp.head_semi_axes.x() * h, bp.head_semi_axes.y() * h * sigma,
                        bp.head_semi_axes.z() * h);
   const Vec3 head_centre(0, y_of(1.0 - bp.head_semi_axes.y()), bp.head_centre_z * h);
-  const Vec3 neck_bottom = c[kNeck] - 0.03 * h * body.axis[kNeck];
-  const Vec3 neck_top = c[kHead] + 0.015 * h * body.axis[kNeck];
+  const Vec3 neck_bottom = c[kNeck] - bp.neck_extension_bottom * h * body.axis[kNeck];
+  const Vec3 neck_top = c[kHead] + bp.neck_extension_top * h * body.axis[kNeck];
   prims.push_back(MakeCone(Group::kNeckHead, blend_trunk, neck_bottom, neck_top,
                            bp.neck_base_radius * h * g, bp.neck_top_radius * h * g));
   prims.push_back(MakeEllipsoid(Group::kNeckHead, blend_root, head_centre, head_semi));
@@ -422,12 +442,13 @@ Body BuildBody(const BodyShapeOptions& shape, const BodyProportions& bp, double 
     body.arm_seam[side] = inner;
 
     // Trapezius slope from the neck base to the top of the shoulder (trunk), deltoid (arm).
-    const Vec3 acromion = c[js] + 0.012 * h * up;
-    prims.push_back(MakeCone(Group::kTrunk, blend_trunk,
-                             Vec3(sx * 0.3 * shoulder_x, y_of(bp.neck_height), -0.01 * h),
-                             acromion - 0.02 * h * Vec3(sx, 0, 0), bp.trapezius_radius * h * g,
-                             0.8 * bp.trapezius_radius * h * g));
-    prims.push_back(MakeEllipsoid(group, blend_trunk, c[js] + 0.005 * h * (dir + up),
+    const Vec3 acromion =
+        c[js] + bp.acromion_rise * h * up - bp.acromion_inset * h * Vec3(sx, 0.0, 0.0);
+    prims.push_back(MakeCone(
+        Group::kTrunk, blend_trunk,
+        Vec3(sx * bp.trapezius_neck_x * shoulder_x, y_of(bp.neck_height), bp.trapezius_neck_z * h),
+        acromion, bp.trapezius_radius * h * g, bp.trapezius_taper * bp.trapezius_radius * h * g));
+    prims.push_back(MakeEllipsoid(group, blend_trunk, c[js] + bp.deltoid_offset * h * (dir + up),
                                   Vec3::Constant(bp.deltoid_radius * h * g)));
     prims.push_back(MakeCone(group, blend_root, c[js], c[js + 1], bp.upper_arm_radius_top * h * g,
                              bp.upper_arm_radius_bottom * h * g));
@@ -435,22 +456,24 @@ Body BuildBody(const BodyShapeOptions& shape, const BodyProportions& bp, double 
                              bp.forearm_radius_wrist * h * g));
     prims.push_back(MakeEllipsoid(
         group, blend_limb, c[js + 1] + bp.forearm_bulge_fraction * forearm * dir,
-        Vec3(0.35 * forearm, bp.forearm_radius_bulge * h * g, bp.forearm_radius_bulge * h * g),
+        Vec3(bp.forearm_bulge_length * forearm, bp.forearm_radius_bulge * h * g,
+             bp.forearm_radius_bulge * h * g),
         FrameFromAxis(dir, inner)));
     // Hand: flattened palm and finger cones (width along Z), thumb to the front.
     const Vec3 knuckles = c[js + 2] + bp.palm_fraction * hand * dir;
     const double tip_r = bp.fingertip_half_width * h;
-    prims.push_back(MakeCone(group, blend_limb, c[js + 2] - 0.005 * h * dir, knuckles,
+    prims.push_back(MakeCone(group, blend_limb, c[js + 2] - bp.palm_start_offset * h * dir, knuckles,
                              bp.palm_half_width * h, bp.palm_half_width * h, bp.hand_flattening,
                              inner));
     prims.push_back(MakeCone(group, blend_hand, knuckles, c[js + 2] + (hand - tip_r * bp.hand_flattening) * dir,
                              bp.finger_half_width * h, tip_r, bp.hand_flattening, inner));
-    const Vec3 thumb_base = c[js + 2] + 0.22 * hand * dir + 0.55 * bp.palm_half_width * h * Vec3::UnitZ();
-    const double thumb_angle = 35.0 * kPi / 180.0;
+    const Vec3 thumb_base = c[js + 2] + bp.thumb_base_fraction * hand * dir +
+                            bp.thumb_base_offset * bp.palm_half_width * h * Vec3::UnitZ();
+    const double thumb_angle = bp.thumb_angle_deg * kPi / 180.0;
     const Vec3 thumb_dir = (std::cos(thumb_angle) * dir + std::sin(thumb_angle) * Vec3::UnitZ()).normalized();
     prims.push_back(MakeCone(group, blend_hand, thumb_base,
                              thumb_base + bp.thumb_length * h * thumb_dir, bp.thumb_radius * h,
-                             0.8 * bp.thumb_radius * h));
+                             bp.thumb_taper * bp.thumb_radius * h));
   }
 
   // Legs.
@@ -473,15 +496,16 @@ Body BuildBody(const BodyShapeOptions& shape, const BodyProportions& bp, double 
                              bp.thigh_radius_bottom * h * g));
     prims.push_back(MakeEllipsoid(
         group, blend_limb, c[jh] + bp.thigh_muscle_fraction * thigh * dir,
-        Vec3(0.45 * thigh, bp.thigh_muscle_radius * h * g, bp.thigh_muscle_radius * h * g),
+        Vec3(bp.thigh_muscle_length * thigh, bp.thigh_muscle_radius * h * g,
+             bp.thigh_muscle_radius * h * g),
         FrameFromAxis(dir, Vec3::UnitZ())));
     prims.push_back(MakeCone(group, blend_limb, c[jh + 1], c[jh + 2], bp.shank_radius_top * h * g,
                              bp.shank_radius_ankle * h * g));
     // The calf bulges backwards.
     prims.push_back(MakeEllipsoid(
         group, blend_limb,
-        c[jh + 1] + bp.calf_fraction * shank * dir - 0.008 * h * Vec3::UnitZ(),
-        Vec3(0.32 * shank, bp.calf_radius * h * g, bp.calf_radius * h * g),
+        c[jh + 1] + bp.calf_fraction * shank * dir - bp.calf_back_offset * h * Vec3::UnitZ(),
+        Vec3(bp.calf_length * shank, bp.calf_radius * h * g, bp.calf_radius * h * g),
         FrameFromAxis(dir, Vec3::UnitZ())));
     // Foot: rounded box with the sole on y = 0, plus an instep cone from the ankle.
     const double foot_len = bp.foot_length * h;
@@ -489,16 +513,19 @@ Body BuildBody(const BodyShapeOptions& shape, const BodyProportions& bp, double 
     const Vec3 half(bp.foot_half_width * h, bp.foot_half_height * h, 0.5 * foot_len);
     const Vec3 foot_centre(c[jh + 2].x(), half.y(), heel_z + half.z());
     prims.push_back(MakeBox(group, blend_limb, foot_centre, half, bp.foot_rounding * h));
-    const Vec3 ball(c[jh + 2].x(), 1.3 * half.y(), heel_z + 0.72 * foot_len);
+    const Vec3 ball(c[jh + 2].x(), bp.instep_height * half.y(),
+                    heel_z + bp.foot_ball_fraction * foot_len);
     prims.push_back(MakeCone(group, blend_limb, c[jh + 2], ball, bp.shank_radius_ankle * h,
                              half.y()));
     prims.push_back(MakeEllipsoid(group, blend_limb,
-                                  Vec3(c[jh + 2].x(), 1.6 * half.y(), heel_z + 1.6 * half.y()),
-                                  Vec3(half.x() * 0.9, 1.6 * half.y(), 1.6 * half.y())));
+                                  Vec3(c[jh + 2].x(), bp.heel_radius * half.y(),
+                                       heel_z + bp.heel_radius * half.y()),
+                                  Vec3(bp.heel_width * half.x(), bp.heel_radius * half.y(),
+                                       bp.heel_radius * half.y())));
     body.axis[jh + 2] = (ball - c[jh + 2]).normalized();
   }
 
-  body.cull_margin = 3.0 * grid_cell;
+  body.cull_margin = kCullMarginCells * grid_cell;
   body.box_min = Vec3::Constant(kInf);
   body.box_max = Vec3::Constant(-kInf);
   for (const Primitive& p : prims) {
@@ -612,7 +639,7 @@ TriangleMesh ExtractIsoSurface(const Body& body, double cell) {
     if (it != edge_vertex.end()) return it->second;
     const double fa = values[index(pa.x(), pa.y(), pa.z())];
     const double fb = values[index(pb.x(), pb.y(), pb.z())];
-    const double t = std::clamp(fa / (fa - fb), 0.02, 0.98);
+    const double t = std::clamp(fa / (fa - fb), kEdgeClamp, 1.0 - kEdgeClamp);
     const Vec3 p = (1.0 - t) * point(pa.x(), pa.y(), pa.z()) + t * point(pb.x(), pb.y(), pb.z());
     const int id = static_cast<int>(mesh.vertices.size());
     mesh.vertices.push_back(p);
@@ -755,8 +782,8 @@ class Remesher {
   }
 
   void Run() {
-    const double high = 4.0 / 3.0 * target_;
-    const double low = 4.0 / 5.0 * target_;
+    const double high = kSplitFactor * target_;
+    const double low = kCollapseFactor * target_;
     for (int it = 0; it < options_.remesh_iterations; ++it) {
       SplitLongEdges(high);
       CollapseShortEdges(low, high);
@@ -811,7 +838,9 @@ class Remesher {
       if (has_skip) continue;
       const Vec3 n0 = FaceNormal(old_pts[0], old_pts[1], old_pts[2]);
       const Vec3 n1 = FaceNormal(new_pts[0], new_pts[1], new_pts[2]);
-      if (n1.norm() < 1e-14 || n0.dot(n1) <= 0.2 * n0.norm() * n1.norm()) return false;
+      if (n1.norm() < 1e-14 || n0.dot(n1) <= kCollapseNormalCosine * n0.norm() * n1.norm()) {
+        return false;
+      }
     }
     return true;
   }
@@ -869,7 +898,7 @@ class Remesher {
       const Vec3 n2 = FaceNormal(P(d), P(c), P(b));
       if (n1.dot(n_old) <= 0.0 || n2.dot(n_old) <= 0.0) continue;
       const Vec3 f1 = FaceNormal(P(b), P(a), P(c)), f2 = FaceNormal(P(a), P(b), P(d));
-      if (f1.normalized().dot(f2.normalized()) < 0.5) continue;  // keep creases
+      if (f1.normalized().dot(f2.normalized()) < kFlipCreaseCosine) continue;
       mesh_.flip(eh);
     }
   }
@@ -899,14 +928,14 @@ class Remesher {
   }
 
   void Project() {
-    const double eps = 1e-5 * body_.height;
+    const double eps = kGradientStep * body_.height;
     std::vector<OmMesh::VertexHandle> handles(mesh_.vertices().begin(), mesh_.vertices().end());
     tbb::parallel_for(tbb::blocked_range<size_t>(0, handles.size()),
                       [&](const tbb::blocked_range<size_t>& r) {
                         for (size_t i = r.begin(); i < r.end(); ++i) {
                           const Vec3 p = ProjectToSurface(body_, P(handles[i]),
                                                           options_.projection_iterations, eps,
-                                                          0.5 * target_);
+                                                          kMaxProjectionStep * target_);
                           mesh_.point(handles[i]) = ToOm(p);
                         }
                       });
@@ -1349,7 +1378,13 @@ bool BodyProportions::IsValid(std::string* error) const {
                            thumb_length, thumb_radius, thigh_radius_top, thigh_radius_bottom,
                            shank_radius_top, calf_radius, calf_fraction, shank_radius_ankle,
                            foot_length, foot_half_width, foot_half_height, foot_rounding,
-                           blend_trunk, blend_limb_root, blend_limb, blend_hand};
+                           blend_trunk, blend_limb_root, blend_limb, blend_hand,
+                           neck_extension_bottom, neck_extension_top, torso_cap_rounding,
+                           trapezius_neck_x, trapezius_taper, acromion_rise, acromion_inset,
+                           deltoid_offset, forearm_bulge_length, palm_start_offset,
+                           thumb_base_fraction, thumb_base_offset, thumb_taper,
+                           thigh_muscle_length, calf_length, calf_back_offset,
+                           foot_ball_fraction, heel_width};
   for (double v : values) {
     if (!(std::isfinite(v) && v > 0.0 && v < 1.0)) {
       return Check(false, "body proportions", "every ratio in (0, 1) of the stature", v, error);
@@ -1357,6 +1392,16 @@ bool BodyProportions::IsValid(std::string* error) const {
   }
   return Check(InRange(leg_spread_deg, 0.0, 30.0), "leg_spread_deg", "an angle in [0, 30]",
                leg_spread_deg, error) &&
+         Check(InRange(thumb_angle_deg, 0.0, 90.0), "thumb_angle_deg", "an angle in [0, 90]",
+               thumb_angle_deg, error) &&
+         Check(InRange(instep_height, 0.1, 4.0), "instep_height", "a value in [0.1, 4]",
+               instep_height, error) &&
+         Check(InRange(heel_radius, 0.1, 4.0), "heel_radius", "a value in [0.1, 4]", heel_radius,
+               error) &&
+         Check(InRange(neck_base_z, -0.1, 0.1), "neck_base_z", "a ratio in [-0.1, 0.1]",
+               neck_base_z, error) &&
+         Check(InRange(trapezius_neck_z, -0.1, 0.1), "trapezius_neck_z",
+               "a ratio in [-0.1, 0.1]", trapezius_neck_z, error) &&
          Check(ankle_height < hip_height && hip_height < pelvis_height &&
                    pelvis_height < spine_height && spine_height < chest_height &&
                    chest_height < neck_height && neck_height < head_joint_height &&

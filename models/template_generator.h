@@ -127,6 +127,30 @@ struct BodyProportions {
   double foot_half_height = 0.016;       // forefoot box half height (sole at y = 0)
   double heel_offset = 0.030;            // heel end behind the ankle centre
   double foot_rounding = 0.014;          // edge radius of the foot box
+  // Placement details (fractions of H unless stated).
+  double neck_base_z = -0.012;           // z of the neck joint (the neck leans forwards)
+  double neck_extension_bottom = 0.03;   // neck cone starts this far below the neck joint
+  double neck_extension_top = 0.015;     // and ends this far above the head joint
+  double torso_cap_rounding = 0.8;       // loft end caps: fraction of the end's smaller half axis
+  double trapezius_neck_x = 0.3;         // trapezius start |x|, fraction of the shoulder |x|
+  double trapezius_neck_z = -0.01;
+  double trapezius_taper = 0.8;          // end radius / start radius
+  double acromion_rise = 0.012;          // trapezius end above the shoulder joint
+  double acromion_inset = 0.02;          // trapezius end medial of the shoulder joint
+  double deltoid_offset = 0.005;         // deltoid centre: joint + offset * (arm dir + up)
+  double forearm_bulge_length = 0.35;    // forearm muscle semi-axis, fraction of the forearm
+  double palm_start_offset = 0.005;      // palm starts this far inside the wrist
+  double thumb_angle_deg = 35.0;         // thumb direction between the hand axis and +Z
+  double thumb_base_fraction = 0.22;     // of the hand length, from the wrist
+  double thumb_base_offset = 0.55;       // towards +Z, fraction of the palm half width
+  double thumb_taper = 0.8;              // tip radius / base radius
+  double thigh_muscle_length = 0.45;     // thigh muscle semi-axis, fraction of the thigh
+  double calf_length = 0.32;             // calf semi-axis, fraction of the shank
+  double calf_back_offset = 0.008;       // calf centre behind the shank axis
+  double foot_ball_fraction = 0.72;      // ball of the foot, fraction of the foot length
+  double instep_height = 1.3;            // instep cone end height, in foot half heights
+  double heel_radius = 1.6;              // heel ellipsoid, in foot half heights
+  double heel_width = 0.9;               // heel half width, fraction of the foot half width
   // Smooth-union radii (polynomial smooth minimum) with which parts join the body.
   double blend_trunk = 0.030;            // between trunk ellipsoids, neck and head
   double blend_limb_root = 0.018;        // limbs to the trunk

@@ -62,10 +62,11 @@ bool InSubtree(const Template& t, int joint, int root) {
   return false;
 }
 
-// Largest ratio posed / rest length over all mesh edges.
-double MaxEdgeStretch(const Template& t, const Eigen::MatrixX3d& posed) {
+// Largest ratio posed / rest length over the given edges.
+double MaxEdgeStretch(const Template& t, const std::vector<std::pair<int, int>>& edges,
+                      const Eigen::MatrixX3d& posed) {
   double worst = 0.0;
-  for (const auto& [a, b] : Edges(t)) {
+  for (const auto& [a, b] : edges) {
     const double rest = (t.vertices.row(a) - t.vertices.row(b)).norm();
     const double now = (posed.row(a) - posed.row(b)).norm();
     worst = std::max(worst, now / rest);
@@ -337,6 +338,7 @@ TEST_F(DefaultTemplateTest, ChartsKeepThePaddingApart) {
 TEST_F(DefaultTemplateTest, PosedSurfaceStaysContinuous) {
   const Template& t = *template_;
   const Skinning skinning(t);
+  const std::vector<std::pair<int, int>> edges = Edges(t);
   struct Motion {
     const char* joint;
     Eigen::Vector3d axis;  // bending axis in the rest frame
@@ -366,10 +368,10 @@ TEST_F(DefaultTemplateTest, PosedSurfaceStaysContinuous) {
     Pose pose = Pose::Identity(t.num_joints());
     pose.joint_rotations[j] = ExpSO3(m.axis.normalized() * m.bend_degrees * kPi / 180.0);
     skinning.Apply(pose, &posed);
-    EXPECT_LT(MaxEdgeStretch(t, posed), 3.0) << m.joint;
+    EXPECT_LT(MaxEdgeStretch(t, edges, posed), 3.0) << m.joint;
     pose.joint_rotations[j] = ExpSO3(t.joints[j].twist_axis * m.twist_degrees * kPi / 180.0);
     skinning.Apply(pose, &posed);
-    EXPECT_LT(MaxEdgeStretch(t, posed), 3.0) << m.joint << " (twist)";
+    EXPECT_LT(MaxEdgeStretch(t, edges, posed), 3.0) << m.joint << " (twist)";
   }
 }
 
@@ -389,7 +391,7 @@ TEST_F(DefaultTemplateTest, PosedSurfaceTearsWithoutBlendBand) {
   pose.joint_rotations[elbow] = ExpSO3(Eigen::Vector3d::UnitZ() * kPi / 2.0);
   Eigen::MatrixX3d posed;
   skinning.Apply(pose, &posed);
-  EXPECT_GT(MaxEdgeStretch(t, posed), 3.0);
+  EXPECT_GT(MaxEdgeStretch(t, Edges(t), posed), 3.0);
 }
 
 TEST(TemplateGeneratorTest, CoarseResolution) {
@@ -451,6 +453,34 @@ TEST(TemplateGeneratorTest, ShapeParametersChangeTheBodyAsExpected) {
   o.arm_angle_deg = 20.0;
   const Template raised = GenerateTemplate(o, NoAtlas(), nullptr);
   EXPECT_GT(raised.vertices.col(0).maxCoeff(), base.vertices.col(0).maxCoeff() + 0.05);
+}
+
+// Corners of the valid parameter box still give valid, closed templates with an atlas whose
+// segments only touch their parents, children and siblings.
+TEST(TemplateGeneratorTest, ExtremeShapesStayValid) {
+  BodyShapeOptions wide = Coarse();
+  wide.girth = 1.6;
+  wide.hip_width = 1.3;
+  wide.arm_angle_deg = 60.0;
+  BodyShapeOptions small = Coarse();
+  small.height = 1.0;
+  small.girth = 0.6;
+  small.shoulder_width = 0.7;
+  small.arm_length = 1.2;
+  small.leg_length = 1.2;
+  for (const BodyShapeOptions& o : {wide, small}) {
+    const Template t = GenerateTemplate(o);
+    std::string error;
+    EXPECT_TRUE(t.IsValid(&error)) << error;
+    EXPECT_TRUE(IsClosedManifoldSphere(t.num_vertices(), t.triangles, &error)) << error;
+    EXPECT_TRUE(t.has_uvs());
+    EXPECT_NEAR(t.vertices.col(1).maxCoeff(), o.height, 0.02 * o.height);
+    for (const auto& [a, b] : Edges(t)) {
+      const int ja = t.vertex_joint[a], jb = t.vertex_joint[b];
+      const int pa = t.joints[ja].parent, pb = t.joints[jb].parent;
+      EXPECT_TRUE(ja == jb || pa == jb || pb == ja || pa == pb);
+    }
+  }
 }
 
 TEST(TemplateGeneratorTest, InvalidOptionsThrow) {
