@@ -191,16 +191,26 @@ TEST_F(DefaultTemplateTest, VertexJointAssignmentIsPlausible) {
     const Eigen::Vector3d p = t.vertices.row(v);
     const std::string& name = t.joints[k].name;
     const double sx = name.rfind("l_", 0) == 0 ? 1.0 : (name.rfind("r_", 0) == 0 ? -1.0 : 0.0);
-    if (sx != 0.0) EXPECT_GT(sx * p.x(), 0.0) << name << " vertex " << v;
-    if (name == "head") EXPECT_GT(p.y(), t.joints[t.FindJoint("neck")].center.y());
-    if (name == "l_ankle" || name == "r_ankle") EXPECT_LT(p.y(), 0.2);
+    if (sx != 0.0) {
+      EXPECT_GT(sx * p.x(), 0.0) << name << " vertex " << v;
+    }
+    if (name == "head") {
+      EXPECT_GT(p.y(), t.joints[t.FindJoint("neck")].center.y());
+    }
+    if (name == "l_ankle" || name == "r_ankle") {
+      EXPECT_LT(p.y(), 0.2);
+    }
     if (name == "l_wrist" || name == "r_wrist") {
       // Hands: within a hand length of the wrist, far from the head.
       EXPECT_LT((p - t.joints[k].center).norm(), 0.25);
       EXPECT_GT((p - head).norm(), 0.6);
     }
-    if (name == "l_knee" || name == "r_knee") EXPECT_LT(p.y(), 0.6);
-    if (name == "pelvis") EXPECT_LT(std::abs(p.x()), 0.25);
+    if (name == "l_knee" || name == "r_knee") {
+      EXPECT_LT(p.y(), 0.6);
+    }
+    if (name == "pelvis") {
+      EXPECT_LT(std::abs(p.x()), 0.25);
+    }
   }
   for (int j = 0; j < t.num_joints(); ++j) {
     EXPECT_GT(count[j], 30) << t.joints[j].name;
@@ -248,8 +258,12 @@ TEST_F(DefaultTemplateTest, SkinningConstantsAreContinuousAcrossSegments) {
   for (int v = 0; v < t.num_vertices(); ++v) {
     if (t.vertex_joint[v] != elbow) continue;
     const double s = (t.vertices.row(v).transpose() - j.center).dot(j.twist_axis);
-    if (s > 0.07) EXPECT_EQ(t.lbs_weight[v], 1.0);
-    if (std::abs(s) < 0.005) EXPECT_NEAR(t.lbs_weight[v], 0.5, 0.25);
+    if (s > 0.07) {
+      EXPECT_EQ(t.lbs_weight[v], 1.0);
+    }
+    if (std::abs(s) < 0.005) {
+      EXPECT_NEAR(t.lbs_weight[v], 0.5, 0.25);
+    }
   }
 }
 
@@ -586,7 +600,10 @@ TEST(UvAtlasTest, CutsAnnulusChartsAndPacksWithoutFlips) {
   for (size_t i = 0; i < tris.size(); ++i) f.row(i) = tris[i].transpose();
   std::string error;
   ASSERT_TRUE(IsClosedManifoldSphere(static_cast<int>(v.rows()), f, &error)) << error;
-  ASSERT_GT(Volume(Template{v, f}), 0.0);
+  Template closed;
+  closed.vertices = v;
+  closed.triangles = f;
+  ASSERT_GT(Volume(closed), 0.0);
   UvAtlasOptions options;
   options.atlas_size = 512;
   UvAtlas atlas;
