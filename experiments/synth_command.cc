@@ -206,7 +206,7 @@ void Run(const SynthCliOptions& cli) {
   });
   std::fprintf(stderr,
                "synth: wrote %d frames + %d background frames to %s in %.2f s "
-               "(setup %.2f s; %.1f ms per frame: render %.1f, write %.1f)\n",
+               "(setup %.2f s; %.1f ms per frame; per image set: render %.1f ms, write %.1f ms)\n",
                summary.frames, summary.background_frames, cli.output.c_str(), summary.total_seconds,
                summary.setup_seconds, summary.ms_per_frame(),
                1000.0 * summary.render_seconds / std::max(1, summary.frames + summary.background_frames),

@@ -234,10 +234,11 @@ struct SynthSummary {
   int frames = 0;
   int background_frames = 0;
   double setup_seconds = 0;      // subject, texture, motion
-  double render_seconds = 0;     // all frames incl. background (rendering only)
-  double write_seconds = 0;      // encoding and writing files
+  double render_seconds = 0;     // rendering, summed over all frames incl. background
+  double write_seconds = 0;      // encoding and writing files, summed (overlaps rendering)
+  double frames_seconds = 0;     // wall time of the (pipelined) frame loop
   double total_seconds = 0;
-  double ms_per_frame() const { return frames ? 1000.0 * (render_seconds + write_seconds) / frames : 0; }
+  double ms_per_frame() const { return frames ? 1000.0 * frames_seconds / frames : 0; }
 };
 
 // The subject, its texture and the posed frames of a synthesis, without rendering or files.
