@@ -559,14 +559,19 @@ Experiment ParseExperiment(const std::string& yaml, const std::string& source_na
   CheckTopKeys(root, source_name);
   Experiment ex;
   ex.file = source_name;
+  ex.base_source = source_name + " (base)";
   ex.name = root["name"] ? root["name"].as<std::string>() : fs::path(source_name).stem().string();
 
   // Base configuration: a path (relative to the experiment file) or an inline mapping.
   if (const YAML::Node base = root["base"]) {
     if (base.IsScalar()) {
-      ex.base = Config::Load(ResolvePath(base.Scalar(), base_dir));
+      ex.base_source = ResolvePath(base.Scalar(), base_dir);
+      ex.base = Config::Load(ex.base_source);  // reports a missing file or bad YAML
+      ex.base_yaml = ReadText(ex.base_source);
     } else if (base.IsMap()) {
-      ex.base = Config::FromString(EmitBlock(base), source_name + " (base)");
+      ex.base_source = source_name + " (base)";
+      ex.base_yaml = EmitBlock(base);
+      ex.base = Config::FromString(ex.base_yaml, ex.base_source);
     } else {
       throw Error(source_name + ": base: expected a configuration file path or a mapping");
     }
@@ -726,7 +731,7 @@ Experiment LoadExperiment(const std::string& path) {
 }
 
 Config CombinationConfig(const Experiment& experiment, const ExperimentCombination& combination) {
-  Config c = experiment.base;
+  Config c = Config::FromString(experiment.base_yaml, experiment.base_source);
   for (const auto& o : combination.overrides) c.Set(o.key, o.value);
   return c;
 }
@@ -784,8 +789,9 @@ void RunSingle(const std::string& config_path, const std::string& sequence_dir,
                                                   static_cast<std::size_t>(threads));
     cv::setNumThreads(threads);
   }
+  // Two instances: reading options touches the YAML nodes, the pipeline writes the other one.
+  const PipelineOptions options = LoadPipelineOptions(Config::Load(config_path));
   const Config config = Config::Load(config_path);
-  const PipelineOptions options = LoadPipelineOptions(config);
   const PipelineResult result = RunPipeline(sequence_dir, template_path, options, config, out_dir,
                                             [&](const PipelineProgress& p) {
                                               if (progress) progress(p.done, p.total);
@@ -1019,7 +1025,7 @@ ExperimentSummary RunExperiment(const Experiment& experiment, const std::string&
   ExperimentSummary summary;
   summary.runs_total = static_cast<int>(sequences.size() * experiment.combinations.size());
   std::vector<Job> run_jobs;
-  int skipped = 0;
+  int skipped = 0, would_run = 0;
   for (const auto& s : sequences) {
     const fs::path seq_runs = out / "runs" / s.name;
     fs::create_directories(seq_runs);
@@ -1044,7 +1050,10 @@ ExperimentSummary RunExperiment(const Experiment& experiment, const std::string&
         emit(e);
         continue;
       }
-      if (options.dry_run) continue;
+      if (options.dry_run) {
+        ++would_run;
+        continue;
+      }
       if (fs::exists(final_dir)) fs::remove_all(final_dir);  // incomplete: rerun from scratch
       const fs::path tmp = seq_runs / (kTmpPrefix + c.id + "." + std::to_string(getpid()));
       fs::create_directories(tmp);
@@ -1105,7 +1114,7 @@ ExperimentSummary RunExperiment(const Experiment& experiment, const std::string&
     e.kind = RunnerEvent::Kind::kPlan;
     e.runs_total = summary.runs_total;
     e.runs_skipped = skipped;
-    e.total = static_cast<int>(run_jobs.size());
+    e.total = static_cast<int>(run_jobs.size()) + would_run;
     emit(e);
   }
   int running = 0;

@@ -41,6 +41,8 @@ struct Experiment {
   std::string name;                 // `name:` (default: the file's stem)
   std::string file;                 // the experiment file
   Config base;                      // base configuration (file or inline mapping)
+  std::string base_yaml;            // its text and source name: CombinationConfig parses a
+  std::string base_source;          // fresh copy (Config copies share their YAML nodes)
   std::string template_path;        // tracking template (.glb); "" = generated (below)
   std::string template_yaml;        // BodyShapeOptions mapping of the generated template
   std::vector<ExperimentSequence> sequences;
