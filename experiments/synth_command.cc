@@ -151,6 +151,9 @@ void Run(const SynthCliOptions& cli) {
   if (cli.output.empty() && cli.preview.empty()) {
     throw Error("-o/--output: an output folder is required (or --preview PNG)");
   }
+  if (cli.frames == 0 && cli.bvh.empty()) {
+    throw Error("--frames: expected >= 1 (0 = the whole clip, only with --bvh), found 0");
+  }
   SynthOptions options;
   try {
     options.motion.type = ParseMotionType(cli.motion);
