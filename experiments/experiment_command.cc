@@ -162,7 +162,7 @@ void RunExperimentCli(const ExperimentCliOptions& cli) {
   std::fprintf(stderr, "experiment: wrote %s/results.csv and %s/summary.md\n", cli.output.c_str(),
                cli.output.c_str());
   const std::string script = (fs::path(SourceDirectory()) / "scripts" / "plot_results.py").string();
-  if (!cli.no_plots) {
+  if (!cli.no_plots && summary.runs_completed + summary.runs_skipped > 0) {
     const std::string python = FindPlottingPython();
     if (python.empty() || !fs::exists(script)) {
       std::fprintf(stderr,

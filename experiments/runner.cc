@@ -520,12 +520,13 @@ const std::vector<MetricInfo>& Metrics() {
       {"skipped_frames", true, false, "unreadable input frames"},
       {"mean_em_iterations", true, false, "EM iterations per frame (mean)"},
       {"converged_fraction", false, false, "fraction of frames whose EM converged before its iteration cap"},
-      {"seam_rms_before", true, false, "RMS colour jump at texture seams before levelling (mean over frames, 0-255 units)"},
+      {"seam_rms_before", true, false, "RMS colour jump at texture seams before levelling (mean over frames; colours in [0, 1])"},
       {"seam_rms_after", true, false, "RMS colour jump at texture seams after levelling (mean over frames)"},
       {"seam_edges", true, false, "interior edges whose triangles use different source images (last frame)"},
       {"changed_triangles", true, false, "triangles whose source image changed, per frame (mean; temporal stability)"},
       {"textured_triangles", false, false, "triangles with a source image (last frame)"},
       {"mrf_energy", true, false, "view-selection energy E(L) of the last frame (comparable only at equal lambda/alpha/beta)"},
+      {"mrf_iterations", true, false, "view-selection (MRF) solver iterations per frame (mean; warm-started)"},
       {"pool_size", true, false, "images in the pool (mean over frames)"},
       {"stream_kbit_per_s", true, false, "compressed pose + texture update stream at the frame rate"},
       {"preprocess_ms", true, true, "preprocessing per frame (ms)"},
@@ -803,11 +804,11 @@ void RunSingle(const std::string& config_path, const std::string& sequence_dir,
            "max_vertex_error_mm,joint_error_mm,lost,scale,preprocess_ms,icp_ms,estep_ms,mstep_ms,"
            "fit_ms,texture_pool_ms,texture_mrf_ms,texture_sampling_ms,texture_levelling_ms,"
            "texture_ms,mrf_energy,pool_size,seam_edges,changed_triangles,textured_triangles,"
-           "seam_rms_before,seam_rms_after\n";
+           "seam_rms_before,seam_rms_after,mrf_iterations\n";
   em << "frame,iteration,stage,radius,cost,max_update,total_weight,num_pairs,scale,converged\n";
   int fitted = 0, lost = 0, failed = 0, converged = 0;
   std::vector<double> iterations, errors, seam_before, seam_after, changed, pool, pre, estep,
-      mstep, fit, tex, mrf, lev;
+      mstep, fit, tex, mrf, lev, mrf_iterations;
   const FrameRecord* last_textured = nullptr;
   const FrameRecord* last_fitted = nullptr;
   for (const FrameRecord& r : result.frames) {
@@ -829,7 +830,7 @@ void RunSingle(const std::string& config_path, const std::string& sequence_dir,
           << "," << r.texture.pool_size << "," << r.texture.seam_edges << ","
           << r.texture.changed_triangles << "," << r.texture.textured_triangles << ","
           << FormatNumber(r.texture.seam_rms_before) << "," << FormatNumber(r.texture.seam_rms_after)
-          << "\n";
+          << "," << r.texture.mrf_iterations << "\n";
     for (const EMIterationInfo& it : r.fit.trace) {
       em << r.frame << "," << it.iteration << "," << it.stage << "," << FormatNumber(it.radius)
          << "," << FormatNumber(it.cost) << "," << FormatNumber(it.max_update) << ","
@@ -853,6 +854,7 @@ void RunSingle(const std::string& config_path, const std::string& sequence_dir,
       mrf.push_back(1e3 * r.texture.seconds_mrf);
       lev.push_back(1e3 * r.texture.seconds_levelling);
       changed.push_back(r.texture.changed_triangles);
+      mrf_iterations.push_back(r.texture.mrf_iterations);
       pool.push_back(r.texture.pool_size);
       if (r.texture.seam_edges > 0) {
         seam_before.push_back(r.texture.seam_rms_before);
@@ -886,6 +888,7 @@ void RunSingle(const std::string& config_path, const std::string& sequence_dir,
     put("changed_triangles", Mean(changed));
     put("textured_triangles", last_textured->texture.textured_triangles);
     put("mrf_energy", last_textured->texture.energy);
+    put("mrf_iterations", Mean(mrf_iterations));
     put("pool_size", Mean(pool));
     put("stream_kbit_per_s", result.stream_kbit_per_s);
   }
