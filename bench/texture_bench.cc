@@ -18,6 +18,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <memory>
 #include <vector>
 
@@ -25,6 +26,7 @@
 
 #include "energies/texture_terms.h"
 #include "models/skinning.h"
+#include "solvers/seam_levelling.h"
 #include "models/template_generator.h"
 #include "sensors/motion.h"
 #include "sensors/subject_texture.h"
@@ -100,8 +102,11 @@ void BM_AddFrame(benchmark::State& state) {
   Texturer texturer(seq.body, BenchOptions());
   for (int f = 0; f < kWarmupFrames; ++f) texturer.AddFrame(f, seq.color[f], seq.camera, seq.posed[f]);
   std::vector<double> wall, cpu, pool, mrf, sampling, levelling, changed, seams, pool_size;
+  std::vector<double> to_newest, from_dropped, textured;
+  uint64_t labels_hash = 1469598103934665603ull;  // FNV-1a over every frame's labels
   int frame = kWarmupFrames;
   for (auto _ : state) {
+    const std::vector<int> before = texturer.triangle_frames();
     const double cpu0 = ProcessCpuSeconds();
     const auto t0 = std::chrono::steady_clock::now();
     const TextureFrameSummary s =
@@ -115,6 +120,17 @@ void BM_AddFrame(benchmark::State& state) {
     changed.push_back(s.changed_triangles);
     seams.push_back(s.seam_edges);
     pool_size.push_back(s.pool_size);
+    textured.push_back(s.textured_triangles);
+    // Why triangles changed: they moved to the newest image, or their image left the pool.
+    int newest = 0, dropped = 0;
+    for (int f : texturer.last_changed_triangles()) {
+      newest += texturer.triangle_frames()[f] == frame;
+      dropped += before[f] >= 0 && texturer.pool().SlotOfFrame(before[f]) < 0;
+    }
+    for (int l : texturer.triangle_frames())
+      labels_hash = (labels_hash ^ static_cast<uint64_t>(l + 1)) * 1099511628211ull;
+    to_newest.push_back(newest);
+    from_dropped.push_back(dropped);
     ++frame;
   }
   state.counters["median_ms"] = 1e3 * Median(wall);
@@ -126,6 +142,11 @@ void BM_AddFrame(benchmark::State& state) {
   state.counters["changed_tris"] = Median(changed);
   state.counters["seam_edges"] = Median(seams);
   state.counters["pool_size"] = Median(pool_size);
+  state.counters["textured_tris"] = Median(textured);
+  state.counters["changed_to_newest"] = Median(to_newest);
+  state.counters["changed_from_dropped"] = Median(from_dropped);
+  // Identifies the sequence of labellings (equal hashes: identical view selection).
+  state.counters["labels_hash"] = static_cast<double>(labels_hash % 1000000007ull);
 }
 BENCHMARK(BM_AddFrame)->Iterations(kTimedFrames)->Unit(benchmark::kMillisecond)->UseRealTime();
 
@@ -191,6 +212,32 @@ BENCHMARK(BM_ViewSelection)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->MinTime(0.5);
+
+// Seam levelling of one frame's labelling (the texturer's state after kWarmupFrames frames), by
+// a SeamLeveller made once for the mesh.
+void BM_LevelSeams(benchmark::State& state) {
+  const Sequence& seq = Walk();
+  Texturer texturer(seq.body, BenchOptions());
+  for (int f = 0; f < kWarmupFrames; ++f)
+    texturer.AddFrame(f, seq.color[f], seq.camera, seq.posed[f]);
+  const ImagePool& pool = texturer.pool();
+  const auto colour = [&pool](int v, int frame_index, Eigen::Vector3f* c) {
+    const int slot = pool.SlotOfFrame(frame_index);
+    if (slot < 0 || !pool.entry(slot).vertex_colors.row(v).allFinite()) return false;
+    *c = pool.entry(slot).vertex_colors.row(v).transpose();
+    return true;
+  };
+  Eigen::MatrixX3f corrections;
+  SeamLevellingSummary summary;
+  const SeamLeveller leveller(seq.body.num_vertices(), seq.body.triangles, BenchOptions().levelling);
+  for (auto _ : state)
+    leveller.Level(texturer.triangle_frames(), colour, &corrections, &summary);
+  state.counters["unknowns"] = summary.unknowns;
+  state.counters["seam_equations"] = summary.seam_equations;
+  state.counters["rms_before"] = summary.seam_residual_before;
+  state.counters["rms_after"] = summary.seam_residual_after;
+}
+BENCHMARK(BM_LevelSeams)->Unit(benchmark::kMillisecond)->MinTime(1.0);
 
 }  // namespace
 }  // namespace artex

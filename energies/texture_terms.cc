@@ -48,10 +48,14 @@ double TemporalSeamCost(double distance, const TextureTermOptions& options) {
 std::vector<double> MeshDistanceField(const Eigen::MatrixX3d& vertices,
                                       const Eigen::MatrixX3i& triangles,
                                       const std::vector<int>& sources) {
+  if (sources.empty())
+    return std::vector<double>(vertices.rows(), std::numeric_limits<double>::infinity());
+  return MeshGeodesics(vertices, triangles).DistanceField(sources);
+}
+
+MeshGeodesics::MeshGeodesics(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& triangles) {
   const int n = static_cast<int>(vertices.rows());
-  std::vector<double> dist(n, std::numeric_limits<double>::infinity());
-  if (sources.empty()) return dist;
-  // Vertex adjacency (CSR) from the triangles.
+  // Vertex adjacency (CSR) from the triangles, duplicates removed.
   std::vector<int> degree(n + 1, 0);
   for (int f = 0; f < triangles.rows(); ++f)
     for (int c = 0; c < 3; ++c) degree[triangles(f, c) + 1] += 2;
@@ -65,24 +69,45 @@ std::vector<double> MeshDistanceField(const Eigen::MatrixX3d& vertices,
       adjacency[fill[a]++] = triangles(f, (c + 2) % 3);
     }
   }
+  offsets_.assign(n + 1, 0);
+  neighbours_.reserve(adjacency.size() / 2);
+  for (int v = 0; v < n; ++v) {
+    std::sort(adjacency.begin() + degree[v], adjacency.begin() + degree[v + 1]);
+    const auto end = std::unique(adjacency.begin() + degree[v], adjacency.begin() + degree[v + 1]);
+    for (auto it = adjacency.begin() + degree[v]; it != end; ++it) {
+      neighbours_.push_back(*it);
+      lengths_.push_back((vertices.row(*it) - vertices.row(v)).norm());
+    }
+    offsets_[v + 1] = static_cast<int>(neighbours_.size());
+  }
+}
+
+std::vector<double> MeshGeodesics::DistanceField(const std::vector<int>& sources) const {
+  const int n = num_vertices();
+  std::vector<double> dist(n, std::numeric_limits<double>::infinity());
   using Item = std::pair<double, int>;
-  std::priority_queue<Item, std::vector<Item>, std::greater<Item>> queue;
+  std::vector<Item> heap;
+  heap.reserve(static_cast<std::size_t>(n));
+  const auto later = std::greater<Item>();
   for (int s : sources) {
     if (s >= 0 && s < n && dist[s] > 0.0) {
       dist[s] = 0.0;
-      queue.push({0.0, s});
+      heap.push_back({0.0, s});
     }
   }
-  while (!queue.empty()) {
-    const auto [d, v] = queue.top();
-    queue.pop();
+  std::make_heap(heap.begin(), heap.end(), later);
+  while (!heap.empty()) {
+    std::pop_heap(heap.begin(), heap.end(), later);
+    const auto [d, v] = heap.back();
+    heap.pop_back();
     if (d > dist[v]) continue;
-    for (int k = degree[v]; k < degree[v + 1]; ++k) {
-      const int u = adjacency[k];
-      const double nd = d + (vertices.row(u) - vertices.row(v)).norm();
+    for (int k = offsets_[v]; k < offsets_[v + 1]; ++k) {
+      const int u = neighbours_[k];
+      const double nd = d + lengths_[k];
       if (nd < dist[u]) {
         dist[u] = nd;
-        queue.push({nd, u});
+        heap.push_back({nd, u});
+        std::push_heap(heap.begin(), heap.end(), later);
       }
     }
   }

@@ -47,4 +47,20 @@ std::vector<double> MeshDistanceField(const Eigen::MatrixX3d& vertices,
                                       const Eigen::MatrixX3i& triangles,
                                       const std::vector<int>& sources);
 
+// The same distance field for many source sets on one mesh: the vertex adjacency and the edge
+// lengths are built once (Dijkstra per call).
+class MeshGeodesics {
+ public:
+  // vertices: V x 3; triangles: F x 3 with indices in [0, V).
+  MeshGeodesics(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& triangles);
+  int num_vertices() const { return static_cast<int>(offsets_.size()) - 1; }
+  // As MeshDistanceField; sources outside [0, V) are ignored.
+  std::vector<double> DistanceField(const std::vector<int>& sources) const;
+
+ private:
+  std::vector<int> offsets_;      // V + 1 (CSR)
+  std::vector<int> neighbours_;   // unique neighbours per vertex
+  std::vector<double> lengths_;   // edge length per neighbour entry
+};
+
 }  // namespace artex

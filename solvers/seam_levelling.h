@@ -8,6 +8,7 @@
 #pragma once
 
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -29,9 +30,35 @@ struct SeamLevellingSummary {
   double seconds = 0.0;
 };
 
-// triangles: F x 3; labels: F (label per triangle, < 0 = untextured, ignored);
-// colour(v, l, &c): the colour of vertex v in label l's image, false when unknown.
-// corrections: (3F) x 3, row 3 f + c = g at corner c of triangle f.
+// Levels seams of many labellings of one mesh (e.g. one per frame). The fill-reducing order
+// of the sparse factorisation is computed once from the mesh (approximate minimum degree on the
+// vertex graph); the unknowns of a vertex are numbered consecutively in that order, so every
+// call only factorises. Throws artex::Error for invalid options or triangle indices outside
+// [0, num_vertices).
+class SeamLeveller {
+ public:
+  SeamLeveller(int num_vertices, const Eigen::MatrixX3i& triangles,
+               const SeamLevellingOptions& options);
+  ~SeamLeveller();
+
+  // labels: F (label per triangle, < 0 = untextured, ignored); colour(v, l, &c): the colour of
+  // vertex v in label l's image, false when unknown. corrections: (3F) x 3, row 3 f + c = g at
+  // corner c of triangle f (0 for untextured triangles). summary may be null.
+  void Level(const std::vector<int>& labels,
+             const std::function<bool(int, int, Eigen::Vector3f*)>& colour,
+             Eigen::MatrixX3f* corrections, SeamLevellingSummary* summary) const;
+
+ private:
+  int num_vertices_;
+  Eigen::MatrixX3i triangles_;
+  SeamLevellingOptions options_;
+  std::vector<int> order_;           // vertices in elimination order
+  std::vector<int> corner_offsets_;  // V + 1: corners (3 f + c) of each vertex (CSR)
+  std::vector<int> corners_;
+};
+
+// One-off levelling (builds a SeamLeveller): triangles F x 3; labels, colour, corrections and
+// summary as in SeamLeveller::Level.
 void LevelSeams(int num_vertices, const Eigen::MatrixX3i& triangles, const std::vector<int>& labels,
                 const std::function<bool(int, int, Eigen::Vector3f*)>& colour,
                 const SeamLevellingOptions& options, Eigen::MatrixX3f* corrections,

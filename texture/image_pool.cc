@@ -8,6 +8,9 @@
 #include <sstream>
 #include <utility>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include "models/error.h"
 
 namespace artex {
@@ -50,25 +53,6 @@ bool ImagePoolOptions::IsValid(std::string* error) const {
   return false;
 }
 
-bool PoolEntry::Sample(const Eigen::Vector2d& pixel, Eigen::Vector3f* color) const {
-  const double x = pixel.x() - offset.x();
-  const double y = pixel.y() - offset.y();
-  if (!(x >= 0.0 && y >= 0.0 && x <= image.cols - 1 && y <= image.rows - 1)) return false;
-  const int x0 = std::min(static_cast<int>(x), image.cols - 2 < 0 ? 0 : image.cols - 2);
-  const int y0 = std::min(static_cast<int>(y), image.rows - 2 < 0 ? 0 : image.rows - 2);
-  const int x1 = std::min(x0 + 1, image.cols - 1);
-  const int y1 = std::min(y0 + 1, image.rows - 1);
-  const float fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
-  const auto* r0 = image.ptr<cv::Vec3b>(y0);
-  const auto* r1 = image.ptr<cv::Vec3b>(y1);
-  for (int c = 0; c < 3; ++c) {
-    const float top = r0[x0][c] * (1 - fx) + r0[x1][c] * fx;
-    const float bottom = r1[x0][c] * (1 - fx) + r1[x1][c] * fx;
-    (*color)[c] = (top * (1 - fy) + bottom * fy) / 255.0f;
-  }
-  return true;
-}
-
 std::size_t PoolEntry::MemoryBytes() const {
   return image.total() * image.elemSize() + vertices.size() * sizeof(double) +
          visibility.visible.size() * 5 + vertex_colors.size() * 4 + edge_colors.size() * 4;
@@ -98,15 +82,24 @@ int ImagePool::Add(int frame_index, const cv::Mat& color_bgr, const PinholeCamer
   entry->vertices = posed_vertices;
   entry->visibility =
       ComputeVisibility(posed_vertices, mesh_->triangles, camera, visibility_options_);
-  // Crop to the projection of the subject.
+  // Camera coordinates of every vertex (sample points along edges are linear in them).
   const int v_count = static_cast<int>(posed_vertices.rows());
+  const Eigen::Matrix3d rotation = camera.world_to_camera.linear();
+  const Eigen::Vector3d translation = camera.world_to_camera.translation();
+  Eigen::Matrix3Xd cam(3, v_count);
+  for (int v = 0; v < v_count; ++v)
+    cam.col(v) = rotation * posed_vertices.row(v).transpose() + translation;
+  const auto project = [&camera](const Eigen::Vector3d& c) {
+    return Eigen::Vector2d(camera.fx * c.x() / c.z() + camera.cx,
+                           camera.fy * c.y() / c.z() + camera.cy);
+  };
+  // Crop to the projection of the subject.
   std::vector<Eigen::Vector2d> pixels(v_count);
   double min_x = std::numeric_limits<double>::infinity(), min_y = min_x;
   double max_x = -min_x, max_y = -min_x;
   for (int v = 0; v < v_count; ++v) {
-    double z = 0.0;
-    pixels[v] = camera.Project(posed_vertices.row(v).transpose(), &z);
-    if (!(z > 0.0)) pixels[v].setConstant(std::numeric_limits<double>::quiet_NaN());
+    pixels[v] = project(cam.col(v));
+    if (!(cam(2, v) > 0.0)) pixels[v].setConstant(std::numeric_limits<double>::quiet_NaN());
     if (!pixels[v].allFinite()) continue;
     min_x = std::min(min_x, pixels[v].x());
     min_y = std::min(min_y, pixels[v].y());
@@ -137,23 +130,28 @@ int ImagePool::Add(int frame_index, const cv::Mat& color_bgr, const PinholeCamer
     if (vertex_seen[v] && pixels[v].allFinite() && entry->Sample(pixels[v], &color))
       entry->vertex_colors.row(v) = color.transpose();
   }
-  // Colours along edges with a visible side.
+  // Colours along edges with a visible side (edges are independent: parallel).
   const int samples = options_.edge_samples;
   const int e_count = static_cast<int>(mesh_->edges.rows());
   entry->edge_colors.setConstant(static_cast<Eigen::Index>(e_count) * samples, 3, nan);
-  for (int e = 0; e < e_count; ++e) {
-    if (!entry->visibility.visible[mesh_->edge_faces(e, 0)] &&
-        !entry->visibility.visible[mesh_->edge_faces(e, 1)])
-      continue;
-    const Eigen::Vector3d a = posed_vertices.row(mesh_->edges(e, 0));
-    const Eigen::Vector3d b = posed_vertices.row(mesh_->edges(e, 1));
-    for (int k = 0; k < samples; ++k) {
-      const double t = (k + 0.5) / samples;
-      Eigen::Vector3f color;
-      if (entry->Sample(camera.Project((1 - t) * a + t * b), &color))
-        entry->edge_colors.row(static_cast<Eigen::Index>(e) * samples + k) = color.transpose();
+  const PoolEntry& e_ref = *entry;
+  ColorRows& edge_colors = entry->edge_colors;
+  tbb::parallel_for(tbb::blocked_range<int>(0, e_count, 4096),
+                    [&](const tbb::blocked_range<int>& range) {
+    for (int e = range.begin(); e < range.end(); ++e) {
+      if (!e_ref.visibility.visible[mesh_->edge_faces(e, 0)] &&
+          !e_ref.visibility.visible[mesh_->edge_faces(e, 1)])
+        continue;
+      const Eigen::Vector3d a = cam.col(mesh_->edges(e, 0));
+      const Eigen::Vector3d b = cam.col(mesh_->edges(e, 1));
+      for (int k = 0; k < samples; ++k) {
+        const double t = (k + 0.5) / samples;
+        Eigen::Vector3f color;
+        if (e_ref.Sample(project((1 - t) * a + t * b), &color))
+          edge_colors.row(static_cast<Eigen::Index>(e) * samples + k) = color.transpose();
+      }
     }
-  }
+  });
   entries_.push_back(std::move(entry));
   return size() - 1;
 }
@@ -182,20 +180,40 @@ bool ImagePool::IsUniquelyBest(int slot) const {
   return false;
 }
 
+std::vector<uint8_t> ImagePool::UniquelyBestSlots() const {
+  const int bins = options_.histogram_bins;
+  const int f_count = static_cast<int>(mesh_->triangles.rows());
+  const int slots = size();
+  const auto bin_of = [bins](float w) { return std::min(bins - 1, static_cast<int>(w * bins)); };
+  std::vector<uint8_t> keep(slots, 0);
+  for (int f = 0; f < f_count; ++f) {
+    // The best bin over the slots that see f, and the only slot in it (-1: none or several).
+    int best_bin = -1, best_slot = -1;
+    for (int s = 0; s < slots; ++s) {
+      if (!entries_[s]->visibility.visible[f]) continue;
+      const int bin = bin_of(entries_[s]->visibility.quality[f]);
+      if (bin > best_bin) {
+        best_bin = bin;
+        best_slot = s;
+      } else if (bin == best_bin) {
+        best_slot = -1;
+      }
+    }
+    if (best_slot >= 0) keep[best_slot] = 1;
+  }
+  return keep;
+}
+
 std::vector<int> ImagePool::Prune() {
   std::vector<int> dropped;
   // The paper's rule, oldest first: drop an image unless it is uniquely best for a triangle.
-  bool changed = true;
-  while (size() > options_.max_images && changed) {
-    changed = false;
-    for (int s = 0; s < size(); ++s) {
-      if (!IsUniquelyBest(s)) {
-        dropped.push_back(entries_[s]->frame_index);
-        entries_.erase(entries_.begin() + s);
-        changed = true;
-        break;
-      }
-    }
+  while (size() > options_.max_images) {
+    const std::vector<uint8_t> keep = UniquelyBestSlots();
+    const auto it = std::find(keep.begin(), keep.end(), 0);
+    if (it == keep.end()) break;
+    const int s = static_cast<int>(it - keep.begin());
+    dropped.push_back(entries_[s]->frame_index);
+    entries_.erase(entries_.begin() + s);
   }
   // Memory bound: beyond the hard cap the oldest go regardless.
   while (size() > options_.hard_max_images) {

@@ -5,6 +5,7 @@
 // Pruning follows the paper's coarse-histogram rule; a hard cap bounds memory.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -37,6 +38,9 @@ struct ImagePoolOptions {
   bool IsValid(std::string* error) const;
 };
 
+// Colours, one row per point (3 channels contiguous).
+using ColorRows = Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>;
+
 struct PoolEntry {
   int frame_index = 0;
   cv::Mat image;                 // CV_8UC3 (BGR), cropped
@@ -45,15 +49,34 @@ struct PoolEntry {
   Eigen::MatrixX3d vertices;     // V x 3 posed template of that frame (world, m)
   TriangleVisibility visibility;
   // V x 3 colours (channel order of `image`, [0, 1]) at the projected vertices; NaN outside.
-  Eigen::MatrixX3f vertex_colors;
+  ColorRows vertex_colors;
   // (E * edge_samples) x 3 colours along every edge (rows e * samples + k); NaN where the edge
   // is not seen (neither side visible).
-  Eigen::MatrixX3f edge_colors;
+  ColorRows edge_colors;
 
   // Bilinear colour at a full-image pixel position; false outside the crop.
-  bool Sample(const Eigen::Vector2d& pixel, Eigen::Vector3f* color) const;
+  inline bool Sample(const Eigen::Vector2d& pixel, Eigen::Vector3f* color) const;
   std::size_t MemoryBytes() const;
 };
+
+inline bool PoolEntry::Sample(const Eigen::Vector2d& pixel, Eigen::Vector3f* color) const {
+  const double x = pixel.x() - offset.x();
+  const double y = pixel.y() - offset.y();
+  if (!(x >= 0.0 && y >= 0.0 && x <= image.cols - 1 && y <= image.rows - 1)) return false;
+  const int x0 = std::min(static_cast<int>(x), image.cols - 2 < 0 ? 0 : image.cols - 2);
+  const int y0 = std::min(static_cast<int>(y), image.rows - 2 < 0 ? 0 : image.rows - 2);
+  const int x1 = std::min(x0 + 1, image.cols - 1);
+  const int y1 = std::min(y0 + 1, image.rows - 1);
+  const float fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
+  const auto* r0 = image.ptr<cv::Vec3b>(y0);
+  const auto* r1 = image.ptr<cv::Vec3b>(y1);
+  for (int c = 0; c < 3; ++c) {
+    const float top = r0[x0][c] * (1 - fx) + r0[x1][c] * fx;
+    const float bottom = r1[x0][c] * (1 - fx) + r1[x1][c] * fx;
+    (*color)[c] = (top * (1 - fy) + bottom * fy) / 255.0f;
+  }
+  return true;
+}
 
 class ImagePool {
  public:
@@ -74,6 +97,8 @@ class ImagePool {
   // True when the entry at `slot` is, for some triangle, the only image in the best non-empty
   // bin of that triangle's histogram of W over the pool (the paper's reason to keep it).
   bool IsUniquelyBest(int slot) const;
+  // IsUniquelyBest for every slot at once (one pass over triangles and slots).
+  std::vector<uint8_t> UniquelyBestSlots() const;
 
  private:
   const TextureMesh* mesh_;

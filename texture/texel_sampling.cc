@@ -4,6 +4,9 @@
 #include <cmath>
 #include <sstream>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include "models/error.h"
 
 namespace artex {
@@ -16,9 +19,9 @@ AtlasMap::AtlasMap(const Template& tmpl, int size) : size_(size) {
     throw Error(msg.str());
   }
   const int f_count = tmpl.num_triangles();
-  texel_triangle_.assign(static_cast<std::size_t>(size) * size, -1);
-  texel_bary_.assign(static_cast<std::size_t>(size) * size, Eigen::Vector3f::Zero());
-  std::vector<std::vector<int>> per_triangle(f_count);
+  const std::size_t total = static_cast<std::size_t>(size) * size;
+  texel_triangle_.assign(total, -1);
+  std::vector<Eigen::Vector3f> texel_bary(total, Eigen::Vector3f::Zero());
   for (int f = 0; f < f_count; ++f) {
     Eigen::Vector2d p[3];
     for (int c = 0; c < 3; ++c) p[c] = tmpl.uvs.row(tmpl.uv_triangles(f, c)).transpose() * size;
@@ -38,15 +41,27 @@ AtlasMap::AtlasMap(const Template& tmpl, int size) : size_(size) {
         const int texel = y * size + x;
         if (texel_triangle_[texel] >= 0) continue;  // shared boundary: first triangle wins
         texel_triangle_[texel] = f;
-        texel_bary_[texel] = Eigen::Vector3f(b0, b1, b2);
-        per_triangle[f].push_back(texel);
+        texel_bary[texel] = Eigen::Vector3f(b0, b1, b2);
       }
     }
   }
+  // Triangle-major order (texels of a triangle in row-major order), by a counting sort.
   offsets_.assign(f_count + 1, 0);
-  for (int f = 0; f < f_count; ++f) offsets_[f + 1] = offsets_[f] + static_cast<int>(per_triangle[f].size());
-  texels_.reserve(offsets_[f_count]);
-  for (auto& list : per_triangle) texels_.insert(texels_.end(), list.begin(), list.end());
+  for (std::size_t t = 0; t < total; ++t)
+    if (texel_triangle_[t] >= 0) ++offsets_[texel_triangle_[t] + 1];
+  for (int f = 0; f < f_count; ++f) offsets_[f + 1] += offsets_[f];
+  texels_.resize(offsets_[f_count]);
+  bary_.resize(offsets_[f_count]);
+  texel_position_.assign(total, -1);
+  std::vector<int> fill(offsets_.begin(), offsets_.end() - 1);
+  for (std::size_t t = 0; t < total; ++t) {
+    const int f = texel_triangle_[t];
+    if (f < 0) continue;
+    const int position = fill[f]++;
+    texels_[position] = static_cast<int>(t);
+    bary_[position] = texel_bary[t];
+    texel_position_[t] = position;
+  }
 }
 
 double AtlasMap::Coverage() const {
@@ -54,55 +69,68 @@ double AtlasMap::Coverage() const {
 }
 
 int SampleTriangle(const AtlasMap& map, int f, const Eigen::MatrixX3i& triangles,
-                   const PoolEntry& entry, AtlasImage* atlas) {
-  const Eigen::Vector3d a = entry.vertices.row(triangles(f, 0));
-  const Eigen::Vector3d b = entry.vertices.row(triangles(f, 1));
-  const Eigen::Vector3d c = entry.vertices.row(triangles(f, 2));
-  auto* color = reinterpret_cast<cv::Vec3f*>(atlas->color.data);
-  uint8_t* mask = atlas->mask.data;
+                   const PoolEntry& entry, TexelBuffer* texels) {
+  // The texel's surface point w . (a, b, c) is projected through the entry's camera; camera
+  // coordinates are linear in the barycentrics, so the corners are transformed once.
+  const PinholeCamera& camera = entry.camera;
+  Eigen::Vector3d corner[3];
+  for (int k = 0; k < 3; ++k)
+    corner[k] = camera.world_to_camera * entry.vertices.row(triangles(f, k)).transpose();
+  Eigen::Vector3f* color = texels->color.data();
+  uint8_t* valid = texels->valid.data();
   int written = 0;
-  for (const int* t = map.texels_begin(f); t != map.texels_end(f); ++t) {
-    const Eigen::Vector3f& w = map.barycentric(*t);
-    const Eigen::Vector3d point = w.x() * a + w.y() * b + w.z() * c;
+  for (int p = map.first(f); p < map.last(f); ++p) {
+    const Eigen::Vector3f& w = map.barycentric_at(p);
+    const Eigen::Vector3d c = w.x() * corner[0] + w.y() * corner[1] + w.z() * corner[2];
+    const Eigen::Vector2d pixel(camera.fx * c.x() / c.z() + camera.cx,
+                                camera.fy * c.y() / c.z() + camera.cy);
     Eigen::Vector3f value;
-    if (!entry.Sample(entry.camera.Project(point), &value)) continue;
-    color[*t] = cv::Vec3f(value.x(), value.y(), value.z());
-    mask[*t] = 255;
+    if (!entry.Sample(pixel, &value)) continue;
+    color[p] = value;
+    valid[p] = 1;
     ++written;
   }
   return written;
 }
 
-void ClearTriangle(const AtlasMap& map, int f, AtlasImage* atlas) {
-  auto* color = reinterpret_cast<cv::Vec3f*>(atlas->color.data);
-  for (const int* t = map.texels_begin(f); t != map.texels_end(f); ++t) {
-    color[*t] = cv::Vec3f(0, 0, 0);
-    atlas->mask.data[*t] = 0;
+void ClearTriangle(const AtlasMap& map, int f, TexelBuffer* texels) {
+  for (int p = map.first(f); p < map.last(f); ++p) {
+    texels->color[p].setZero();
+    texels->valid[p] = 0;
   }
 }
 
-cv::Mat ComposeAtlas(const AtlasMap& map, const AtlasImage& base,
+cv::Mat ComposeAtlas(const AtlasMap& map, const TexelBuffer& base,
                      const Eigen::MatrixX3f* corner_corrections, int padding) {
   const int size = map.size();
-  cv::Mat out = base.color.clone();
-  cv::Mat mask = base.mask.clone();
-  if (corner_corrections != nullptr && corner_corrections->rows() > 0) {
-    auto* color = reinterpret_cast<cv::Vec3f*>(out.data);
-    for (int t = 0; t < size * size; ++t) {
-      const int f = map.triangle(t);
-      if (f < 0 || !mask.data[t]) continue;
-      const Eigen::Vector3f& w = map.barycentric(t);
-      const Eigen::Vector3f g = w.x() * corner_corrections->row(3 * f).transpose() +
-                                w.y() * corner_corrections->row(3 * f + 1).transpose() +
-                                w.z() * corner_corrections->row(3 * f + 2).transpose();
-      color[t] += cv::Vec3f(g.x(), g.y(), g.z());
+  cv::Mat out(size, size, CV_32FC3, cv::Scalar(0, 0, 0));
+  cv::Mat mask(size, size, CV_8UC1, cv::Scalar(0));
+  const bool correct = corner_corrections != nullptr && corner_corrections->rows() > 0;
+  auto* color = reinterpret_cast<cv::Vec3f*>(out.data);
+  tbb::parallel_for(tbb::blocked_range<int>(0, map.num_triangles(), 256),
+                    [&](const tbb::blocked_range<int>& range) {
+    for (int f = range.begin(); f < range.end(); ++f) {
+      for (int p = map.first(f); p < map.last(f); ++p) {
+        const int t = *(map.texels_begin(f) + (p - map.first(f)));
+        Eigen::Vector3f c = base.color[p];
+        if (base.valid[p]) {
+          mask.data[t] = 255;
+          if (correct) {
+            const Eigen::Vector3f& w = map.barycentric_at(p);
+            c += w.x() * corner_corrections->row(3 * f).transpose() +
+                 w.y() * corner_corrections->row(3 * f + 1).transpose() +
+                 w.z() * corner_corrections->row(3 * f + 2).transpose();
+          }
+        }
+        color[t] = cv::Vec3f(c.x(), c.y(), c.z());
+      }
     }
-  }
+  });
   // Padding: each pass fills empty texels with the mean of their filled 8-neighbours.
   for (int pass = 0; pass < padding; ++pass) {
     cv::Mat next = out.clone();
     cv::Mat next_mask = mask.clone();
-    for (int y = 0; y < size; ++y) {
+    tbb::parallel_for(0, size, [&](int y) {
       for (int x = 0; x < size; ++x) {
         if (mask.at<uint8_t>(y, x)) continue;
         cv::Vec3f sum(0, 0, 0);
@@ -120,13 +148,29 @@ cv::Mat ComposeAtlas(const AtlasMap& map, const AtlasImage& base,
           next_mask.at<uint8_t>(y, x) = 255;
         }
       }
-    }
+    });
     out = next;
     mask = next_mask;
   }
   cv::Mat out8;
   out.convertTo(out8, CV_8UC3, 255.0);
   return out8;
+}
+
+cv::Mat UnlevelledPatch(const AtlasMap& map, const TexelBuffer& base, const cv::Rect& rect) {
+  cv::Mat patch(rect.height, rect.width, CV_8UC3, cv::Scalar(0, 0, 0));
+  for (int y = 0; y < rect.height; ++y) {
+    auto* row = patch.ptr<cv::Vec3b>(y);
+    for (int x = 0; x < rect.width; ++x) {
+      const int p = map.position((rect.y + y) * map.size() + rect.x + x);
+      if (p < 0) continue;
+      const Eigen::Vector3f& c = base.color[p];
+      row[x] = cv::Vec3b(cv::saturate_cast<uchar>(255.0f * c.x()),
+                         cv::saturate_cast<uchar>(255.0f * c.y()),
+                         cv::saturate_cast<uchar>(255.0f * c.z()));
+    }
+  }
+  return patch;
 }
 
 }  // namespace artex

@@ -10,6 +10,9 @@
 
 #include <algorithm>
 #include <opencv2/imgproc.hpp>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 
 namespace artex {
 namespace {
@@ -39,8 +42,12 @@ Texturer::Texturer(const Template& tmpl, const TexturingOptions& options)
   map_ = std::make_unique<AtlasMap>(template_, options_.atlas_size);
   pool_ = std::make_unique<ImagePool>(&mesh_, options_.pool, options_.visibility);
   solver_ = MrfSolver::Create(options_.mrf);
-  base_.color = cv::Mat(options_.atlas_size, options_.atlas_size, CV_32FC3, cv::Scalar(0, 0, 0));
-  base_.mask = cv::Mat(options_.atlas_size, options_.atlas_size, CV_8UC1, cv::Scalar(0));
+  geodesics_ = std::make_unique<MeshGeodesics>(template_.vertices, template_.triangles);
+  if (options_.seam_levelling) {
+    leveller_ = std::make_unique<SeamLeveller>(template_.num_vertices(), template_.triangles,
+                                               options_.levelling);
+  }
+  base_ = TexelBuffer(*map_);
   frames_.assign(template_.num_triangles(), -1);
   seam_distance_.assign(template_.num_vertices(), std::numeric_limits<double>::infinity());
   const int e_count = static_cast<int>(mesh_.edges.rows());
@@ -93,55 +100,68 @@ TextureFrameSummary Texturer::AddFrame(int frame, const cv::Mat& color_bgr,
   s.lower_bound = result.mrf.lower_bound;
   s.mrf_iterations = result.mrf.iterations;
 
-  const auto t_sample = std::chrono::steady_clock::now();
   const int f_count = template_.num_triangles();
   changed_.clear();
   for (int f = 0; f < f_count; ++f) {
-    // Resample only where the source image changed (labels always name pooled images).
-    if (result.frames[f] == frames_[f]) continue;
-    ++s.changed_triangles;
-    changed_.push_back(f);
-    if (result.frames[f] < 0) {
-      ClearTriangle(*map_, f, &base_);
-    } else {
-      SampleTriangle(*map_, f, template_.triangles, pool_->entry(pool_->SlotOfFrame(result.frames[f])),
-                     &base_);
-    }
+    if (result.frames[f] != frames_[f]) changed_.push_back(f);
   }
-  frames_ = result.frames;
+  s.changed_triangles = static_cast<int>(changed_.size());
+  frames_ = std::move(result.frames);
   for (int f = 0; f < f_count; ++f) s.textured_triangles += frames_[f] >= 0;
-  s.seconds_sampling = SecondsSince(t_sample);
 
-  // Seams of the new labelling: Psi's distance field for the next frame, and the count.
-  std::vector<int> seam_vertices;
-  for (int e = 0; e < mesh_.edges.rows(); ++e) {
-    if (frames_[mesh_.edge_faces(e, 0)] != frames_[mesh_.edge_faces(e, 1)]) {
-      ++s.seam_edges;
-      seam_vertices.push_back(mesh_.edges(e, 0));
-      seam_vertices.push_back(mesh_.edges(e, 1));
+  // Three independent tasks on the new labelling: resampling of the changed triangles, Psi's
+  // distance field for the next frame, and seam levelling.
+  const auto resample = [&] {
+    const auto t_sample = std::chrono::steady_clock::now();
+    // Resample only where the source image changed (labels always name pooled images). Every
+    // texel belongs to one triangle, so triangles are written in parallel.
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, changed_.size(), 16),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+      for (std::size_t k = range.begin(); k < range.end(); ++k) {
+        const int f = changed_[k];
+        if (frames_[f] < 0) {
+          ClearTriangle(*map_, f, &base_);
+        } else {
+          SampleTriangle(*map_, f, template_.triangles,
+                         pool_->entry(pool_->SlotOfFrame(frames_[f])), &base_);
+        }
+      }
+    });
+    s.seconds_sampling = SecondsSince(t_sample);
+  };
+  const auto seams = [&] {
+    std::vector<int> seam_vertices;
+    for (int e = 0; e < mesh_.edges.rows(); ++e) {
+      if (frames_[mesh_.edge_faces(e, 0)] != frames_[mesh_.edge_faces(e, 1)]) {
+        ++s.seam_edges;
+        seam_vertices.push_back(mesh_.edges(e, 0));
+        seam_vertices.push_back(mesh_.edges(e, 1));
+      }
     }
-  }
-  seam_distance_ = MeshDistanceField(template_.vertices, template_.triangles, seam_vertices);
-
-  const auto t_level = std::chrono::steady_clock::now();
-  if (options_.seam_levelling) {
-    SeamLevellingSummary ls;
-    LevelSeams(template_.num_vertices(), template_.triangles, frames_,
-               [this](int v, int frame_index, Eigen::Vector3f* c) {
-                 const int slot = pool_->SlotOfFrame(frame_index);
-                 if (slot < 0) return false;
-                 const auto row = pool_->entry(slot).vertex_colors.row(v);
-                 if (!row.allFinite()) return false;
-                 *c = row.transpose();
-                 return true;
-               },
-               options_.levelling, &corrections_, &ls);
-    s.seam_rms_before = ls.seam_residual_before;
-    s.seam_rms_after = ls.seam_residual_after;
-  } else {
-    corrections_.setZero(3 * f_count, 3);
-  }
-  s.seconds_levelling = SecondsSince(t_level);
+    seam_distance_ = geodesics_->DistanceField(seam_vertices);
+  };
+  const auto level = [&] {
+    const auto t_level = std::chrono::steady_clock::now();
+    if (options_.seam_levelling) {
+      SeamLevellingSummary ls;
+      leveller_->Level(frames_,
+                       [this](int v, int frame_index, Eigen::Vector3f* c) {
+                         const int slot = pool_->SlotOfFrame(frame_index);
+                         if (slot < 0) return false;
+                         const auto row = pool_->entry(slot).vertex_colors.row(v);
+                         if (!row.allFinite()) return false;
+                         *c = row.transpose();
+                         return true;
+                       },
+                       &corrections_, &ls);
+      s.seam_rms_before = ls.seam_residual_before;
+      s.seam_rms_after = ls.seam_residual_after;
+    } else {
+      corrections_.setZero(3 * f_count, 3);
+    }
+    s.seconds_levelling = SecondsSince(t_level);
+  };
+  tbb::parallel_invoke(resample, seams, level);
   s.seconds_total = SecondsSince(start);
   return s;
 }
@@ -189,9 +209,7 @@ cv::Mat Texturer::ChangedPatch() const {
     }
   }
   if (x1 < x0) return cv::Mat();
-  cv::Mat patch;
-  base_.color(cv::Rect(x0, y0, x1 - x0 + 1, y1 - y0 + 1)).convertTo(patch, CV_8UC3, 255.0);
-  return patch;
+  return UnlevelledPatch(*map_, base_, cv::Rect(x0, y0, x1 - x0 + 1, y1 - y0 + 1));
 }
 
 cv::Mat Texturer::LabelMap() const {

@@ -93,7 +93,9 @@ class Texturer {
   std::unique_ptr<AtlasMap> map_;
   std::unique_ptr<ImagePool> pool_;
   std::unique_ptr<MrfSolver> solver_;
-  AtlasImage base_;
+  std::unique_ptr<MeshGeodesics> geodesics_;  // rest mesh, for Psi's distance field
+  std::unique_ptr<SeamLeveller> leveller_;
+  TexelBuffer base_;                 // unlevelled texel colours (triangle-major)
   std::vector<int> frames_;          // F
   std::vector<double> seam_distance_;
   std::vector<double> edge_weight_;

@@ -2,9 +2,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <numeric>
 #include <sstream>
+#include <unordered_map>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include "models/error.h"
 
@@ -31,86 +36,138 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
   const TextureMesh& mesh = *input.mesh;
   const ImagePool& pool = *input.pool;
   const int f_count = static_cast<int>(mesh.triangles.rows());
+  const int e_count = static_cast<int>(mesh.edges.rows());
   const int slots = pool.size();
   const int untextured = slots;  // the extra label
+  const int width = slots + 1;   // candidates per triangle at most
   const double inf = std::numeric_limits<double>::infinity();
 
   // Warm start in slots.
   std::vector<int> warm(f_count, -1);
-  for (int f = 0; f < f_count && !input.previous_frames.empty(); ++f) {
-    const int frame = input.previous_frames[f];
-    warm[f] = frame < 0 ? untextured : pool.SlotOfFrame(frame);
+  if (!input.previous_frames.empty()) {
+    std::unordered_map<int, int> slot_of_frame;
+    for (int s = 0; s < slots; ++s) slot_of_frame[pool.entry(s).frame_index] = s;
+    for (int f = 0; f < f_count; ++f) {
+      const int frame = input.previous_frames[f];
+      if (frame < 0) {
+        warm[f] = untextured;
+      } else {
+        const auto it = slot_of_frame.find(frame);
+        warm[f] = it == slot_of_frame.end() ? -1 : it->second;
+      }
+    }
   }
+
+  // Candidates per triangle (ascending labels) and their data costs, in parallel: the best
+  // max_candidates images by D (ties: older slot first), the warm-start label, "untextured".
+  std::vector<int> count(f_count, 0);
+  std::vector<int> cand_labels(static_cast<std::size_t>(f_count) * width);
+  std::vector<double> cand_costs(static_cast<std::size_t>(f_count) * width);
+  tbb::parallel_for(tbb::blocked_range<int>(0, f_count, 1024),
+                    [&](const tbb::blocked_range<int>& range) {
+    std::vector<double> d(slots);
+    std::vector<int> order(slots);
+    std::vector<uint8_t> chosen(width);
+    for (int f = range.begin(); f < range.end(); ++f) {
+      for (int s = 0; s < slots; ++s) {
+        const PoolEntry& e = pool.entry(s);
+        d[s] = ViewDataCost(e.visibility.visible[f] != 0, e.visibility.quality[f],
+                            input.current_frame - e.frame_index, options.terms);
+      }
+      std::iota(order.begin(), order.end(), 0);
+      std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return d[a] < d[b]; });
+      std::fill(chosen.begin(), chosen.end(), 0);
+      const int keep = options.max_candidates > 0 ? options.max_candidates : slots;
+      for (int k = 0; k < slots; ++k) {
+        const int s = order[k];
+        if (!std::isfinite(d[s])) break;
+        if (k < keep || s == warm[f]) chosen[s] = 1;
+      }
+      chosen[untextured] = 1;
+      int* labels = &cand_labels[static_cast<std::size_t>(f) * width];
+      double* costs = &cand_costs[static_cast<std::size_t>(f) * width];
+      int n = 0;
+      for (int l = 0; l < width; ++l) {
+        if (!chosen[l]) continue;
+        labels[n] = l;
+        costs[n] = l == untextured ? options.untextured_cost : d[l];
+        ++n;
+      }
+      count[f] = n;
+    }
+  });
 
   MrfProblem problem(slots + 1);
   ViewSelectionResult result;
-  std::vector<int> labels;
-  std::vector<double> costs;
-  std::vector<int> order(slots);
-  for (int f = 0; f < f_count; ++f) {
-    std::vector<double> d(slots);
-    for (int s = 0; s < slots; ++s) {
-      const PoolEntry& e = pool.entry(s);
-      d[s] = ViewDataCost(e.visibility.visible[f] != 0, e.visibility.quality[f],
-                          input.current_frame - e.frame_index, options.terms);
+  {
+    std::vector<int> labels;
+    std::vector<double> costs;
+    for (int f = 0; f < f_count; ++f) {
+      const std::size_t base = static_cast<std::size_t>(f) * width;
+      labels.assign(cand_labels.begin() + base, cand_labels.begin() + base + count[f]);
+      costs.assign(cand_costs.begin() + base, cand_costs.begin() + base + count[f]);
+      result.num_candidates += count[f];
+      problem.AddNode(labels, costs);
     }
-    std::iota(order.begin(), order.end(), 0);
-    std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return d[a] < d[b]; });
-    labels.clear();
-    costs.clear();
-    const int keep = options.max_candidates > 0 ? options.max_candidates : slots;
-    for (int k = 0; k < slots; ++k) {
-      const int s = order[k];
-      if (!std::isfinite(d[s])) break;
-      if (k < keep || s == warm[f]) {
-        labels.push_back(s);
-        costs.push_back(d[s]);
-      }
-    }
-    labels.push_back(untextured);
-    costs.push_back(options.untextured_cost);
-    // AddNode expects ascending labels.
-    std::vector<int> idx(labels.size());
-    std::iota(idx.begin(), idx.end(), 0);
-    std::sort(idx.begin(), idx.end(), [&](int a, int b) { return labels[a] < labels[b]; });
-    std::vector<int> sorted_labels;
-    std::vector<double> sorted_costs;
-    for (int i : idx) {
-      sorted_labels.push_back(labels[i]);
-      sorted_costs.push_back(costs[i]);
-    }
-    result.num_candidates += static_cast<int>(sorted_labels.size());
-    problem.AddNode(sorted_labels, sorted_costs);
   }
-  (void)inf;
 
-  const int e_count = static_cast<int>(mesh.edges.rows());
+  // Pairwise tables over the candidates of both sides, computed in parallel, then added.
   const int samples =
       slots > 0 ? static_cast<int>(pool.entry(0).edge_colors.rows() / std::max(1, e_count)) : 0;
-  for (int e = 0; e < e_count; ++e) {
-    const int u = mesh.edges(e, 0), v = mesh.edges(e, 1);
-    double distance = inf;
-    if (!input.seam_distance.empty())
-      distance = 0.5 * (input.seam_distance[u] + input.seam_distance[v]);
-    const double psi = TemporalSeamCost(distance, options.terms);
-    const double weight = input.edge_weight.empty() ? 1.0 : input.edge_weight[e];
-    problem.AddEdge(mesh.edge_faces(e, 0), mesh.edge_faces(e, 1), weight, [&](int a, int b) {
-      if (a == b) return 0.0;
-      double pi = options.unseen_colour_cost;
-      if (a != untextured && b != untextured && samples > 0) {
-        const Eigen::MatrixX3f& ca = pool.entry(a).edge_colors;
-        const Eigen::MatrixX3f& cb = pool.entry(b).edge_colors;
-        double sum = 0.0;
-        int n = 0;
-        for (int k = 0; k < samples; ++k) {
-          const Eigen::Index row = static_cast<Eigen::Index>(e) * samples + k;
-          if (!ca.row(row).allFinite() || !cb.row(row).allFinite()) continue;
-          sum += (ca.row(row) - cb.row(row)).norm();
-          ++n;
+  std::vector<std::int64_t> table_offset(e_count + 1, 0);
+  for (int e = 0; e < e_count; ++e)
+    table_offset[e + 1] = table_offset[e] + static_cast<std::int64_t>(count[mesh.edge_faces(e, 0)]) *
+                                                count[mesh.edge_faces(e, 1)];
+  std::vector<double> tables(table_offset[e_count]);
+  tbb::parallel_for(tbb::blocked_range<int>(0, e_count, 1024),
+                    [&](const tbb::blocked_range<int>& range) {
+    for (int e = range.begin(); e < range.end(); ++e) {
+      const int u = mesh.edges(e, 0), v = mesh.edges(e, 1);
+      double distance = inf;
+      if (!input.seam_distance.empty())
+        distance = 0.5 * (input.seam_distance[u] + input.seam_distance[v]);
+      const double psi = TemporalSeamCost(distance, options.terms);
+      const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
+      const int* li = &cand_labels[static_cast<std::size_t>(fi) * width];
+      const int* lj = &cand_labels[static_cast<std::size_t>(fj) * width];
+      double* table = &tables[table_offset[e]];
+      for (int p = 0; p < count[fi]; ++p) {
+        for (int q = 0; q < count[fj]; ++q) {
+          const int a = li[p], b = lj[q];
+          double cost = 0.0;
+          if (a != b) {
+            double pi = options.unseen_colour_cost;
+            if (a != untextured && b != untextured && samples > 0) {
+              const ColorRows& ca = pool.entry(a).edge_colors;
+              const ColorRows& cb = pool.entry(b).edge_colors;
+              double sum = 0.0;
+              int n = 0;
+              for (int k = 0; k < samples; ++k) {
+                const Eigen::Index row = static_cast<Eigen::Index>(e) * samples + k;
+                if (!ca.row(row).allFinite() || !cb.row(row).allFinite()) continue;
+                sum += (ca.row(row) - cb.row(row)).norm();
+                ++n;
+              }
+              if (n > 0) pi = sum / n;
+            }
+            cost = SeamPairCost(pi, psi, options.terms);
+          }
+          table[p * count[fj] + q] = cost;
         }
-        if (n > 0) pi = sum / n;
       }
-      return SeamPairCost(pi, psi, options.terms);
+    }
+  });
+  for (int e = 0; e < e_count; ++e) {
+    const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
+    const int* li = &cand_labels[static_cast<std::size_t>(fi) * width];
+    const int* lj = &cand_labels[static_cast<std::size_t>(fj) * width];
+    const int ni = count[fi], nj = count[fj];
+    const double* table = &tables[table_offset[e]];
+    const double weight = input.edge_weight.empty() ? 1.0 : input.edge_weight[e];
+    problem.AddEdge(fi, fj, weight, [&](int a, int b) {
+      const int p = static_cast<int>(std::lower_bound(li, li + ni, a) - li);
+      const int q = static_cast<int>(std::lower_bound(lj, lj + nj, b) - lj);
+      return table[p * nj + q];
     });
   }
   problem.set_smoothness(options.terms.lambda);

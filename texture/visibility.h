@@ -23,6 +23,11 @@ struct VisibilityOptions {
   double min_visible_fraction = 0.99;
   // Samples closer than this many pixels to the image border count as outside.
   double border_pixels = 2.0;
+  // Resolution of the occlusion z-buffer relative to the colour image; (0, 1]. 1 rasterises at
+  // the image's pixel grid (exact); below 1 is faster but may misjudge occlusion within about
+  // 1 / raster_scale pixels of a silhouette. The z-buffer always covers only the bounding box
+  // of the mesh's projection (same result as the full image).
+  double raster_scale = 1.0;
 
   bool IsValid(std::string* error) const;
 };
