@@ -2,13 +2,15 @@
 // ~25k triangles) at the depth camera's 640 x 480 and the paper's 1600 x 2032 colour
 // resolution; the same primary visibility by Embree ray casting (BVH build + one ray per
 // pixel; loaded at run time when libembree3 is present); and the virtual Kinect's frames.
+#include <benchmark/benchmark.h>
 #include <dlfcn.h>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
 
 #include <cmath>
+#include <map>
 #include <memory>
-
-#include <benchmark/benchmark.h>
-#include <tbb/parallel_for.h>
+#include <utility>
 
 #include "models/skinning.h"
 #include "models/template_generator.h"
@@ -23,6 +25,13 @@
 
 namespace artex {
 namespace {
+
+// The last benchmark argument is the number of threads (TBB). With 1 thread all work runs
+// on the benchmark's thread, so its CPU time is the single-core cost even on a busy machine.
+tbb::global_control Threads(const benchmark::State& state, int arg) {
+  return tbb::global_control(tbb::global_control::max_allowed_parallelism,
+                             static_cast<size_t>(state.range(arg)));
+}
 
 const Template& Body() {
   static const Template body = GenerateTemplate();
@@ -45,7 +54,9 @@ PinholeCamera Camera(int width, int height) {
 
 void BM_Rasterize(benchmark::State& state) {
   const Template& body = Body();
-  const PinholeCamera camera = Camera(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)));
+  const PinholeCamera camera =
+      Camera(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)));
+  const tbb::global_control threads = Threads(state, 2);
   RasterBuffers buffers;
   for (auto _ : state) {
     Rasterize(body.vertices, body.triangles, camera, RasterOptions(), &buffers);
@@ -56,7 +67,13 @@ void BM_Rasterize(benchmark::State& state) {
   state.counters["covered_px"] = hits;
   state.counters["triangles"] = body.num_triangles();
 }
-BENCHMARK(BM_Rasterize)->Args({640, 480})->Args({1600, 2032})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Rasterize)
+    ->Args({640, 480, 1})
+    ->Args({640, 480, 2})
+    ->Args({1600, 2032, 1})
+    ->Args({1600, 2032, 2})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 #ifdef ARTEX_BENCH_EMBREE
 // Embree entry points, resolved with dlopen so the build does not depend on Embree.
@@ -100,8 +117,10 @@ void BM_EmbreeRayCast(benchmark::State& state) {
     return;
   }
   const Template& body = Body();
-  const PinholeCamera camera = Camera(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)));
-  RTCDevice device = api.NewDevice(nullptr);
+  const PinholeCamera camera =
+      Camera(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)));
+  const tbb::global_control threads = Threads(state, 2);
+  RTCDevice device = api.NewDevice(state.range(2) == 1 ? "threads=1" : nullptr);
   const Eigen::Matrix3d cam_to_world = camera.world_to_camera.linear().transpose();
   const Eigen::Vector3d origin = camera.Center();
   RasterBuffers out;
@@ -116,9 +135,9 @@ void BM_EmbreeRayCast(benchmark::State& state) {
     auto* v = static_cast<float*>(api.SetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
                                                            RTC_FORMAT_FLOAT3, 3 * sizeof(float),
                                                            body.num_vertices()));
-    auto* t = static_cast<unsigned*>(api.SetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0,
-                                                              RTC_FORMAT_UINT3, 3 * sizeof(unsigned),
-                                                              body.num_triangles()));
+    auto* t = static_cast<unsigned*>(
+        api.SetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                 3 * sizeof(unsigned), body.num_triangles()));
     for (int i = 0; i < body.num_vertices(); ++i) {
       for (int k = 0; k < 3; ++k) v[3 * i + k] = static_cast<float>(body.vertices(i, k));
     }
@@ -134,7 +153,8 @@ void BM_EmbreeRayCast(benchmark::State& state) {
       rtcInitIntersectContext(&context);
       for (int x = 0; x < camera.width; ++x) {
         const Eigen::Vector3d dir =
-            cam_to_world * Eigen::Vector3d((x - camera.cx) / camera.fx, (y - camera.cy) / camera.fy, 1.0);
+            cam_to_world *
+            Eigen::Vector3d((x - camera.cx) / camera.fx, (y - camera.cy) / camera.fy, 1.0);
         RTCRayHit rh;
         rh.ray.org_x = static_cast<float>(origin.x());
         rh.ray.org_y = static_cast<float>(origin.y());
@@ -172,52 +192,87 @@ void BM_EmbreeRayCast(benchmark::State& state) {
   state.counters["covered_px"] = hits;
   state.counters["id_differs_px"] = differ;
 }
-BENCHMARK(BM_EmbreeRayCast)->Args({640, 480})->Args({1600, 2032})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_EmbreeRayCast)
+    ->Args({640, 480, 1})
+    ->Args({640, 480, 2})
+    ->Args({1600, 2032, 1})
+    ->Args({1600, 2032, 2})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 #endif
+
+// One subject (generated once) rendered by virtual Kinects with different colour sizes.
+const SynthSubject& Subject() {
+  static const SynthSubject subject = [] {
+    SynthOptions o;
+    o.motion.frames = 2;
+    return PrepareSynthSubject(o);
+  }();
+  return subject;
+}
 
 struct KinectFixture {
   KinectFixture(int color_width, int color_height) {
-    SynthOptions o;
-    o.kinect.color_width = color_width;
-    o.kinect.color_height = color_height;
-    o.motion.frames = 2;
-    subject = PrepareSynthSubject(o);
-    kinect = std::make_unique<VirtualKinect>(o.kinect, subject.subject, subject.texture_bgr);
-    Skinning(subject.subject).Apply(subject.poses[1], &posed);
+    VirtualKinectOptions o;
+    o.color_width = color_width;
+    o.color_height = color_height;
+    kinect = std::make_unique<VirtualKinect>(o, Subject().subject, Subject().texture_bgr);
+    Skinning(Subject().subject).Apply(Subject().poses[1], &posed);
   }
-  SynthSubject subject;
   std::unique_ptr<VirtualKinect> kinect;
   Eigen::MatrixX3d posed;
 };
 
+KinectFixture& Fixture(int color_width, int color_height) {
+  static std::map<std::pair<int, int>, std::unique_ptr<KinectFixture>> fixtures;
+  auto& f = fixtures[{color_width, color_height}];
+  if (!f) f = std::make_unique<KinectFixture>(color_width, color_height);
+  return *f;
+}
+
 void BM_VirtualKinectDepth(benchmark::State& state) {
-  static KinectFixture fixture(800, 1016);
+  KinectFixture& fixture = Fixture(800, 1016);
+  const tbb::global_control threads = Threads(state, 0);
   for (auto _ : state) {
     const cv::Mat depth = fixture.kinect->RenderDepth(1, &fixture.posed);
     benchmark::DoNotOptimize(depth.data);
   }
 }
-BENCHMARK(BM_VirtualKinectDepth)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_VirtualKinectDepth)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 void BM_VirtualKinectColor(benchmark::State& state) {
-  KinectFixture fixture(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)));
+  KinectFixture& fixture =
+      Fixture(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)));
   const ColorConditions conditions;
+  const tbb::global_control threads = Threads(state, 2);
   for (auto _ : state) {
     const cv::Mat color = fixture.kinect->RenderColor(1, &fixture.posed, conditions);
     benchmark::DoNotOptimize(color.data);
   }
 }
-BENCHMARK(BM_VirtualKinectColor)->Args({800, 1016})->Args({1600, 2032})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_VirtualKinectColor)
+    ->Args({800, 1016, 1})
+    ->Args({800, 1016, 2})
+    ->Args({1600, 2032, 1})
+    ->Args({1600, 2032, 2})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 void BM_SubjectTexture(benchmark::State& state) {
   SubjectTextureOptions o;
   o.size = static_cast<int>(state.range(0));
+  const tbb::global_control threads = Threads(state, 1);
   for (auto _ : state) {
     const cv::Mat texture = GenerateSubjectTexture(Body(), o);
     benchmark::DoNotOptimize(texture.data);
   }
 }
-BENCHMARK(BM_SubjectTexture)->Arg(1024)->Arg(2048)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_SubjectTexture)
+    ->Args({1024, 1})
+    ->Args({2048, 1})
+    ->Args({2048, 2})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 }  // namespace
 }  // namespace artex

@@ -1,13 +1,12 @@
 // `artex synth`: renders a synthetic RGB-D sequence with ground truth (sensors/virtual_kinect.h)
 // and optionally a preview picture of one frame (colour | depth | foreground depth mesh).
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
-#include <string>
-
-#include <CLI/CLI.hpp>
 #include <opencv2/imgproc.hpp>
+#include <string>
 
 #include "experiments/commands.h"
 #include "models/error.h"
@@ -56,7 +55,9 @@ cv::Mat DepthColormap(const cv::Mat& depth, double depth_scale) {
     for (int y = 0; y < depth.rows; ++y) {
       for (int x = 0; x < depth.cols; ++x) {
         const uint16_t d = depth.at<uint16_t>(y, x);
-        if (d) gray.at<uint8_t>(y, x) = static_cast<uint8_t>(std::lround(255.0 * (hi - d / depth_scale) / (hi - lo)));
+        if (d)
+          gray.at<uint8_t>(y, x) =
+              static_cast<uint8_t>(std::lround(255.0 * (hi - d / depth_scale) / (hi - lo)));
       }
     }
   }
@@ -86,9 +87,9 @@ cv::Mat NormalImage(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& tr
       if (n.norm() == 0) continue;
       n = r * n.normalized();
       const Eigen::Vector3d rgb(0.5 + 0.5 * n.x(), 0.5 - 0.5 * n.y(), 0.5 - 0.5 * n.z());
-      image.at<cv::Vec3b>(y, x) = cv::Vec3b(static_cast<uint8_t>(255 * rgb.z()),
-                                            static_cast<uint8_t>(255 * rgb.y()),
-                                            static_cast<uint8_t>(255 * rgb.x()));
+      image.at<cv::Vec3b>(y, x) =
+          cv::Vec3b(static_cast<uint8_t>(255 * rgb.z()), static_cast<uint8_t>(255 * rgb.y()),
+                    static_cast<uint8_t>(255 * rgb.x()));
     }
   }
   return image;
@@ -207,13 +208,14 @@ void Run(const SynthCliOptions& cli) {
     }
     std::fflush(stderr);
   });
-  std::fprintf(stderr,
-               "synth: wrote %d frames + %d background frames to %s in %.2f s "
-               "(setup %.2f s; %.1f ms per frame; per image set: render %.1f ms, write %.1f ms)\n",
-               summary.frames, summary.background_frames, cli.output.c_str(), summary.total_seconds,
-               summary.setup_seconds, summary.ms_per_frame(),
-               1000.0 * summary.render_seconds / std::max(1, summary.frames + summary.background_frames),
-               1000.0 * summary.write_seconds / std::max(1, summary.frames + summary.background_frames));
+  std::fprintf(
+      stderr,
+      "synth: wrote %d frames + %d background frames to %s in %.2f s "
+      "(setup %.2f s; %.1f ms per frame; per image set: render %.1f ms, write %.1f ms)\n",
+      summary.frames, summary.background_frames, cli.output.c_str(), summary.total_seconds,
+      summary.setup_seconds, summary.ms_per_frame(),
+      1000.0 * summary.render_seconds / std::max(1, summary.frames + summary.background_frames),
+      1000.0 * summary.write_seconds / std::max(1, summary.frames + summary.background_frames));
 }
 
 }  // namespace
@@ -223,8 +225,7 @@ void RegisterSynthCommand(CLI::App* app) {
   CLI::App* sub = app->add_subcommand(
       "synth", "Render a synthetic RGB-D sequence with ground truth (virtual Kinect)");
   sub->add_option("-o,--output", cli->output, "Output sequence folder");
-  sub->add_option("--motion", cli->motion,
-                  "Built-in motion: walk, arm_raise, turn, bend, still")
+  sub->add_option("--motion", cli->motion, "Built-in motion: walk, arm_raise, turn, bend, still")
       ->capture_default_str();
   sub->add_option("--bvh", cli->bvh, "Motion from a BVH file (retargeted; overrides --motion)")
       ->check(CLI::ExistingFile);

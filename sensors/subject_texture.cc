@@ -1,18 +1,18 @@
 #include "sensors/subject_texture.h"
 
-#include <algorithm>
-#include <array>
-#include <atomic>
-#include <limits>
-#include <cmath>
-#include <random>
-#include <sstream>
-#include <vector>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include <Eigen/Geometry>
 #include <Eigen/LU>
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <limits>
+#include <random>
+#include <sstream>
+#include <vector>
 
 #include "models/error.h"
 
@@ -27,9 +27,9 @@ constexpr double kPanelBottom = 0.50, kPanelTop = 0.85;  // chest panel: waist -
 constexpr double kPanelHalfWidth = 0.40;                 // of the shoulder half-breadth
 constexpr double kFrontNormal = 0.45;                    // normal z above which is "front"
 constexpr double kEyeHeight = 0.58, kMouthHeight = 0.30, kHairLine = 0.78;  // of head height
-constexpr double kShoeTop = 0.03;                        // m above the ankle centre
-constexpr double kSoleTop = 0.015;                       // m above the floor
-constexpr double kChartTint = 0.10;                      // relative colour change per chart
+constexpr double kShoeTop = 0.03;    // m above the ankle centre
+constexpr double kSoleTop = 0.015;   // m above the floor
+constexpr double kChartTint = 0.10;  // relative colour change per chart
 
 uint64_t SplitMix(uint64_t x) {
   x += 0x9E3779B97F4A7C15ull;
@@ -59,8 +59,8 @@ Part PartOfJoint(const std::string& name) {
 }
 
 struct Palette {
-  Eigen::Vector3d shirt_a, shirt_b, sleeve, pinstripe, trousers, plaid_line, skin, hair, shoe,
-      sole, panel, ink, lips, eye_white, iris;
+  Eigen::Vector3d shirt_a, shirt_b, sleeve, pinstripe, trousers, plaid_line, skin, hair, shoe, sole,
+      panel, ink, lips, eye_white, iris;
 };
 
 Palette MakePalette(std::mt19937_64* rng) {
@@ -97,7 +97,7 @@ Palette MakePalette(std::mt19937_64* rng) {
 
 // Body landmarks measured on the rest pose.
 struct Landmarks {
-  double waist_y = 1.0;          // between pelvis and spine joint centres
+  double waist_y = 1.0;  // between pelvis and spine joint centres
   double shoulder_y = 1.4;
   double shoulder_half_width = 0.2;
   double head_bottom = 1.5, head_top = 1.75;
@@ -118,8 +118,8 @@ struct Context {
   Palette palette;
   Landmarks marks;
   std::vector<Part> joint_part;
-  std::vector<LimbFrame> limb;                 // per joint
-  std::vector<Eigen::Vector3d> chart_tint;     // per chart
+  std::vector<LimbFrame> limb;              // per joint
+  std::vector<Eigen::Vector3d> chart_tint;  // per chart
   std::vector<std::array<uint8_t, kGlyphCols * kGlyphRows>> glyphs;
 };
 
@@ -189,8 +189,7 @@ void BuildContext(const Template& t, const SubjectTextureOptions& o, Context* c)
   m.head_center_x = head_count ? head_x / head_count : m.center.x();
 
   // Per-chart colourway tints.
-  const int num_charts =
-      t.triangle_chart.size() ? std::max(1, t.triangle_chart.maxCoeff() + 1) : 1;
+  const int num_charts = t.triangle_chart.size() ? std::max(1, t.triangle_chart.maxCoeff() + 1) : 1;
   c->chart_tint.resize(num_charts);
   for (int k = 0; k < num_charts; ++k) {
     for (int ch = 0; ch < 3; ++ch) {
@@ -334,8 +333,8 @@ bool SubjectTextureOptions::IsValid(std::string* error) const {
   if (size < 64 || size > 8192) {
     msg << "texture size must be in [64, 8192], found " << size;
   } else if (!(stripe_period_m > 0) || !(plaid_period_m > 0) || !(glyph_size_m > 0)) {
-    msg << "stripe_period_m, plaid_period_m and glyph_size_m must be > 0, found "
-        << stripe_period_m << ", " << plaid_period_m << ", " << glyph_size_m;
+    msg << "stripe_period_m, plaid_period_m and glyph_size_m must be > 0, found " << stripe_period_m
+        << ", " << plaid_period_m << ", " << glyph_size_m;
   } else if (!(sleeve_length_m >= 0)) {
     msg << "sleeve_length_m must be >= 0, found " << sleeve_length_m;
   } else if (!(fabric_noise >= 0 && fabric_noise <= 0.5)) {
@@ -366,19 +365,22 @@ cv::Mat GenerateSubjectTexture(const Template& subject, const SubjectTextureOpti
   // minimum, so the parallel result is deterministic), then dilation into the gutter.
   constexpr int32_t kNone = std::numeric_limits<int32_t>::max();
   std::vector<std::atomic<int32_t>> cover(static_cast<size_t>(n) * n);
-  tbb::parallel_for(size_t{0}, cover.size(), [&](size_t i) {
-    cover[i].store(kNone, std::memory_order_relaxed);
-  });
+  tbb::parallel_for(size_t{0}, cover.size(),
+                    [&](size_t i) { cover[i].store(kNone, std::memory_order_relaxed); });
   tbb::parallel_for(0, num_triangles, [&](int f) {
     Eigen::Vector2d uv[3];
     for (int k = 0; k < 3; ++k) uv[k] = subject.uvs.row(subject.uv_triangles(f, k)).transpose() * n;
-    const double area = (uv[1] - uv[0]).x() * (uv[2] - uv[0]).y() -
-                        (uv[1] - uv[0]).y() * (uv[2] - uv[0]).x();
+    const double area =
+        (uv[1] - uv[0]).x() * (uv[2] - uv[0]).y() - (uv[1] - uv[0]).y() * (uv[2] - uv[0]).x();
     if (area == 0) return;
-    const int x0 = std::max(0, static_cast<int>(std::floor(std::min({uv[0].x(), uv[1].x(), uv[2].x()}))));
-    const int x1 = std::min(n - 1, static_cast<int>(std::ceil(std::max({uv[0].x(), uv[1].x(), uv[2].x()}))));
-    const int y0 = std::max(0, static_cast<int>(std::floor(std::min({uv[0].y(), uv[1].y(), uv[2].y()}))));
-    const int y1 = std::min(n - 1, static_cast<int>(std::ceil(std::max({uv[0].y(), uv[1].y(), uv[2].y()}))));
+    const int x0 =
+        std::max(0, static_cast<int>(std::floor(std::min({uv[0].x(), uv[1].x(), uv[2].x()}))));
+    const int x1 =
+        std::min(n - 1, static_cast<int>(std::ceil(std::max({uv[0].x(), uv[1].x(), uv[2].x()}))));
+    const int y0 =
+        std::max(0, static_cast<int>(std::floor(std::min({uv[0].y(), uv[1].y(), uv[2].y()}))));
+    const int y1 =
+        std::min(n - 1, static_cast<int>(std::ceil(std::max({uv[0].y(), uv[1].y(), uv[2].y()}))));
     for (int y = y0; y <= y1; ++y) {
       for (int x = x0; x <= x1; ++x) {
         const Eigen::Vector2d q(x + 0.5, y + 0.5);
@@ -445,7 +447,8 @@ cv::Mat GenerateSubjectTexture(const Template& subject, const SubjectTextureOpti
       if (f >= 0) {
         // Barycentrics of the texel centre (extrapolated for padding texels).
         Eigen::Vector2d uv[3];
-        for (int k = 0; k < 3; ++k) uv[k] = subject.uvs.row(subject.uv_triangles(f, k)).transpose() * n;
+        for (int k = 0; k < 3; ++k)
+          uv[k] = subject.uvs.row(subject.uv_triangles(f, k)).transpose() * n;
         Eigen::Matrix2d m;
         m.col(0) = uv[1] - uv[0];
         m.col(1) = uv[2] - uv[0];
@@ -458,8 +461,7 @@ cv::Mat GenerateSubjectTexture(const Template& subject, const SubjectTextureOpti
         rgb *= 1.0 + options.fabric_noise * (2.0 * Hash01(options.seed, y, x) - 1.0);
       }
       for (int ch = 0; ch < 3; ++ch) {
-        row[x][2 - ch] =
-            static_cast<uint8_t>(std::lround(255.0 * std::clamp(rgb[ch], 0.0, 1.0)));
+        row[x][2 - ch] = static_cast<uint8_t>(std::lround(255.0 * std::clamp(rgb[ch], 0.0, 1.0)));
       }
     }
   });
@@ -480,8 +482,9 @@ Eigen::Vector3d SampleTextureBilinear(const cv::Mat& texture_bgr, const Eigen::V
   Eigen::Vector3d rgb;
   for (int ch = 0; ch < 3; ++ch) {
     const int k = 2 - ch;
-    rgb[ch] = ((1 - ay) * ((1 - ax) * c00[k] + ax * c01[k]) + ay * ((1 - ax) * c10[k] + ax * c11[k])) /
-              255.0;
+    rgb[ch] =
+        ((1 - ay) * ((1 - ax) * c00[k] + ax * c01[k]) + ay * ((1 - ax) * c10[k] + ax * c11[k])) /
+        255.0;
   }
   return rgb;
 }
@@ -497,8 +500,8 @@ Eigen::MatrixX3d VertexColorsFromTexture(const Template& tmpl, const cv::Mat& te
   for (int f = 0; f < tmpl.num_triangles(); ++f) {
     for (int k = 0; k < 3; ++k) {
       const int v = tmpl.triangles(f, k);
-      sum.row(v) += SampleTextureBilinear(texture_bgr, tmpl.uvs.row(tmpl.uv_triangles(f, k)))
-                        .transpose();
+      sum.row(v) +=
+          SampleTextureBilinear(texture_bgr, tmpl.uvs.row(tmpl.uv_triangles(f, k))).transpose();
       ++count(v);
     }
   }

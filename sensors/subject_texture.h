@@ -5,25 +5,24 @@
 // each chart gets its own garment colourway. Deterministic given the seed.
 #pragma once
 
-#include <cstdint>
-#include <string>
-
 #include <Eigen/Core>
+#include <cstdint>
 #include <opencv2/core.hpp>
+#include <string>
 
 #include "models/template.h"
 
 namespace artex {
 
 struct SubjectTextureOptions {
-  int size = 2048;                 // atlas side (texels); [64, 8192]
-  uint64_t seed = 1;               // colour choices, glyphs and fabric noise
-  double stripe_period_m = 0.05;   // shirt stripes (rest-pose height period, m)
-  double plaid_period_m = 0.08;    // trouser plaid (m)
-  double glyph_size_m = 0.012;     // height of one text glyph on the chest panel (m)
-  double sleeve_length_m = 0.10;   // how far the shirt sleeve reaches below the elbow (m)
-  double fabric_noise = 0.04;      // per-texel multiplicative albedo noise (relative)
-  int padding_texels = 4;          // chart colours dilated this far into the empty gutter
+  int size = 2048;                // atlas side (texels); [64, 8192]
+  uint64_t seed = 1;              // colour choices, glyphs and fabric noise
+  double stripe_period_m = 0.05;  // shirt stripes (rest-pose height period, m)
+  double plaid_period_m = 0.08;   // trouser plaid (m)
+  double glyph_size_m = 0.012;    // height of one text glyph on the chest panel (m)
+  double sleeve_length_m = 0.10;  // how far the shirt sleeve reaches below the elbow (m)
+  double fabric_noise = 0.04;     // per-texel multiplicative albedo noise (relative)
+  int padding_texels = 4;         // chart colours dilated this far into the empty gutter
   Eigen::Vector3d gutter_rgb = Eigen::Vector3d(0.5, 0.5, 0.5);  // texels outside all charts
 
   // Returns false and describes the first invalid field in `error` (name, valid range, value).

@@ -1,17 +1,17 @@
 #include "sensors/virtual_kinect.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_pipeline.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <opencv2/core.hpp>
 #include <random>
 #include <sstream>
-
-#include <opencv2/core.hpp>
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-#include <tbb/parallel_pipeline.h>
 
 #include "models/error.h"
 #include "models/normals.h"
@@ -102,44 +102,55 @@ const char* NoiseLevelName(NoiseLevel level) {
 }
 
 bool DepthNoiseOptions::IsValid(std::string* error) const {
-  if (!(baseline_m > 0)) return Fail(error, "depth_noise.baseline_m must be > 0, found " + Str(baseline_m));
+  if (!(baseline_m > 0))
+    return Fail(error, "depth_noise.baseline_m must be > 0, found " + Str(baseline_m));
   if (!(disparity_step_px >= 0))
-    return Fail(error, "depth_noise.disparity_step_px must be >= 0, found " + Str(disparity_step_px));
+    return Fail(error,
+                "depth_noise.disparity_step_px must be >= 0, found " + Str(disparity_step_px));
   if (!(disparity_noise_px >= 0))
-    return Fail(error, "depth_noise.disparity_noise_px must be >= 0, found " + Str(disparity_noise_px));
+    return Fail(error,
+                "depth_noise.disparity_noise_px must be >= 0, found " + Str(disparity_noise_px));
   if (!(min_depth_m >= 0 && max_depth_m > min_depth_m))
     return Fail(error, "depth_noise: expected 0 <= min_depth_m < max_depth_m, found " +
                            Str(min_depth_m) + ", " + Str(max_depth_m));
-  if (!(edge_jump_m > 0)) return Fail(error, "depth_noise.edge_jump_m must be > 0, found " + Str(edge_jump_m));
+  if (!(edge_jump_m > 0))
+    return Fail(error, "depth_noise.edge_jump_m must be > 0, found " + Str(edge_jump_m));
   if (edge_radius_px < 0 || edge_radius_px > 8)
-    return Fail(error, "depth_noise.edge_radius_px must be in [0, 8], found " + Str(edge_radius_px));
+    return Fail(error,
+                "depth_noise.edge_radius_px must be in [0, 8], found " + Str(edge_radius_px));
   if (!(edge_drop_probability >= 0 && edge_drop_probability <= 1))
     return Fail(error, "depth_noise.edge_drop_probability must be in [0, 1], found " +
                            Str(edge_drop_probability));
   if (!(grazing_angle_deg > 0 && grazing_angle_deg <= 90))
-    return Fail(error, "depth_noise.grazing_angle_deg must be in (0, 90], found " + Str(grazing_angle_deg));
+    return Fail(
+        error, "depth_noise.grazing_angle_deg must be in (0, 90], found " + Str(grazing_angle_deg));
   if (!projector_offset_m.allFinite())
     return Fail(error, "depth_noise.projector_offset_m must be finite");
   if (!(shadow_tolerance_m >= 0))
-    return Fail(error, "depth_noise.shadow_tolerance_m must be >= 0, found " + Str(shadow_tolerance_m));
+    return Fail(error,
+                "depth_noise.shadow_tolerance_m must be >= 0, found " + Str(shadow_tolerance_m));
   if (projector_margin_px < 0 || projector_margin_px > 4096)
     return Fail(error, "depth_noise.projector_margin_px must be in [0, 4096], found " +
                            Str(projector_margin_px));
   if (!(random_dropout >= 0 && random_dropout <= 1))
-    return Fail(error, "depth_noise.random_dropout must be in [0, 1], found " + Str(random_dropout));
+    return Fail(error,
+                "depth_noise.random_dropout must be in [0, 1], found " + Str(random_dropout));
   return true;
 }
 
 bool ColorModelOptions::IsValid(std::string* error) const {
-  if (!(ambient >= 0 && ambient <= 1)) return Fail(error, "color_model.ambient must be in [0, 1], found " + Str(ambient));
+  if (!(ambient >= 0 && ambient <= 1))
+    return Fail(error, "color_model.ambient must be in [0, 1], found " + Str(ambient));
   if (!light_direction.allFinite() || light_direction.norm() == 0)
     return Fail(error, "color_model.light_direction must be a finite non-zero vector");
-  if (!(noise_std >= 0)) return Fail(error, "color_model.noise_std must be >= 0, found " + Str(noise_std));
+  if (!(noise_std >= 0))
+    return Fail(error, "color_model.noise_std must be >= 0, found " + Str(noise_std));
   if (!(exposure_step >= 0 && exposure_limit >= 0 && white_balance_step >= 0 &&
         white_balance_limit >= 0))
     return Fail(error, "color_model: exposure/white-balance steps and limits must be >= 0");
   if (!(walk_smoothing >= 0 && walk_smoothing < 1))
-    return Fail(error, "color_model.walk_smoothing must be in [0, 1), found " + Str(walk_smoothing));
+    return Fail(error,
+                "color_model.walk_smoothing must be in [0, 1), found " + Str(walk_smoothing));
   if (!background_rgb.allFinite()) return Fail(error, "color_model.background_rgb must be finite");
   return true;
 }
@@ -159,19 +170,24 @@ bool VirtualKinectOptions::IsValid(std::string* error) const {
   const PinholeCamera& d = depth_intrinsics;
   if (d.width <= 0 || d.height <= 0 || !(d.fx > 0) || !(d.fy > 0))
     return Fail(error, "depth camera: expected positive size and focal lengths, found " +
-                           Str(d.width) + " x " + Str(d.height) + ", f " + Str(d.fx) + ", " + Str(d.fy));
+                           Str(d.width) + " x " + Str(d.height) + ", f " + Str(d.fx) + ", " +
+                           Str(d.fy));
   if (color_width <= 0 || color_height <= 0 || color_width > 8192 || color_height > 8192)
     return Fail(error, "color camera size must be in [1, 8192]^2, found " + Str(color_width) +
                            " x " + Str(color_height));
   if (!(color_vertical_fov_deg > 1 && color_vertical_fov_deg < 170))
-    return Fail(error, "color_vertical_fov_deg must be in (1, 170), found " + Str(color_vertical_fov_deg));
-  if (!depth_eye.allFinite() || !depth_target.allFinite() || (depth_eye - depth_target).norm() < 1e-6)
+    return Fail(error,
+                "color_vertical_fov_deg must be in (1, 170), found " + Str(color_vertical_fov_deg));
+  if (!depth_eye.allFinite() || !depth_target.allFinite() ||
+      (depth_eye - depth_target).norm() < 1e-6)
     return Fail(error, "depth_eye and depth_target must be finite and distinct");
-  if (!color_offset_m.allFinite() || !std::isfinite(color_yaw_deg) || !std::isfinite(color_pitch_deg))
+  if (!color_offset_m.allFinite() || !std::isfinite(color_yaw_deg) ||
+      !std::isfinite(color_pitch_deg))
     return Fail(error, "color camera offset / yaw / pitch must be finite");
   if (!(depth_scale > 0)) return Fail(error, "depth_scale must be > 0, found " + Str(depth_scale));
   if (!(frame_rate > 0)) return Fail(error, "frame_rate must be > 0, found " + Str(frame_rate));
-  if (!(near_plane_m > 0)) return Fail(error, "near_plane_m must be > 0, found " + Str(near_plane_m));
+  if (!(near_plane_m > 0))
+    return Fail(error, "near_plane_m must be > 0, found " + Str(near_plane_m));
   return scene.IsValid(error) && depth_noise.IsValid(error) && color_model.IsValid(error);
 }
 
@@ -234,9 +250,12 @@ bool SynthOptions::IsValid(std::string* error) const {
   if (!subject_shape.IsValid(&why)) return Fail(error, "subject shape: " + why);
   if (!texture.IsValid(&why)) return Fail(error, "subject texture: " + why);
   if (bvh_path.empty() ? motion.frames < 1 : motion.frames < 0)
-    return Fail(error, "motion.frames must be >= 1 (>= 0 with a BVH file), found " + Str(motion.frames));
-  if (!(motion.frame_rate > 0)) return Fail(error, "motion.frame_rate must be > 0, found " + Str(motion.frame_rate));
-  if (background_frames < 0) return Fail(error, "background_frames must be >= 0, found " + Str(background_frames));
+    return Fail(error,
+                "motion.frames must be >= 1 (>= 0 with a BVH file), found " + Str(motion.frames));
+  if (!(motion.frame_rate > 0))
+    return Fail(error, "motion.frame_rate must be > 0, found " + Str(motion.frame_rate));
+  if (background_frames < 0)
+    return Fail(error, "background_frames must be >= 0, found " + Str(background_frames));
   if (!subject_position_m.allFinite() || !std::isfinite(subject_yaw_deg))
     return Fail(error, "subject placement must be finite");
   return true;
@@ -292,7 +311,8 @@ VirtualKinect::VirtualKinect(const VirtualKinectOptions& options, const Template
   PinholeCamera& color = calibration_.color;
   color.width = options.color_width;
   color.height = options.color_height;
-  color.fy = 0.5 * options.color_height / std::tan(0.5 * options.color_vertical_fov_deg * kDegToRad);
+  color.fy =
+      0.5 * options.color_height / std::tan(0.5 * options.color_vertical_fov_deg * kDegToRad);
   color.fx = color.fy;
   color.cx = 0.5 * (options.color_width - 1);
   color.cy = 0.5 * (options.color_height - 1);
@@ -335,10 +355,12 @@ VirtualKinect::VirtualKinect(const VirtualKinectOptions& options, const Template
       return;
     }
     const double b1 = color_scene_.barycentric[i].x(), b2 = color_scene_.barycentric[i].y();
-    const Eigen::Vector3d p = (1 - b1 - b2) * scene_vertices_.row(scene_triangles_(f, 0)).transpose() +
-                              b1 * scene_vertices_.row(scene_triangles_(f, 1)).transpose() +
-                              b2 * scene_vertices_.row(scene_triangles_(f, 2)).transpose();
-    const double shade = c.ambient + (1 - c.ambient) * std::max(0.0, scene_normals_.row(f).dot(light));
+    const Eigen::Vector3d p =
+        (1 - b1 - b2) * scene_vertices_.row(scene_triangles_(f, 0)).transpose() +
+        b1 * scene_vertices_.row(scene_triangles_(f, 1)).transpose() +
+        b2 * scene_vertices_.row(scene_triangles_(f, 2)).transpose();
+    const double shade =
+        c.ambient + (1 - c.ambient) * std::max(0.0, scene_normals_.row(f).dot(light));
     color_scene_radiance_[i] = (SceneAlbedo(p) * shade).cast<float>();
   });
 }
@@ -350,7 +372,8 @@ void VirtualKinect::BuildScene() {
   auto grid = [&](int nu, int nv, const std::function<Eigen::Vector3d(double, double)>& at) {
     const int base = static_cast<int>(v.size());
     for (int j = 0; j <= nv; ++j) {
-      for (int i = 0; i <= nu; ++i) v.push_back(at(static_cast<double>(i) / nu, static_cast<double>(j) / nv));
+      for (int i = 0; i <= nu; ++i)
+        v.push_back(at(static_cast<double>(i) / nu, static_cast<double>(j) / nv));
     }
     for (int j = 0; j < nv; ++j) {
       for (int i = 0; i < nu; ++i) {
@@ -365,9 +388,11 @@ void VirtualKinect::BuildScene() {
   const int nx = std::max(1, static_cast<int>(std::ceil(2 * w / s.cell_m)));
   if (s.floor) {
     // u: x from -w to w, v: z from front to wall; du x dv = (+x) x (-z) = +y (up).
-    const int nz = std::max(1, static_cast<int>(std::ceil((s.floor_front_z_m - s.wall_z_m) / s.cell_m)));
+    const int nz =
+        std::max(1, static_cast<int>(std::ceil((s.floor_front_z_m - s.wall_z_m) / s.cell_m)));
     grid(nx, nz, [&](double a, double b) {
-      return Eigen::Vector3d(-w + 2 * w * a, 0.0, s.floor_front_z_m + (s.wall_z_m - s.floor_front_z_m) * b);
+      return Eigen::Vector3d(-w + 2 * w * a, 0.0,
+                             s.floor_front_z_m + (s.wall_z_m - s.floor_front_z_m) * b);
     });
   }
   if (s.back_wall) {
@@ -418,7 +443,8 @@ Eigen::Vector3d VirtualKinect::SceneAlbedo(const Eigen::Vector3d& x) const {
     const double fz = x.z() / plank_l + Hash01(seed, 11, i);
     const int64_t k = static_cast<int64_t>(std::floor(fz));
     const double tone = 0.75 + 0.5 * Hash01(seed, 13 + i, k);
-    const double grain = 1.0 + 0.08 * std::sin(2 * kPi * (x.z() / (0.03 * p) + 7 * Hash01(seed, 17 + i, k)));
+    const double grain =
+        1.0 + 0.08 * std::sin(2 * kPi * (x.z() / (0.03 * p) + 7 * Hash01(seed, 17 + i, k)));
     Eigen::Vector3d c = Eigen::Vector3d(0.55, 0.38, 0.22) * tone * grain;
     if (Frac(fx) < 0.03 || Frac(fz) < 0.008) c *= 0.35;
     return c;
@@ -436,7 +462,7 @@ Eigen::Vector3d VirtualKinect::SceneAlbedo(const Eigen::Vector3d& x) const {
       const Eigen::Vector3d b = Eigen::Vector3d::Ones() - a;
       const bool band = Frac(3 * v + 2 * u) < 0.5;
       return (std::abs(u) > 0.92 || std::abs(v) > 0.94) ? Eigen::Vector3d(0.05, 0.05, 0.05)
-                                                          : (band ? a : b);
+                                                        : (band ? a : b);
     }
   }
   const double du = Frac((x.x() + x.y()) / p), dv = Frac((x.x() - x.y()) / p);
@@ -500,9 +526,9 @@ cv::Mat VirtualKinect::RenderDepthStream(int frame_index, const Eigen::MatrixX3d
         s = DepthStatus::kOutOfRange;
       } else {
         const Eigen::Vector3d xc((x - cam.cx) / cam.fx * z, (y - cam.cy) / cam.fy * z, z);
-        const Eigen::Vector3d normal = f < subject_triangles
-                                           ? Eigen::Vector3d(subject_normals.row(f))
-                                           : Eigen::Vector3d(scene_normals_.row(f - subject_triangles));
+        const Eigen::Vector3d normal =
+            f < subject_triangles ? Eigen::Vector3d(subject_normals.row(f))
+                                  : Eigen::Vector3d(scene_normals_.row(f - subject_triangles));
         if (std::abs((rotation * normal).dot(xc.normalized())) < cos_grazing) {
           s = DepthStatus::kGrazing;
         }
@@ -605,7 +631,8 @@ cv::Mat VirtualKinect::RenderColor(int frame_index, const Eigen::MatrixX3d* pose
         rgb = color_scene_radiance_[i].cast<double>();  // the same scene point as when cached
       }
       for (int c = 0; c < 3; ++c) {
-        const double value = rgb[c] * conditions.gain[c] + (o.noise_std > 0 ? rng.gaussian(o.noise_std) : 0.0);
+        const double value =
+            rgb[c] * conditions.gain[c] + (o.noise_std > 0 ? rng.gaussian(o.noise_std) : 0.0);
         out[x][2 - c] = static_cast<uint8_t>(std::lround(255.0 * std::clamp(value, 0.0, 1.0)));
       }
     }
@@ -644,7 +671,8 @@ SynthSubject PrepareSynthSubject(const SynthOptions& options) {
     s.poses = GenerateMotion(s.subject, options.motion);
   }
   const Eigen::Matrix3d yaw =
-      Eigen::AngleAxisd(options.subject_yaw_deg * kDegToRad, Eigen::Vector3d::UnitY()).toRotationMatrix();
+      Eigen::AngleAxisd(options.subject_yaw_deg * kDegToRad, Eigen::Vector3d::UnitY())
+          .toRotationMatrix();
   for (Pose& p : s.poses) {
     p.rotation = yaw * p.rotation;
     p.translation = yaw * p.translation + options.subject_position_m;
@@ -661,8 +689,9 @@ SynthSummary SynthesizeSequence(const SynthOptions& options, const std::string& 
   const auto start = std::chrono::steady_clock::now();
   const SynthSubject subject = PrepareSynthSubject(options);
   SynthSummary summary = SynthesizeSequence(options, subject, out_folder, progress);
-  const double setup = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() -
-                       summary.total_seconds;
+  const double setup =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() -
+      summary.total_seconds;
   summary.setup_seconds += setup;
   summary.total_seconds += setup;
   return summary;

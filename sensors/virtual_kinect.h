@@ -7,13 +7,12 @@
 // Everything is deterministic given the seeds (docs/synthesis.md).
 #pragma once
 
+#include <Eigen/Core>
 #include <cstdint>
 #include <functional>
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <opencv2/core.hpp>
 
 #include "models/template.h"
 #include "models/template_generator.h"
@@ -37,11 +36,11 @@ struct DepthNoiseOptions {
   // Disparity model d = b f / z (f = depth camera fx in pixels): quantised to
   // disparity_step_px after adding Gaussian noise of disparity_noise_px, so the depth noise
   // std is z^2 / (b f) * disparity_noise_px (Khoshelham & Elberink 2012).
-  double baseline_m = 0.075;          // b: IR camera to projector (m), > 0
-  double disparity_step_px = 0.125;   // 1/8 pixel sub-pixel disparity; 0 = no quantisation
-  double disparity_noise_px = 0.07;   // Gaussian std in disparity (px); >= 0
-  double min_depth_m = 0.4;           // nearer: missing (0)
-  double max_depth_m = 6.0;           // farther: missing
+  double baseline_m = 0.075;         // b: IR camera to projector (m), > 0
+  double disparity_step_px = 0.125;  // 1/8 pixel sub-pixel disparity; 0 = no quantisation
+  double disparity_noise_px = 0.07;  // Gaussian std in disparity (px); >= 0
+  double min_depth_m = 0.4;          // nearer: missing (0)
+  double max_depth_m = 6.0;          // farther: missing
   // Depth discontinuities: a pixel whose (2r+1)^2 neighbourhood of true depths spans more
   // than edge_jump_m (or touches a pixel without a surface) is dropped with this probability.
   double edge_jump_m = 0.08;
@@ -55,8 +54,8 @@ struct DepthNoiseOptions {
   bool projector_shadow = true;
   Eigen::Vector3d projector_offset_m = Eigen::Vector3d(0.075, 0.0, 0.0);
   double shadow_tolerance_m = 0.01;
-  int projector_margin_px = 64;       // the projector's image extends the camera's by this
-  double random_dropout = 0.0;        // probability of an isolated missing pixel
+  int projector_margin_px = 64;  // the projector's image extends the camera's by this
+  double random_dropout = 0.0;   // probability of an isolated missing pixel
 
   bool IsValid(std::string* error) const;
 };
@@ -65,7 +64,7 @@ struct ColorModelOptions {
   // Lambert shading of the albedo: albedo * (ambient + (1 - ambient) max(0, n . l)).
   double ambient = 0.5;
   Eigen::Vector3d light_direction = Eigen::Vector3d(0.3, 0.8, 0.6);  // towards the light, world
-  double noise_std = 0.01;            // Gaussian per channel (fraction of full scale)
+  double noise_std = 0.01;  // Gaussian per channel (fraction of full scale)
   // Exposure (log gain) and white balance (log gain per channel, zero mean over channels):
   // smooth random walks, velocity v <- walk_smoothing v + (1 - walk_smoothing) N(0, step),
   // value reflected into [-limit, limit].
@@ -73,7 +72,7 @@ struct ColorModelOptions {
   double exposure_limit = 0.25;
   double white_balance_step = 0.03;
   double white_balance_limit = 0.08;
-  double walk_smoothing = 0.8;        // [0, 1)
+  double walk_smoothing = 0.8;                                         // [0, 1)
   Eigen::Vector3d background_rgb = Eigen::Vector3d(0.05, 0.05, 0.06);  // rays hitting nothing
 
   bool IsValid(std::string* error) const;
@@ -85,12 +84,12 @@ struct ColorModelOptions {
 struct SceneOptions {
   bool floor = true;
   bool back_wall = true;
-  double wall_z_m = -1.5;            // back wall plane (m); the subject stands near z = 0
-  double half_width_m = 3.5;         // both planes span x in [-w, w]
+  double wall_z_m = -1.5;     // back wall plane (m); the subject stands near z = 0
+  double half_width_m = 3.5;  // both planes span x in [-w, w]
   double wall_height_m = 3.0;
-  double floor_front_z_m = 3.5;      // the floor reaches from the wall to this z
-  double cell_m = 0.25;              // tessellation cell size
-  double pattern_m = 0.3;            // size of the floor planks / wall pattern
+  double floor_front_z_m = 3.5;  // the floor reaches from the wall to this z
+  double cell_m = 0.25;          // tessellation cell size
+  double pattern_m = 0.3;        // size of the floor planks / wall pattern
 
   bool IsValid(std::string* error) const;
 };
@@ -233,10 +232,10 @@ struct SynthProgress {
 struct SynthSummary {
   int frames = 0;
   int background_frames = 0;
-  double setup_seconds = 0;      // subject, texture, motion
-  double render_seconds = 0;     // rendering, summed over all frames incl. background
-  double write_seconds = 0;      // encoding and writing files, summed (overlaps rendering)
-  double frames_seconds = 0;     // wall time of the (pipelined) frame loop
+  double setup_seconds = 0;   // subject, texture, motion
+  double render_seconds = 0;  // rendering, summed over all frames incl. background
+  double write_seconds = 0;   // encoding and writing files, summed (overlaps rendering)
+  double frames_seconds = 0;  // wall time of the (pipelined) frame loop
   double total_seconds = 0;
   double ms_per_frame() const { return frames ? 1000.0 * frames_seconds / frames : 0; }
 };

@@ -1,9 +1,9 @@
 #include "render/rasterizer.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <random>
-
-#include <gtest/gtest.h>
 
 #include "models/error.h"
 
@@ -132,9 +132,8 @@ TEST(RasterizerTest, PlaneGivesExactPerspectiveCorrectDepth) {
 
 TEST(RasterizerTest, BarycentricsReproduceTheHitPoint) {
   PinholeCamera camera = KinectLikeCamera();
-  camera.world_to_camera =
-      PinholeCamera::LookAt(Eigen::Vector3d(0.3, 1.2, 2.5), Eigen::Vector3d(0, 0.9, 0),
-                            Eigen::Vector3d::UnitY());
+  camera.world_to_camera = PinholeCamera::LookAt(
+      Eigen::Vector3d(0.3, 1.2, 2.5), Eigen::Vector3d(0, 0.9, 0), Eigen::Vector3d::UnitY());
   Eigen::MatrixX3d v(3, 3);
   v << -0.6, 0.2, -0.4,  //
       0.5, 0.4, 0.6,     //

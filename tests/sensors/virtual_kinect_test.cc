@@ -1,15 +1,15 @@
 #include "sensors/virtual_kinect.h"
 
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <Eigen/Geometry>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <limits>
-
-#include <Eigen/Geometry>
-#include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
-#include <unistd.h>
 
 #include "models/error.h"
 #include "models/skinning.h"
@@ -34,8 +34,8 @@ SynthOptions SmallOptions() {
 }
 
 fs::path TempDir(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() /
-                       ("artex_vk_" + name + "_" + std::to_string(::getpid()));
+  const fs::path dir =
+      fs::temp_directory_path() / ("artex_vk_" + name + "_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   return dir;
 }
@@ -148,8 +148,9 @@ TEST(VirtualKinectTest, SubjectDepthMatchesTheMeshWithinTheNoiseBound) {
       ASSERT_NEAR(diag.true_depth.at<float>(y, x), truth, 1e-4);
       const double z = depth.at<uint16_t>(y, x) / kinect.calibration().depth_scale;
       // 5 sigma of the disparity noise plus half a quantisation step, in depth, plus 1 unit.
-      const double bound = truth * truth / bf * (5 * n.disparity_noise_px + 0.5 * n.disparity_step_px) +
-                           1.0 / kinect.calibration().depth_scale;
+      const double bound =
+          truth * truth / bf * (5 * n.disparity_noise_px + 0.5 * n.disparity_step_px) +
+          1.0 / kinect.calibration().depth_scale;
       ASSERT_LT(std::abs(z - truth), bound) << x << "," << y;
       ++checked;
     }
@@ -337,7 +338,8 @@ TEST(VirtualKinectTest, BackgroundFramesContainNoSubject) {
   int nearer = 0, subject = 0;
   for (int y = 0; y < frame.depth.rows; ++y) {
     for (int x = 0; x < frame.depth.cols; ++x) {
-      if (!with_subject.subject_mask.at<uint8_t>(y, x) || frame.depth.at<uint16_t>(y, x) == 0) continue;
+      if (!with_subject.subject_mask.at<uint8_t>(y, x) || frame.depth.at<uint16_t>(y, x) == 0)
+        continue;
       if (with_subject.true_depth.at<float>(y, x) * 1000 + 400 > scene.at<uint16_t>(y, x)) continue;
       ++subject;
       nearer += frame.depth.at<uint16_t>(y, x) + 300 < scene.at<uint16_t>(y, x);
@@ -390,7 +392,8 @@ TEST(VirtualKinectTest, ColourDriftIsSmoothBoundedAndNeutralAtFrameZero) {
   EXPECT_NEAR((c[0].gain - Eigen::Vector3d::Ones()).norm(), 0, 1e-12);
   double max_step = 0, max_dev = 0;
   for (size_t f = 1; f < c.size(); ++f) {
-    max_step = std::max(max_step, (c[f].gain.array().log() - c[f - 1].gain.array().log()).abs().maxCoeff());
+    max_step = std::max(max_step,
+                        (c[f].gain.array().log() - c[f - 1].gain.array().log()).abs().maxCoeff());
     max_dev = std::max(max_dev, c[f].gain.array().log().abs().maxCoeff());
   }
   EXPECT_GT(max_dev, 0.02);  // it does drift
