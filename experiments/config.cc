@@ -55,8 +55,18 @@ std::string Config::Path(const std::string& key) const {
   return impl_->source + ": " + (impl_->prefix.empty() ? key : impl_->prefix + "." + key);
 }
 
+namespace {
+// Read-only lookup: yaml-cpp's non-const operator[] inserts pending nodes for missing keys.
+YAML::Node Lookup(const YAML::Node& node, const std::string& key) {
+  const YAML::Node& map = node;
+  return map[key];
+}
+}  // namespace
+
 bool Config::Has(const std::string& key) const {
-  return impl_->node.IsMap() && impl_->node[key].IsDefined() && !impl_->node[key].IsNull();
+  if (!impl_->node.IsMap()) return false;
+  const YAML::Node n = Lookup(impl_->node, key);
+  return n.IsDefined() && !n.IsNull();
 }
 
 Config Config::Section(const std::string& key) const {
@@ -64,7 +74,7 @@ Config Config::Section(const std::string& key) const {
   c.impl_->source = impl_->source;
   c.impl_->prefix = impl_->prefix.empty() ? key : impl_->prefix + "." + key;
   if (!Has(key)) return c;
-  YAML::Node n = impl_->node[key];
+  YAML::Node n = Lookup(impl_->node, key);
   if (!n.IsMap()) throw Error(Path(key) + ": expected a mapping of options");
   c.impl_->node = n;
   return c;
@@ -90,29 +100,29 @@ T Convert(const YAML::Node& n, const std::string& path, const char* expected) {
 
 void Config::Get(const std::string& key, double* value) const {
   if (!Has(key)) return;
-  const double v = Convert<double>(impl_->node[key], Path(key), "a number");
-  if (!std::isfinite(v)) throw Error(Path(key) + ": expected a finite number, found " + impl_->node[key].Scalar());
+  const double v = Convert<double>(Lookup(impl_->node, key), Path(key), "a number");
+  if (!std::isfinite(v)) throw Error(Path(key) + ": expected a finite number, found " + Lookup(impl_->node, key).Scalar());
   *value = v;
 }
 
 void Config::Get(const std::string& key, int* value) const {
   if (!Has(key)) return;
-  *value = Convert<int>(impl_->node[key], Path(key), "an integer");
+  *value = Convert<int>(Lookup(impl_->node, key), Path(key), "an integer");
 }
 
 void Config::Get(const std::string& key, bool* value) const {
   if (!Has(key)) return;
-  *value = Convert<bool>(impl_->node[key], Path(key), "true or false");
+  *value = Convert<bool>(Lookup(impl_->node, key), Path(key), "true or false");
 }
 
 void Config::Get(const std::string& key, std::string* value) const {
   if (!Has(key)) return;
-  *value = Convert<std::string>(impl_->node[key], Path(key), "a string");
+  *value = Convert<std::string>(Lookup(impl_->node, key), Path(key), "a string");
 }
 
 void Config::Get(const std::string& key, std::vector<double>* value) const {
   if (!Has(key)) return;
-  const YAML::Node n = impl_->node[key];
+  const YAML::Node n = Lookup(impl_->node, key);
   if (!n.IsSequence()) throw Error(Path(key) + ": expected a list of numbers");
   std::vector<double> out;
   for (std::size_t i = 0; i < n.size(); ++i) {

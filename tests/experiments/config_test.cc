@@ -115,3 +115,31 @@ TEST(ConfigTest, NonFiniteNumberIsRejected) {
 
 }  // namespace
 }  // namespace artex
+
+namespace artex {
+namespace {
+
+// Reading absent keys must not modify the document (yaml-cpp's non-const operator[] would
+// insert pending nodes that later break emitting the resolved configuration).
+TEST(ConfigTest, ReadingAbsentKeysLeavesTheDocumentIntact) {
+  Config c = Config::FromString("pipeline:\n  max_frames: 0\nfitting:\n  k: 3\n", "r.yaml");
+  const std::string before = c.ToYaml();
+  double x = 1.0;
+  int k = 0;
+  for (int i = 0; i < 50; ++i) {
+    c.Section("fitting").Get("absent", &x);
+    c.Section("missing_section").Get("absent", &x);
+    c.Section("fitting").Get("k", &k);
+    EXPECT_FALSE(c.Has("nothing"));
+  }
+  EXPECT_EQ(c.ToYaml(), before);
+  c.Set("pipeline.max_frames", "2");
+  Config again = Config::FromString(c.ToYaml(), "again.yaml");
+  int frames = 0;
+  again.Section("pipeline").Get("max_frames", &frames);
+  EXPECT_EQ(frames, 2);
+  EXPECT_EQ(k, 3);
+}
+
+}  // namespace
+}  // namespace artex
