@@ -206,7 +206,7 @@ class VirtualKinect {
 BodyShapeOptions DefaultSubjectShape();
 
 struct SynthOptions {
-  VirtualKinectOptions kinect;
+  VirtualKinectOptions kinect;  // its frame_rate is replaced by motion.frame_rate
   BodyShapeOptions subject_shape = DefaultSubjectShape();
   SubjectTextureOptions texture;
   MotionOptions motion;
