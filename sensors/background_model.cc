@@ -108,15 +108,22 @@ void BackgroundModel::TrainEmpty(int width, int height, double depth_scale) {
   FinishLimits(depth_scale);
 }
 
+namespace {
+// For integer d >= 0: d < x  <=>  d < ceil(x); clamped to [1, 65535] (0 = missing depth).
+uint16_t IntegerLimit(double x) {
+  return static_cast<uint16_t>(std::min(65535.0, std::max(1.0, std::ceil(x))));
+}
+}  // namespace
+
 void BackgroundModel::FinishLimits(double depth_scale) {
-  limit_.create(median_.size(), CV_32FC1);
+  limit_.create(median_.size(), CV_16UC1);
   const double max_units = options_.max_depth * depth_scale;
-  min_units_ = static_cast<float>(options_.min_depth * depth_scale);
-  max_units_ = static_cast<float>(max_units);
+  min_units_ = IntegerLimit(options_.min_depth * depth_scale);
+  max_units_ = IntegerLimit(max_units);
   for (int y = 0; y < median_.rows; ++y) {
     const float* med = median_.ptr<float>(y);
     const float* sig = sigma_.ptr<float>(y);
-    float* lim = limit_.ptr<float>(y);
+    uint16_t* lim = limit_.ptr<uint16_t>(y);
     for (int x = 0; x < median_.cols; ++x) {
       double limit = max_units;
       if (med[x] > 0) {
@@ -124,7 +131,9 @@ void BackgroundModel::FinishLimits(double depth_scale) {
             std::max(options_.min_foreground_distance, options_.threshold_sigmas * sig[x]);
         limit = std::min(limit, (med[x] - margin) * depth_scale);
       }
-      lim[x] = static_cast<float>(limit);
+      // Stored relative to min_units_: foreground iff (uint16)(d - min_units_) < lim, one
+      // unsigned comparison (d < min_units_, including d = 0, wraps to a large value).
+      lim[x] = static_cast<uint16_t>(std::max<int>(IntegerLimit(limit) - min_units_, 0));
     }
   }
 }
@@ -137,14 +146,13 @@ void BackgroundModel::Classify(const cv::Mat& depth, cv::Mat* mask) {
                 " " + std::to_string(depth.cols) + "x" + std::to_string(depth.rows));
   }
   mask->create(depth.size(), CV_8UC1);
-  const float lo = std::max(min_units_, 1.0f);  // 0 = missing depth
+  const uint16_t lo = min_units_;  // >= 1: 0 = missing depth
   for (int y = 0; y < depth.rows; ++y) {
     const uint16_t* d = depth.ptr<uint16_t>(y);
-    const float* lim = limit_.ptr<float>(y);
+    const uint16_t* lim = limit_.ptr<uint16_t>(y);
     uint8_t* m = mask->ptr<uint8_t>(y);
     for (int x = 0; x < depth.cols; ++x) {
-      const float v = d[x];
-      m[x] = (v >= lo && v < lim[x]) ? 255 : 0;
+      m[x] = static_cast<uint16_t>(d[x] - lo) < lim[x] ? 255 : 0;
     }
   }
   if (!kernel_open_.empty()) cv::morphologyEx(*mask, *mask, cv::MORPH_OPEN, kernel_open_);

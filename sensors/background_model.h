@@ -8,6 +8,7 @@
 // background"), whenever it is valid and within [min_depth, max_depth].
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -67,9 +68,11 @@ class BackgroundModel {
   BackgroundModelOptions options_;
   cv::Mat median_;  // CV_32FC1, m
   cv::Mat sigma_;   // CV_32FC1, m
-  cv::Mat limit_;   // CV_32FC1, depth units: foreground iff min_units_ <= d < limit
-  float min_units_ = 0;  // min_depth, max_depth in depth units
-  float max_units_ = 0;
+  // CV_16UC1, integer depth units relative to min_units_: foreground iff
+  // min_units_ <= d < min_units_ + limit (d = 0 never).
+  cv::Mat limit_;
+  uint16_t min_units_ = 1;  // ceil(min_depth), ceil(max_depth) in depth units, >= 1
+  uint16_t max_units_ = 1;
   double known_fraction_ = 0;
   cv::Mat work_mask_, kernel_open_, kernel_close_, labels_, stats_, centroids_;
 };

@@ -5,11 +5,54 @@
 #include <cstdint>
 #include <cstring>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include "models/error.h"
 #include "models/normals.h"
 #include "sensors/image_io.h"
 
 namespace artex {
+namespace {
+
+// Adds the unit normal of triangle (a, b, c) (4-float points x, y, z, 0; 16-byte aligned) to
+// the three 4-float sums; degenerate triangles add nothing.
+inline void AddUnitTriangleNormal(const float* a, const float* b, const float* c, float* sa,
+                                  float* sb, float* sc) {
+#if defined(__SSE2__)
+  const __m128 pa = _mm_load_ps(a);
+  const __m128 e1 = _mm_sub_ps(_mm_load_ps(b), pa);
+  const __m128 e2 = _mm_sub_ps(_mm_load_ps(c), pa);
+  // cross(e1, e2) = (e1 * e2.yzx - e1.yzx * e2).yzx
+  const __m128 e1_yzx = _mm_shuffle_ps(e1, e1, _MM_SHUFFLE(3, 0, 2, 1));
+  const __m128 e2_yzx = _mm_shuffle_ps(e2, e2, _MM_SHUFFLE(3, 0, 2, 1));
+  const __m128 zxy = _mm_sub_ps(_mm_mul_ps(e1, e2_yzx), _mm_mul_ps(e1_yzx, e2));
+  const __m128 n = _mm_shuffle_ps(zxy, zxy, _MM_SHUFFLE(3, 0, 2, 1));
+  alignas(16) float q[4];
+  _mm_store_ps(q, _mm_mul_ps(n, n));
+  const float len2 = q[0] + q[1] + q[2];
+  if (!(len2 > 0)) return;
+  const __m128 u = _mm_mul_ps(n, _mm_set1_ps(1.0f / std::sqrt(len2)));
+  _mm_store_ps(sa, _mm_add_ps(_mm_load_ps(sa), u));
+  _mm_store_ps(sb, _mm_add_ps(_mm_load_ps(sb), u));
+  _mm_store_ps(sc, _mm_add_ps(_mm_load_ps(sc), u));
+#else
+  const float e1x = b[0] - a[0], e1y = b[1] - a[1], e1z = b[2] - a[2];
+  const float e2x = c[0] - a[0], e2y = c[1] - a[1], e2z = c[2] - a[2];
+  const float nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x;
+  const float len2 = nx * nx + ny * ny + nz * nz;
+  if (!(len2 > 0)) return;
+  const float inv = 1.0f / std::sqrt(len2);
+  for (float* s : {sa, sb, sc}) {
+    s[0] += nx * inv;
+    s[1] += ny * inv;
+    s[2] += nz * inv;
+  }
+#endif
+}
+
+}  // namespace
 
 bool DepthMeshOptions::IsValid(std::string* error) const {
   if (step < 1) {
@@ -113,9 +156,15 @@ void DepthMesher::Build(const cv::Mat& depth, double depth_scale, const cv::Mat&
   const float* rays = projector_.rays();
   grid_index_.assign(static_cast<size_t>(gw) * gh, -1);
   row_range_.assign(2 * static_cast<size_t>(gh), 0);  // [first, last + 1) valid gx per row
-  grid_z_.clear();
-  grid_pixel_.clear();
-  camera_points_.clear();
+  // Sized for the worst case once; only the first `candidates` entries are used.
+  const size_t nodes = static_cast<size_t>(gw) * gh;
+  if (grid_pixel_.size() < nodes) {
+    grid_pixel_.resize(nodes);
+    camera_points_.resize(4 * nodes);
+  }
+  int* node_pixel = grid_pixel_.data();
+  float* node_point = camera_points_.data();
+  int candidates = 0;
   for (int gy = 0; gy < gh; ++gy) {
     const int v = gy * step;
     const uint16_t* d = depth.ptr<uint16_t>(v);
@@ -136,19 +185,20 @@ void DepthMesher::Build(const cv::Mat& depth, double depth_scale, const cv::Mat&
       if (d[u] == 0 || (m && !m[u])) continue;
       const int pixel = v * cam.width + u;
       const float z = d[u] * inv_scale;
-      idx[gx] = static_cast<int>(grid_z_.size());
-      grid_z_.push_back(z);
-      grid_pixel_.push_back(pixel);
-      camera_points_.push_back(rays[2 * pixel] * z);
-      camera_points_.push_back(rays[2 * pixel + 1] * z);
-      camera_points_.push_back(z);
+      idx[gx] = candidates;
+      node_pixel[candidates] = pixel;
+      float* p = node_point + 4 * static_cast<size_t>(candidates);
+      p[0] = rays[2 * pixel] * z;
+      p[1] = rays[2 * pixel + 1] * z;
+      p[2] = z;
+      p[3] = 0;
+      ++candidates;
       first = std::min(first, gx);
       last = gx;
     }
     row_range_[2 * gy] = first;
     row_range_[2 * gy + 1] = last + 1;
   }
-  const int candidates = static_cast<int>(grid_z_.size());
 
   // 2. Triangles of each 2x2 block whose depth differences stay below the threshold. A block
   // with >= 3 valid nodes has a valid top-left or bottom-right node, so there are at most
@@ -158,10 +208,10 @@ void DepthMesher::Build(const cv::Mat& depth, double depth_scale, const cv::Mat&
   remap_.assign(candidates, options_.drop_isolated_points ? -1 : 0);
   int* tri = triangles_.data();
   int* used = remap_.data();
-  const float* zs = grid_z_.data();
+  const float* cp = camera_points_.data();
   // Pairwise |z_a - z_b| <= jump min(z_a, z_b) for all pairs <=> z_max - z_min <= jump z_min.
   auto try_add = [&](int a, int b, int c) {
-    const float za = zs[a], zb = zs[b], zc = zs[c];
+    const float za = cp[4 * a + 2], zb = cp[4 * b + 2], zc = cp[4 * c + 2];
     const float lo = std::min(za, std::min(zb, zc)), hi = std::max(za, std::max(zb, zc));
     if (hi - lo > jump * lo) return;
     tri[0] = a;
@@ -205,29 +255,13 @@ void DepthMesher::Build(const cv::Mat& depth, double depth_scale, const cv::Mat&
   }
 
   // 4. Normals (camera frame): sums of unit triangle normals, normalised, facing the camera.
-  normal_sums_.assign(3 * static_cast<size_t>(candidates), 0.0f);
-  const float* cp = camera_points_.data();
+  // 4-float (SIMD) vectors: x, y, z, 0.
+  normal_sums_.assign(4 * static_cast<size_t>(candidates), 0.0f);
   float* ns = normal_sums_.data();
   for (int f = 0; f < num_triangles; ++f) {
     const int* t = &triangles_[3 * static_cast<size_t>(f)];
-    const float* a = cp + 3 * t[0];
-    const float* b = cp + 3 * t[1];
-    const float* c = cp + 3 * t[2];
-    const float e1x = b[0] - a[0], e1y = b[1] - a[1], e1z = b[2] - a[2];
-    const float e2x = c[0] - a[0], e2y = c[1] - a[1], e2z = c[2] - a[2];
-    float nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x;
-    const float len2 = nx * nx + ny * ny + nz * nz;
-    if (!(len2 > 0)) continue;
-    const float inv = 1.0f / std::sqrt(len2);
-    nx *= inv;
-    ny *= inv;
-    nz *= inv;
-    for (int k = 0; k < 3; ++k) {
-      float* n = ns + 3 * t[k];
-      n[0] += nx;
-      n[1] += ny;
-      n[2] += nz;
-    }
+    AddUnitTriangleNormal(cp + 4 * t[0], cp + 4 * t[1], cp + 4 * t[2], ns + 4 * t[0],
+                          ns + 4 * t[1], ns + 4 * t[2]);
   }
 
   // 5. World points and normals of the kept vertices; triangles renumbered.
@@ -243,27 +277,34 @@ void DepthMesher::Build(const cv::Mat& depth, double depth_scale, const cv::Mat&
   double* nx = scan->normals.col(0).data();
   double* ny = scan->normals.col(1).data();
   double* nz = scan->normals.col(2).data();
+  // Local copies: the output arrays could otherwise alias them and force reloads.
+  const double r00 = r(0, 0), r01 = r(0, 1), r02 = r(0, 2), r10 = r(1, 0), r11 = r(1, 1),
+               r12 = r(1, 2), r20 = r(2, 0), r21 = r(2, 1), r22 = r(2, 2);
+  const double tx = t.x(), ty = t.y(), tz = t.z();
+  const int* remap = remap_.data();
+  const int* pixels = grid_pixel_.data();
+  int* vertex_pixels = vertex_pixels_.data();
   for (int i = 0; i < candidates; ++i) {
-    const int k = remap_[i];
+    const int k = remap[i];
     if (k < 0) continue;
-    const Eigen::Vector3d c(cp[3 * i], cp[3 * i + 1], cp[3 * i + 2]);
-    const Eigen::Vector3d w = r * c + t;
-    px[k] = w.x();
-    py[k] = w.y();
-    pz[k] = w.z();
-    Eigen::Vector3d n(ns[3 * i], ns[3 * i + 1], ns[3 * i + 2]);
-    const double len = n.norm();
-    if (len > 0) {
-      n /= len;
-      if (n.dot(c) > 0) n = -n;  // the camera centre is the origin of the camera frame
-      n = r * n;
-    } else {
-      n.setZero();
+    const double cx = cp[4 * i], cy = cp[4 * i + 1], cz = cp[4 * i + 2];
+    px[k] = r00 * cx + r01 * cy + r02 * cz + tx;
+    py[k] = r10 * cx + r11 * cy + r12 * cz + ty;
+    pz[k] = r20 * cx + r21 * cy + r22 * cz + tz;
+    double mx = ns[4 * i], my = ns[4 * i + 1], mz = ns[4 * i + 2];
+    const double len2 = mx * mx + my * my + mz * mz;
+    if (len2 > 0) {
+      // Unit length, facing the camera centre (the origin of the camera frame).
+      double scale = 1.0 / std::sqrt(len2);
+      if (mx * cx + my * cy + mz * cz > 0) scale = -scale;
+      mx *= scale;
+      my *= scale;
+      mz *= scale;
     }
-    nx[k] = n.x();
-    ny[k] = n.y();
-    nz[k] = n.z();
-    vertex_pixels_[k] = grid_pixel_[i];
+    nx[k] = r00 * mx + r01 * my + r02 * mz;
+    ny[k] = r10 * mx + r11 * my + r12 * mz;
+    nz[k] = r20 * mx + r21 * my + r22 * mz;
+    vertex_pixels[k] = pixels[i];
   }
   scan->triangles.resize(num_triangles, 3);
   int* t0 = scan->triangles.col(0).data();

@@ -81,13 +81,13 @@ class DepthMesher {
   DepthMeshOptions options_;
   std::vector<int> grid_index_;   // per grid node: provisional vertex id or -1
   std::vector<int> row_range_;    // per grid row: first and one-past-last valid column
-  std::vector<float> grid_z_;     // per provisional vertex: depth (m)
   std::vector<int> grid_pixel_;   // per provisional vertex: pixel index
   std::vector<int> triangles_;    // 3 provisional vertex ids per triangle
   std::vector<int> remap_;        // provisional -> final vertex id (-1: dropped)
   std::vector<int> vertex_pixels_;
-  std::vector<float> camera_points_;  // 3 per provisional vertex, camera frame (m)
-  std::vector<float> normal_sums_;    // 3 per provisional vertex, camera frame
+  // 4 floats (x, y, z, 0) per provisional vertex, camera frame, 16-byte aligned for SIMD.
+  std::vector<float, Eigen::aligned_allocator<float>> camera_points_;  // m
+  std::vector<float, Eigen::aligned_allocator<float>> normal_sums_;
 };
 
 // models/normals.h ComputeVertexNormals (normalised mean of incident unit triangle normals;

@@ -1,5 +1,6 @@
 #include "sensors/preprocess.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 
@@ -40,14 +41,34 @@ int SampleScanColors(const PinholeCamera& cam, const Distortion& distortion,
   const Eigen::Vector3d t = cam.world_to_camera.translation();
   const bool distorted = !distortion.IsZero();
   const double max_u = cam.width - 1, max_v = cam.height - 1;
-  constexpr double kInv255 = 1.0 / 255.0;
+  const int last_u0 = std::max(cam.width - 2, 0), last_v0 = std::max(cam.height - 2, 0);
+  const int dx = cam.width > 1 ? 3 : 0;  // byte offset of the right neighbour
+  const size_t dy = cam.height > 1 ? color_bgr.step[0] : 0;
+  constexpr float kInv255 = 1.0f / 255.0f;
+  const double* px = scan->points.col(0).data();
+  const double* py = scan->points.col(1).data();
+  const double* pz = scan->points.col(2).data();
+  double* red = scan->colors.col(0).data();
+  double* green = scan->colors.col(1).data();
+  double* blue = scan->colors.col(2).data();
   int invalid = 0;
+  // Local copies: the output arrays could otherwise alias them and force reloads.
+  const double r00 = r(0, 0), r01 = r(0, 1), r02 = r(0, 2), r10 = r(1, 0), r11 = r(1, 1),
+               r12 = r(1, 2), r20 = r(2, 0), r21 = r(2, 1), r22 = r(2, 2);
+  const double tx = t.x(), ty = t.y(), tz = t.z();
+  const double fx = cam.fx, fy = cam.fy, cx = cam.cx, cy = cam.cy;
+  const uint8_t* image = color_bgr.data;
+  const size_t row_step = color_bgr.step[0];
+  uint8_t* valid = scan->color_valid.data();
   for (int i = 0; i < n; ++i) {
-    const Eigen::Vector3d c = r * scan->points.row(i).transpose() + t;
+    const double x = r00 * px[i] + r01 * py[i] + r02 * pz[i] + tx;
+    const double y = r10 * px[i] + r11 * py[i] + r12 * pz[i] + ty;
+    const double z = r20 * px[i] + r21 * py[i] + r22 * pz[i] + tz;
     double u = -1, v = -1;
-    if (c.z() > 0) {
-      u = cam.fx * c.x() / c.z() + cam.cx;
-      v = cam.fy * c.y() / c.z() + cam.cy;
+    if (z > 0) {
+      const double inv_z = 1.0 / z;
+      u = fx * x * inv_z + cx;
+      v = fy * y * inv_z + cy;
       if (distorted) {
         const Eigen::Vector2d p = DistortPixel(cam, distortion, Eigen::Vector2d(u, v));
         u = p.x();
@@ -55,25 +76,24 @@ int SampleScanColors(const PinholeCamera& cam, const Distortion& distortion,
       }
     }
     if (!(u >= 0 && v >= 0 && u <= max_u && v <= max_v)) {
-      scan->colors.row(i).setZero();
-      scan->color_valid[i] = 0;
+      red[i] = green[i] = blue[i] = 0;
+      valid[i] = 0;
       ++invalid;
       continue;
     }
-    const int u0 = std::min(static_cast<int>(u), cam.width - 2 < 0 ? 0 : cam.width - 2);
-    const int v0 = std::min(static_cast<int>(v), cam.height - 2 < 0 ? 0 : cam.height - 2);
-    const int u1 = std::min(u0 + 1, cam.width - 1), v1 = std::min(v0 + 1, cam.height - 1);
-    const double a = u - u0, b = v - v0;
-    const uint8_t* p00 = color_bgr.ptr<uint8_t>(v0) + 3 * u0;
-    const uint8_t* p01 = color_bgr.ptr<uint8_t>(v0) + 3 * u1;
-    const uint8_t* p10 = color_bgr.ptr<uint8_t>(v1) + 3 * u0;
-    const uint8_t* p11 = color_bgr.ptr<uint8_t>(v1) + 3 * u1;
-    const double w00 = (1 - a) * (1 - b), w01 = a * (1 - b), w10 = (1 - a) * b, w11 = a * b;
-    for (int k = 0; k < 3; ++k) {  // BGR -> RGB
-      const int s = 2 - k;
-      scan->colors(i, k) = (w00 * p00[s] + w01 * p01[s] + w10 * p10[s] + w11 * p11[s]) * kInv255;
-    }
-    scan->color_valid[i] = 1;
+    const int u0 = std::min(static_cast<int>(u), last_u0);
+    const int v0 = std::min(static_cast<int>(v), last_v0);
+    const float a = static_cast<float>(u - u0), b = static_cast<float>(v - v0);
+    const uint8_t* p00 = image + row_step * v0 + 3 * u0;
+    const uint8_t* p10 = p00 + dy;
+    const float w00 = (1 - a) * (1 - b), w01 = a * (1 - b), w10 = (1 - a) * b, w11 = a * b;
+    auto tap = [&](int c) {
+      return (w00 * p00[c] + w01 * p00[dx + c] + w10 * p10[c] + w11 * p10[dx + c]) * kInv255;
+    };
+    blue[i] = tap(0);  // BGR -> RGB
+    green[i] = tap(1);
+    red[i] = tap(2);
+    valid[i] = 1;
   }
   return invalid;
 }

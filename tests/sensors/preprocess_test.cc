@@ -429,9 +429,9 @@ TEST(ColorSamplingTest, BilinearRgbAndOutsideInvalid) {
   scan.points.row(1) = Eigen::RowVector3d(0, 0, -1);
   scan.points.row(2) = cam.Unproject(-3.0, 50, 2.0).transpose();
   EXPECT_EQ(SampleScanColors(cam, Distortion(), image, &scan), 2);
-  EXPECT_NEAR(scan.colors(0, 0), 17 / 255.0, 1e-9);     // R
-  EXPECT_NEAR(scan.colors(0, 1), 60.75 / 255.0, 1e-9);  // G = v
-  EXPECT_NEAR(scan.colors(0, 2), 40.25 / 255.0, 1e-9);  // B = u
+  EXPECT_NEAR(scan.colors(0, 0), 17 / 255.0, 1e-6);     // R
+  EXPECT_NEAR(scan.colors(0, 1), 60.75 / 255.0, 1e-6);  // G = v
+  EXPECT_NEAR(scan.colors(0, 2), 40.25 / 255.0, 1e-6);  // B = u
   EXPECT_EQ(scan.color_valid, (std::vector<uint8_t>{1, 0, 0}));
   EXPECT_EQ(scan.colors.row(2).norm(), 0.0);
 
@@ -439,8 +439,8 @@ TEST(ColorSamplingTest, BilinearRgbAndOutsideInvalid) {
   const Distortion d{0.1, 0, 0, 0, 0};
   EXPECT_EQ(SampleScanColors(cam, d, image, &scan), 2);
   const Eigen::Vector2d q = DistortPixel(cam, d, Eigen::Vector2d(40.25, 60.75));
-  EXPECT_NEAR(scan.colors(0, 2), q.x() / 255.0, 1e-9);
-  EXPECT_NEAR(scan.colors(0, 1), q.y() / 255.0, 1e-9);
+  EXPECT_NEAR(scan.colors(0, 2), q.x() / 255.0, 1e-6);
+  EXPECT_NEAR(scan.colors(0, 1), q.y() / 255.0, 1e-6);
   EXPECT_THROW(SampleScanColors(cam, d, cv::Mat(10, 10, CV_8UC3), &scan), Error);
 }
 
@@ -505,9 +505,9 @@ TEST(PreprocessorTest, SyntheticFrameGivesTheSubjectMesh) {
     const double v = cal.color.fy * pc.y() / pc.z() + cal.color.cy;
     ASSERT_EQ(scan.color_valid[i], 1);
     if (u < 1 || v < 1 || u > 254 || v > 254) continue;  // away from the 256-pixel wrap
-    EXPECT_NEAR(scan.colors(i, 2), u / 255.0, 1e-9);
-    EXPECT_NEAR(scan.colors(i, 1), v / 255.0, 1e-9);
-    EXPECT_NEAR(scan.colors(i, 0), 200 / 255.0, 1e-9);
+    EXPECT_NEAR(scan.colors(i, 2), u / 255.0, 1e-6);
+    EXPECT_NEAR(scan.colors(i, 1), v / 255.0, 1e-6);
+    EXPECT_NEAR(scan.colors(i, 0), 200 / 255.0, 1e-6);
     ++checked;
   }
   EXPECT_GT(checked, 50);
