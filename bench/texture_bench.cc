@@ -4,11 +4,12 @@
 // front; procedural subject texture, Lambert shading, exposure drift, sensor noise, floor and
 // wall behind), textured into a 2048^2 atlas.
 //
-// BM_AddFrame: the texturer is warmed up with kWarmupFrames frames, then every iteration is one
-//   incremental AddFrame (visibility, pool, MRF with warm start, resampling of the changed
-//   triangles, levelling) on the next frame. Counters: medians over the timed frames of the wall
-//   time, of the process CPU time (all threads) and of each stage; changed triangles and seam
-//   edges per frame.
+// BM_AddFrame/<switch cost>: the texturer is warmed up with kWarmupFrames frames, then every
+//   iteration is one incremental AddFrame (visibility, pool, MRF with warm start, resampling of
+//   the changed triangles, levelling) on the next frame. Counters: medians over the timed frames
+//   of the wall time, of the process CPU time (all threads) and of each stage (stages after the
+//   MRF run concurrently); changed triangles (median, max; how many moved to the newest image or
+//   lost theirs to pruning) and seam edges per frame.
 // BM_ViewSelection/<solver>: the MRF of one frame (pool after kWarmupFrames + 1 images, warm start
 //   and Psi from the previous frame's labelling) built and solved by SelectViews with each
 //   solver: energy, TRW-S lower bound, iterations, solve time.
@@ -26,11 +27,11 @@
 
 #include "energies/texture_terms.h"
 #include "models/skinning.h"
-#include "solvers/seam_levelling.h"
 #include "models/template_generator.h"
 #include "sensors/motion.h"
 #include "sensors/subject_texture.h"
 #include "sensors/virtual_kinect.h"
+#include "solvers/seam_levelling.h"
 #include "texture/texturer.h"
 
 namespace artex {
@@ -99,7 +100,9 @@ TexturingOptions BenchOptions() {
 
 void BM_AddFrame(benchmark::State& state) {
   const Sequence& seq = Walk();
-  Texturer texturer(seq.body, BenchOptions());
+  TexturingOptions options = BenchOptions();
+  options.selection.terms.switch_cost = 1e-3 * static_cast<double>(state.range(0));
+  Texturer texturer(seq.body, options);
   for (int f = 0; f < kWarmupFrames; ++f) texturer.AddFrame(f, seq.color[f], seq.camera, seq.posed[f]);
   std::vector<double> wall, cpu, pool, mrf, sampling, levelling, changed, seams, pool_size;
   std::vector<double> to_newest, from_dropped, textured;
@@ -140,6 +143,8 @@ void BM_AddFrame(benchmark::State& state) {
   state.counters["sampling_ms"] = 1e3 * Median(sampling);
   state.counters["levelling_ms"] = 1e3 * Median(levelling);
   state.counters["changed_tris"] = Median(changed);
+  state.counters["changed_max"] = *std::max_element(changed.begin(), changed.end());
+  state.counters["max_ms"] = 1e3 * *std::max_element(wall.begin(), wall.end());
   state.counters["seam_edges"] = Median(seams);
   state.counters["pool_size"] = Median(pool_size);
   state.counters["textured_tris"] = Median(textured);
@@ -148,7 +153,14 @@ void BM_AddFrame(benchmark::State& state) {
   // Identifies the sequence of labellings (equal hashes: identical view selection).
   state.counters["labels_hash"] = static_cast<double>(labels_hash % 1000000007ull);
 }
-BENCHMARK(BM_AddFrame)->Iterations(kTimedFrames)->Unit(benchmark::kMillisecond)->UseRealTime();
+// Argument: TextureTermOptions::switch_cost in thousandths (0: the paper's energy, default).
+BENCHMARK(BM_AddFrame)
+    ->ArgName("switch_cost_x1000")
+    ->Arg(0)
+    ->Arg(20)
+    ->Iterations(kTimedFrames)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 // The view-selection input of frame kWarmupFrames + 1 for any solver.
 struct SelectionSetup {

@@ -21,6 +21,8 @@ bool TextureTermOptions::IsValid(std::string* error) const {
     msg << "texture.seam_distance_scale: expected > 0, found " << seam_distance_scale;
   else if (!(min_quality >= 0.0 && min_quality < 1.0))
     msg << "texture.min_quality: expected [0, 1), found " << min_quality;
+  else if (!(switch_cost >= 0.0) || !std::isfinite(switch_cost))
+    msg << "texture.switch_cost: expected a finite value >= 0, found " << switch_cost;
   if (msg.str().empty()) return true;
   if (error) *error = msg.str();
   return false;

@@ -60,6 +60,7 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
 
   // Candidates per triangle (ascending labels) and their data costs, in parallel: the best
   // max_candidates images by D (ties: older slot first), the warm-start label, "untextured".
+  ViewSelectionResult result;
   std::vector<int> count(f_count, 0);
   std::vector<int> cand_labels(static_cast<std::size_t>(f_count) * width);
   std::vector<double> cand_costs(static_cast<std::size_t>(f_count) * width);
@@ -87,31 +88,36 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
       int* labels = &cand_labels[static_cast<std::size_t>(f) * width];
       double* costs = &cand_costs[static_cast<std::size_t>(f) * width];
       int n = 0;
+      // Hysteresis: other labels than a pooled previous image pay switch_cost.
+      const bool keeps = warm[f] >= 0 && warm[f] != untextured && options.terms.switch_cost > 0.0;
       for (int l = 0; l < width; ++l) {
         if (!chosen[l]) continue;
         labels[n] = l;
         costs[n] = l == untextured ? options.untextured_cost : d[l];
+        if (keeps && l != warm[f]) costs[n] += options.terms.switch_cost;
         ++n;
       }
       count[f] = n;
     }
   });
 
-  MrfProblem problem(slots + 1);
-  ViewSelectionResult result;
-  {
-    std::vector<int> labels;
-    std::vector<double> costs;
-    for (int f = 0; f < f_count; ++f) {
-      const std::size_t base = static_cast<std::size_t>(f) * width;
-      labels.assign(cand_labels.begin() + base, cand_labels.begin() + base + count[f]);
-      costs.assign(cand_costs.begin() + base, cand_costs.begin() + base + count[f]);
-      result.num_candidates += count[f];
-      problem.AddNode(labels, costs);
+  // Triangles whose only candidate is "untextured" (seen by no pooled image) are fixed: they are
+  // left out of the MRF, their data cost is a constant and their pairwise terms become unaries
+  // of their neighbours (the same energy; moves of every solver see the same costs).
+  std::vector<int> node_of(f_count, -1);
+  std::vector<int> triangle_of;
+  double constant = 0.0;
+  for (int f = 0; f < f_count; ++f) {
+    if (count[f] > 1) {
+      node_of[f] = static_cast<int>(triangle_of.size());
+      triangle_of.push_back(f);
+    } else {
+      constant += cand_costs[static_cast<std::size_t>(f) * width];
     }
   }
+  const double lambda = options.terms.lambda;
 
-  // Pairwise tables over the candidates of both sides, computed in parallel, then added.
+  // Pairwise tables over the candidates of both sides, computed in parallel.
   const int samples =
       slots > 0 ? static_cast<int>(pool.entry(0).edge_colors.rows() / std::max(1, e_count)) : 0;
   std::vector<std::int64_t> table_offset(e_count + 1, 0);
@@ -157,30 +163,72 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
       }
     }
   });
+
+  // Edges with one fixed side: lambda w c(l, untextured) joins the free side's unaries (in the
+  // single precision the MRF stores pairwise costs in).
   for (int e = 0; e < e_count; ++e) {
     const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
+    if ((node_of[fi] >= 0) == (node_of[fj] >= 0)) continue;
+    const bool first_free = node_of[fi] >= 0;
+    const int free = first_free ? fi : fj;
+    const double weight = input.edge_weight.empty() ? 1.0 : input.edge_weight[e];
+    const double* table = &tables[table_offset[e]];
+    double* costs = &cand_costs[static_cast<std::size_t>(free) * width];
+    // The fixed side has one candidate, so the table is a row or a column of count[free].
+    for (int p = 0; p < count[free]; ++p)
+      costs[p] += lambda * weight * static_cast<double>(static_cast<float>(table[p]));
+  }
+
+  const int num_free = static_cast<int>(triangle_of.size());
+  MrfProblem problem(slots + 1);
+  {
+    std::vector<int> labels;
+    std::vector<double> costs;
+    for (int f = 0; f < f_count; ++f) result.num_candidates += count[f];
+    for (int f : triangle_of) {
+      const std::size_t base = static_cast<std::size_t>(f) * width;
+      labels.assign(cand_labels.begin() + base, cand_labels.begin() + base + count[f]);
+      costs.assign(cand_costs.begin() + base, cand_costs.begin() + base + count[f]);
+      problem.AddNode(labels, costs);
+    }
+  }
+  for (int e = 0; e < e_count; ++e) {
+    const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
+    if (node_of[fi] < 0 || node_of[fj] < 0) continue;
     const int* li = &cand_labels[static_cast<std::size_t>(fi) * width];
     const int* lj = &cand_labels[static_cast<std::size_t>(fj) * width];
     const int ni = count[fi], nj = count[fj];
     const double* table = &tables[table_offset[e]];
     const double weight = input.edge_weight.empty() ? 1.0 : input.edge_weight[e];
-    problem.AddEdge(fi, fj, weight, [&](int a, int b) {
+    problem.AddEdge(node_of[fi], node_of[fj], weight, [&](int a, int b) {
       const int p = static_cast<int>(std::lower_bound(li, li + ni, a) - li);
       const int q = static_cast<int>(std::lower_bound(lj, lj + nj, b) - lj);
       return table[p * nj + q];
     });
   }
-  problem.set_smoothness(options.terms.lambda);
+  problem.set_smoothness(lambda);
 
   // Warm start: previous labels where still candidates, else the best unary.
   std::vector<int> x = problem.UnaryArgmin();
-  for (int f = 0; f < f_count; ++f) {
-    if (warm[f] >= 0 && problem.CandidateIndex(f, warm[f]) >= 0) x[f] = warm[f];
+  for (int i = 0; i < num_free; ++i) {
+    const int f = triangle_of[i];
+    if (warm[f] >= 0 && problem.CandidateIndex(i, warm[f]) >= 0) x[i] = warm[f];
   }
-  result.mrf = solver->Solve(problem, &x);
-  result.frames.resize(f_count);
-  for (int f = 0; f < f_count; ++f)
-    result.frames[f] = x[f] == untextured ? -1 : pool.entry(x[f]).frame_index;
+  if (num_free > 0) {
+    result.mrf = solver->Solve(problem, &x);
+  } else {
+    result.mrf.termination = "optimal";
+    result.mrf.lower_bound = 0.0;
+  }
+  // Energies of the whole labelling: add the fixed triangles' constant.
+  result.mrf.initial_energy += constant;
+  result.mrf.energy += constant;
+  if (std::isfinite(result.mrf.lower_bound)) result.mrf.lower_bound += constant;
+  for (double& value : result.mrf.trace) value += constant;
+  for (double& value : result.mrf.bound_trace) value += constant;
+  result.frames.assign(f_count, -1);
+  for (int i = 0; i < num_free; ++i)
+    result.frames[triangle_of[i]] = x[i] == untextured ? -1 : pool.entry(x[i]).frame_index;
   return result;
 }
 

@@ -1,7 +1,7 @@
 // Per-triangle view selection as an MRF (paper eq. 12-14): labels are pool images plus one
-// "untextured" label; D from quality and lifetime, V = (1 - alpha) Pi + alpha Psi on every
-// interior edge, solved by any MrfSolver (solvers/mrf.h), warm-started from the previous
-// labelling.
+// "untextured" label; D from quality and lifetime (plus the optional switch cost,
+// TextureTermOptions::switch_cost), V = (1 - alpha) Pi + alpha Psi on every interior edge,
+// solved by any MrfSolver (solvers/mrf.h), warm-started from the previous labelling.
 #pragma once
 
 #include <string>
@@ -44,6 +44,11 @@ struct ViewSelectionResult {
   int num_candidates = 0;   // sum over triangles
 };
 
+// Triangles seen by no pooled image (only "untextured" is possible) are not MRF nodes: their
+// costs enter as a constant and as unaries of their neighbours. result.mrf reports energies and
+// bounds of the whole labelling (constant included); the solver's progress callback
+// (MrfSolverOptions::callback) sees those of the reduced problem, without the constant.
+// Throws artex::Error for invalid options.
 ViewSelectionResult SelectViews(const ViewSelectionInput& input,
                                 const ViewSelectionOptions& options, MrfSolver* solver);
 
