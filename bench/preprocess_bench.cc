@@ -52,8 +52,8 @@ cv::Mat Render(const PinholeCamera& cam, bool with_subject, std::mt19937_64* rng
   const Eigen::Vector3d o = c2w.translation();
   for (int v = 0; v < cam.height; ++v) {
     for (int u = 0; u < cam.width; ++u) {
-      const Eigen::Vector3d d = c2w.linear() * Eigen::Vector3d((u - cam.cx) / cam.fx,
-                                                               (v - cam.cy) / cam.fy, 1.0);
+      const Eigen::Vector3d d =
+          c2w.linear() * Eigen::Vector3d((u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, 1.0);
       double t = (kWallZ - o.z()) / d.z();
       if (d.y() < 0) t = std::min(t, -o.y() / d.y());
       if (with_subject) {
@@ -67,8 +67,10 @@ cv::Mat Render(const PinholeCamera& cam, bool with_subject, std::mt19937_64* rng
         }
       }
       const double noisy = t + kSigmaAt1m * t * t * noise(*rng);
-      const double q = kFocalBaseline / (std::round(kSubpixel * kFocalBaseline / noisy) / kSubpixel);
-      out.at<uint16_t>(v, u) = uniform(*rng) < kDropout ? 0 : static_cast<uint16_t>(std::lround(q * 1000));
+      const double q =
+          kFocalBaseline / (std::round(kSubpixel * kFocalBaseline / noisy) / kSubpixel);
+      out.at<uint16_t>(v, u) =
+          uniform(*rng) < kDropout ? 0 : static_cast<uint16_t>(std::lround(q * 1000));
     }
   }
   return out;
@@ -80,7 +82,8 @@ struct Scene {
   Frame frame;
   Scene() {
     std::mt19937_64 rng(kSeed);
-    for (int i = 0; i < kBackgroundFrames; ++i) background.push_back(Render(calibration.depth, false, &rng));
+    for (int i = 0; i < kBackgroundFrames; ++i)
+      background.push_back(Render(calibration.depth, false, &rng));
     frame.depth = Render(calibration.depth, true, &rng);
     frame.color.create(calibration.color.height, calibration.color.width, CV_8UC3);
     cv::randu(frame.color, 0, 255);
@@ -143,8 +146,8 @@ void BM_SampleColors(benchmark::State& state) {
   Scan scan;
   pre.Process(scene.frame, &scan);
   for (auto _ : state) {
-    SampleScanColors(scene.calibration.color, scene.calibration.color_distortion,
-                     scene.frame.color, &scan);
+    SampleScanColors(scene.calibration.color, scene.calibration.color_distortion, scene.frame.color,
+                     &scan);
     benchmark::DoNotOptimize(scan.colors.data());
   }
 }

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-
 #include <opencv2/imgproc.hpp>
 
 #include "models/error.h"
@@ -26,7 +25,8 @@ bool BackgroundModelOptions::IsValid(std::string* error) const {
   if (!(min_depth >= 0) || !(max_depth > min_depth)) {
     return fail("min_depth/max_depth: expected 0 <= min_depth < max_depth");
   }
-  if (opening_radius < 0 || closing_radius < 0) return fail("opening/closing_radius: expected >= 0");
+  if (opening_radius < 0 || closing_radius < 0)
+    return fail("opening/closing_radius: expected >= 0");
   return true;
 }
 
@@ -80,12 +80,13 @@ void BackgroundModel::Train(const std::vector<cv::Mat>& frames, double depth_sca
         continue;
       }
       std::sort(samples.begin(), samples.begin() + n);
-      const float m = (n % 2 == 1) ? samples[n / 2]
-                                   : 0.5f * (static_cast<float>(samples[n / 2 - 1]) + samples[n / 2]);
+      const float m = (n % 2 == 1)
+                          ? samples[n / 2]
+                          : 0.5f * (static_cast<float>(samples[n / 2 - 1]) + samples[n / 2]);
       for (int k = 0; k < n; ++k) deviations[k] = std::abs(static_cast<float>(samples[k]) - m);
       std::sort(deviations.begin(), deviations.begin() + n);
-      const float mad = (n % 2 == 1) ? deviations[n / 2]
-                                     : 0.5f * (deviations[n / 2 - 1] + deviations[n / 2]);
+      const float mad =
+          (n % 2 == 1) ? deviations[n / 2] : 0.5f * (deviations[n / 2 - 1] + deviations[n / 2]);
       const double z = m * inv_scale;
       double s = options_.noise_sigma_at_1m * z * z;
       if (options_.use_mad) s = std::max(s, kMadToSigma * mad * inv_scale);

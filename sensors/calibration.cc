@@ -1,13 +1,13 @@
 #include "sensors/calibration.h"
 
+#include <yaml-cpp/yaml.h>
+
+#include <Eigen/Geometry>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <set>
 #include <sstream>
-
-#include <Eigen/Geometry>
-#include <yaml-cpp/yaml.h>
 
 #include "models/error.h"
 #include "sensors/sequence.h"
@@ -127,7 +127,8 @@ void ReadCamera(const std::string& file, const YAML::Node& root, const std::stri
   const YAML::Node d = node["distortion"];
   if (d.IsDefined() && !d.IsNull()) {
     const std::string dp = prefix + "distortion.";
-    if (!d.IsMap()) Fail(file, d, prefix + "distortion", "a mapping {k1, k2, p1, p2, k3}", Found(d));
+    if (!d.IsMap())
+      Fail(file, d, prefix + "distortion", "a mapping {k1, k2, p1, p2, k3}", Found(d));
     CheckKeys(file, d, dp, {"k1", "k2", "p1", "p2", "k3"});
     auto opt = [&](const char* key, double* out) {
       if (d[key].IsDefined() && !d[key].IsNull()) *out = AsDouble(file, d[key], dp + key);
@@ -152,8 +153,8 @@ void ReadCamera(const std::string& file, const YAML::Node& root, const std::stri
   if (orth > kRotationTolerance || std::abs(det - 1.0) > kRotationTolerance) {
     std::ostringstream found;
     found << "|R R^T - I| = " << orth << ", det R = " << det;
-    Fail(file, pose["rotation"], pp + "rotation",
-         "a proper rotation matrix (9 numbers, row-major)", found.str());
+    Fail(file, pose["rotation"], pp + "rotation", "a proper rotation matrix (9 numbers, row-major)",
+         found.str());
   }
   camera->world_to_camera = Eigen::Isometry3d::Identity();
   camera->world_to_camera.linear() = rot;
@@ -173,8 +174,7 @@ std::string Num(double v) {
   return buf;
 }
 
-void EmitCamera(YAML::Emitter& out, const char* name, const PinholeCamera& c,
-                const Distortion& d) {
+void EmitCamera(YAML::Emitter& out, const char* name, const PinholeCamera& c, const Distortion& d) {
   out << YAML::Key << name << YAML::Value << YAML::BeginMap;
   out << YAML::Key << "width" << YAML::Value << c.width << YAML::Comment("pixels");
   out << YAML::Key << "height" << YAML::Value << c.height << YAML::Comment("pixels");
@@ -183,8 +183,10 @@ void EmitCamera(YAML::Emitter& out, const char* name, const PinholeCamera& c,
   out << YAML::Key << "cx" << YAML::Value << Num(c.cx) << YAML::Comment("pixels, column");
   out << YAML::Key << "cy" << YAML::Value << Num(c.cy) << YAML::Comment("pixels, row");
   out << YAML::Key << "distortion" << YAML::Value << YAML::Flow << YAML::BeginMap;
-  out << YAML::Key << "k1" << YAML::Value << Num(d.k1) << YAML::Key << "k2" << YAML::Value << Num(d.k2);
-  out << YAML::Key << "p1" << YAML::Value << Num(d.p1) << YAML::Key << "p2" << YAML::Value << Num(d.p2);
+  out << YAML::Key << "k1" << YAML::Value << Num(d.k1) << YAML::Key << "k2" << YAML::Value
+      << Num(d.k2);
+  out << YAML::Key << "p1" << YAML::Value << Num(d.p1) << YAML::Key << "p2" << YAML::Value
+      << Num(d.p2);
   out << YAML::Key << "k3" << YAML::Value << Num(d.k3) << YAML::EndMap;
   out << YAML::Key << "world_to_camera" << YAML::Value << YAML::BeginMap;
   out << YAML::Key << "rotation" << YAML::Value << YAML::Flow << YAML::BeginSeq;
@@ -247,7 +249,8 @@ void WriteCalibration(const Calibration& calibration, const std::string& path) {
   out << YAML::Key << "version" << YAML::Value << kCalibrationVersion;
   out << YAML::Key << "depth_scale" << YAML::Value << Num(calibration.depth_scale)
       << YAML::Comment("16-bit depth units per metre");
-  out << YAML::Key << "frame_rate" << YAML::Value << Num(calibration.frame_rate) << YAML::Comment("Hz");
+  out << YAML::Key << "frame_rate" << YAML::Value << Num(calibration.frame_rate)
+      << YAML::Comment("Hz");
   EmitCamera(out, "depth", calibration.depth, calibration.depth_distortion);
   EmitCamera(out, "color", calibration.color, calibration.color_distortion);
   out << YAML::EndMap;

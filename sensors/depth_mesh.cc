@@ -260,8 +260,8 @@ void DepthMesher::Build(const cv::Mat& depth, double depth_scale, const cv::Mat&
   float* ns = normal_sums_.data();
   for (int f = 0; f < num_triangles; ++f) {
     const int* t = &triangles_[3 * static_cast<size_t>(f)];
-    AddUnitTriangleNormal(cp + 4 * t[0], cp + 4 * t[1], cp + 4 * t[2], ns + 4 * t[0],
-                          ns + 4 * t[1], ns + 4 * t[2]);
+    AddUnitTriangleNormal(cp + 4 * t[0], cp + 4 * t[1], cp + 4 * t[2], ns + 4 * t[0], ns + 4 * t[1],
+                          ns + 4 * t[2]);
   }
 
   // 5. World points and normals of the kept vertices; triangles renumbered.

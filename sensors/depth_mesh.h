@@ -8,11 +8,10 @@
 // camera (the paper's n(v_s), eq. 4).
 #pragma once
 
-#include <string>
-#include <vector>
-
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
+#include <string>
+#include <vector>
 
 #include "render/camera.h"
 #include "sensors/calibration.h"
@@ -49,8 +48,8 @@ class DepthBackProjector {
  private:
   PinholeCamera camera_;
   std::vector<float> rays_;
-  Eigen::Matrix3d rotation_;        // camera -> world
-  Eigen::Vector3d translation_;     // camera -> world
+  Eigen::Matrix3d rotation_;     // camera -> world
+  Eigen::Vector3d translation_;  // camera -> world
 };
 
 struct DepthMeshStats {
@@ -79,11 +78,11 @@ class DepthMesher {
  private:
   DepthBackProjector projector_;
   DepthMeshOptions options_;
-  std::vector<int> grid_index_;   // per grid node: provisional vertex id or -1
-  std::vector<int> row_range_;    // per grid row: first and one-past-last valid column
-  std::vector<int> grid_pixel_;   // per provisional vertex: pixel index
-  std::vector<int> triangles_;    // 3 provisional vertex ids per triangle
-  std::vector<int> remap_;        // provisional -> final vertex id (-1: dropped)
+  std::vector<int> grid_index_;  // per grid node: provisional vertex id or -1
+  std::vector<int> row_range_;   // per grid row: first and one-past-last valid column
+  std::vector<int> grid_pixel_;  // per provisional vertex: pixel index
+  std::vector<int> triangles_;   // 3 provisional vertex ids per triangle
+  std::vector<int> remap_;       // provisional -> final vertex id (-1: dropped)
   std::vector<int> vertex_pixels_;
   // 4 floats (x, y, z, 0) per provisional vertex, camera frame, 16-byte aligned for SIMD.
   std::vector<float, Eigen::aligned_allocator<float>> camera_points_;  // m

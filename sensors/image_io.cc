@@ -3,11 +3,10 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <system_error>
-#include <vector>
-
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <system_error>
+#include <vector>
 
 #include "models/error.h"
 #include "sensors/sequence.h"
@@ -41,8 +40,8 @@ bool ReadImage(const std::string& path, int flags, cv::Mat* image, std::string* 
 
 std::string MatTypeName(int type) {
   const int depth = CV_MAT_DEPTH(type);
-  const char* names[] = {"CV_8U", "CV_8S", "CV_16U", "CV_16S", "CV_32S", "CV_32F", "CV_64F",
-                         "CV_16F"};
+  const char* names[] = {"CV_8U",  "CV_8S",  "CV_16U", "CV_16S",
+                         "CV_32S", "CV_32F", "CV_64F", "CV_16F"};
   const std::string base = depth >= 0 && depth < 8 ? names[depth] : "CV_?";
   return base + "C" + std::to_string(CV_MAT_CN(type));
 }
@@ -52,8 +51,10 @@ bool ReadDepthImage(const std::string& path, int width, int height, cv::Mat* dep
   if (!ReadImage(path, cv::IMREAD_UNCHANGED | cv::IMREAD_ANYDEPTH, depth, warning)) return false;
   if (depth->type() != CV_16UC1) {
     if (warning) {
-      *warning = path + ": wrong depth image format: expected 16-bit single-channel (CV_16UC1), "
-                 "found " + MatTypeName(depth->type());
+      *warning = path +
+                 ": wrong depth image format: expected 16-bit single-channel (CV_16UC1), "
+                 "found " +
+                 MatTypeName(depth->type());
     }
     return false;
   }

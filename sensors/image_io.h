@@ -3,9 +3,8 @@
 // throwing, so that sequence readers can skip single bad frames (sensors/sequence.h).
 #pragma once
 
-#include <string>
-
 #include <opencv2/core.hpp>
+#include <string>
 
 namespace artex {
 

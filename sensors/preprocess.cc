@@ -104,8 +104,8 @@ Preprocessor::Preprocessor(const Calibration& calibration, const PreprocessOptio
       background_(options.background),
       mesher_(calibration.depth, calibration.depth_distortion, options.mesh) {
   if (!(calibration.depth_scale > 0)) throw Error("calibration: expected a positive depth_scale");
-  if (calibration.color.width <= 0 || calibration.color.height <= 0 || !(calibration.color.fx > 0) ||
-      !(calibration.color.fy > 0)) {
+  if (calibration.color.width <= 0 || calibration.color.height <= 0 ||
+      !(calibration.color.fx > 0) || !(calibration.color.fy > 0)) {
     throw Error("calibration: colour camera: expected positive width, height, fx, fy");
   }
 }
@@ -130,8 +130,9 @@ void Preprocessor::TrainWithoutBackground() {
 
 void Preprocessor::Process(const Frame& frame, Scan* scan, PreprocessStats* stats) {
   if (!trained()) {
-    throw Error("preprocessing: the background model is not trained (call Train with empty-scene "
-                "depth frames, or TrainWithoutBackground)");
+    throw Error(
+        "preprocessing: the background model is not trained (call Train with empty-scene "
+        "depth frames, or TrainWithoutBackground)");
   }
   const auto t0 = std::chrono::steady_clock::now();
   background_.Classify(frame.depth, &mask_);
@@ -139,8 +140,8 @@ void Preprocessor::Process(const Frame& frame, Scan* scan, PreprocessStats* stat
   DepthMeshStats mesh_stats;
   mesher_.Build(frame.depth, calibration_.depth_scale, mask_, scan, &mesh_stats);
   const auto t2 = std::chrono::steady_clock::now();
-  const int invalid = SampleScanColors(calibration_.color, calibration_.color_distortion,
-                                       frame.color, scan);
+  const int invalid =
+      SampleScanColors(calibration_.color, calibration_.color_distortion, frame.color, scan);
   const auto t3 = std::chrono::steady_clock::now();
   if (stats) {
     stats->valid_depth_pixels = cv::countNonZero(frame.depth);

@@ -4,10 +4,9 @@
 // n(v_s), rgb(v_s) of the fitting energy (eq. 4).
 #pragma once
 
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "sensors/background_model.h"
 #include "sensors/calibration.h"
@@ -27,7 +26,7 @@ struct PreprocessStats {
   int valid_depth_pixels = 0;  // depth != 0
   int foreground_pixels = 0;   // after morphology / component selection
   DepthMeshStats mesh;
-  int color_invalid = 0;       // vertices projecting outside the colour image
+  int color_invalid = 0;  // vertices projecting outside the colour image
   double background_seconds = 0, mesh_seconds = 0, color_seconds = 0, total_seconds = 0;
 };
 
@@ -42,7 +41,8 @@ int SampleScanColors(const PinholeCamera& color_camera, const Distortion& distor
 class Preprocessor {
  public:
   // Throws artex::Error for invalid options or calibration.
-  Preprocessor(const Calibration& calibration, const PreprocessOptions& options = PreprocessOptions());
+  Preprocessor(const Calibration& calibration,
+               const PreprocessOptions& options = PreprocessOptions());
 
   // Trains the background model on empty-scene depth frames (CV_16UC1, depth camera size).
   void Train(const std::vector<cv::Mat>& background_depth);

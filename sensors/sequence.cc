@@ -7,9 +7,8 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
-#include <sstream>
-
 #include <opencv2/imgcodecs.hpp>
+#include <sstream>
 
 #include "models/error.h"
 #include "sensors/image_io.h"
@@ -82,8 +81,8 @@ std::vector<CsvLine> ReadCsv(const std::string& path, const std::string& header,
       }
       const bool ok = header_prefix_only ? compact.rfind(header, 0) == 0 : compact == header;
       if (!ok) {
-        throw Error(path + ": line " + std::to_string(number) + ": expected the header '" +
-                    header + (header_prefix_only ? ",..." : "") + "', found '" + t + "'");
+        throw Error(path + ": line " + std::to_string(number) + ": expected the header '" + header +
+                    (header_prefix_only ? ",..." : "") + "', found '" + t + "'");
       }
       if (header_line) *header_line = compact;
       have_header = true;
@@ -91,7 +90,8 @@ std::vector<CsvLine> ReadCsv(const std::string& path, const std::string& header,
     }
     rows.push_back({number, SplitCsv(t)});
   }
-  if (!have_header) throw Error(path + ": expected the header '" + header + "', found an empty file");
+  if (!have_header)
+    throw Error(path + ": expected the header '" + header + "', found an empty file");
   return rows;
 }
 
@@ -125,7 +125,8 @@ void PutU32(uint32_t v, char* out) {
 }
 uint32_t GetU32(const char* in) {
   uint32_t v = 0;
-  for (int i = 0; i < 4; ++i) v |= static_cast<uint32_t>(static_cast<unsigned char>(in[i])) << (8 * i);
+  for (int i = 0; i < 4; ++i)
+    v |= static_cast<uint32_t>(static_cast<unsigned char>(in[i])) << (8 * i);
   return v;
 }
 void PutF32(float f, char* out) {
@@ -158,15 +159,14 @@ Eigen::MatrixX3d DecodeVertices(const std::string& path) {
   const std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   if (data.size() < kVertexHeaderBytes || std::memcmp(data.data(), kVertexMagic, 4) != 0) {
     throw Error(path + ": expected a vertex file starting with the magic 'AXV1', found " +
-                (data.size() < 4 ? std::string("a file of ") + std::to_string(data.size()) +
-                                       " bytes"
-                                 : "'" + data.substr(0, 4) + "'"));
+                (data.size() < 4
+                     ? std::string("a file of ") + std::to_string(data.size()) + " bytes"
+                     : "'" + data.substr(0, 4) + "'"));
   }
   const size_t n = GetU32(&data[4]);
   if (data.size() != kVertexHeaderBytes + 12 * n) {
-    throw Error(path + ": expected " + std::to_string(kVertexHeaderBytes + 12 * n) +
-                " bytes for " + std::to_string(n) + " vertices, found " +
-                std::to_string(data.size()));
+    throw Error(path + ": expected " + std::to_string(kVertexHeaderBytes + 12 * n) + " bytes for " +
+                std::to_string(n) + " vertices, found " + std::to_string(data.size()));
   }
   Eigen::MatrixX3d v(n, 3);
   const char* p = &data[kVertexHeaderBytes];
@@ -198,16 +198,20 @@ struct SequenceReader::Impl {
   int num_joints = 0;
   std::map<int, Eigen::VectorXd> poses;  // frame index -> pose vector
 
-  std::string Path(const std::string& relative) const { return (fs::path(folder) / relative).string(); }
+  std::string Path(const std::string& relative) const {
+    return (fs::path(folder) / relative).string();
+  }
 };
 
 SequenceReader::SequenceReader(const std::string& folder) : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   m.folder = folder;
   std::error_code ec;
-  if (!fs::is_directory(folder, ec)) throw Error(folder + ": expected a sequence folder, found none");
+  if (!fs::is_directory(folder, ec))
+    throw Error(folder + ": expected a sequence folder, found none");
   if (fs::is_empty(folder, ec)) {
-    throw Error(folder + ": expected a sequence folder (calibration.yaml, frames.csv, depth/, "
+    throw Error(folder +
+                ": expected a sequence folder (calibration.yaml, frames.csv, depth/, "
                 "color/), found an empty folder");
   }
   const std::string calib = m.Path("calibration.yaml");
@@ -279,8 +283,10 @@ SequenceReader::SequenceReader(const std::string& folder) : impl_(std::make_uniq
     const int columns = static_cast<int>(SplitCsv(header).size());
     const int parameters = columns - 1;
     if (parameters < kNumGlobalParameters || (parameters - kNumGlobalParameters) % 3 != 0) {
-      throw Error(poses + ": expected a header with 'frame' and 7 + 3 x joints pose columns, "
-                  "found " + std::to_string(columns) + " columns");
+      throw Error(poses +
+                  ": expected a header with 'frame' and 7 + 3 x joints pose columns, "
+                  "found " +
+                  std::to_string(columns) + " columns");
     }
     m.num_joints = (parameters - kNumGlobalParameters) / 3;
     for (const CsvLine& r : lines) {
@@ -336,8 +342,8 @@ std::vector<cv::Mat> SequenceReader::ReadBackgroundFrames() {
   for (const std::string& file : m.background_files) {
     cv::Mat depth;
     std::string warning;
-    if (!ReadDepthImage(m.Path(file), m.calibration.depth.width, m.calibration.depth.height,
-                        &depth, &warning)) {
+    if (!ReadDepthImage(m.Path(file), m.calibration.depth.width, m.calibration.depth.height, &depth,
+                        &warning)) {
       throw Error("background frame " + warning);
     }
     frames.push_back(depth);
@@ -348,8 +354,8 @@ std::vector<cv::Mat> SequenceReader::ReadBackgroundFrames() {
 GroundTruthFrame SequenceReader::ReadGroundTruth(int i) const {
   const Impl& m = *impl_;
   if (i < 0 || i >= num_frames()) {
-    throw Error(m.folder + ": ground truth of frame " + std::to_string(i) + " requested, expected 0.." +
-                std::to_string(num_frames() - 1));
+    throw Error(m.folder + ": ground truth of frame " + std::to_string(i) +
+                " requested, expected 0.." + std::to_string(num_frames() - 1));
   }
   const std::string poses = m.Path("groundtruth/poses.csv");
   if (!m.has_ground_truth) throw Error(poses + ": missing (the sequence has no ground truth)");
@@ -359,7 +365,8 @@ GroundTruthFrame SequenceReader::ReadGroundTruth(int i) const {
     throw Error(poses + ": expected a row for frame " + std::to_string(index) + ", found none");
   }
   GroundTruthFrame truth;
-  truth.pose = Pose::FromVector(it->second, m.num_joints, poses + ": frame " + std::to_string(index));
+  truth.pose =
+      Pose::FromVector(it->second, m.num_joints, poses + ": frame " + std::to_string(index));
   truth.vertices = DecodeVertices(m.Path("groundtruth/vertices/" + Numbered(index, ".bin")));
   return truth;
 }
@@ -388,7 +395,9 @@ struct SequenceWriter::Impl {
   int num_joints = -1;
   bool finished = false;
 
-  std::string Path(const std::string& relative) const { return (fs::path(folder) / relative).string(); }
+  std::string Path(const std::string& relative) const {
+    return (fs::path(folder) / relative).string();
+  }
   void MakeDir(const std::string& relative) const {
     std::error_code ec;
     fs::create_directories(Path(relative), ec);
@@ -407,7 +416,8 @@ SequenceWriter::SequenceWriter(const std::string& folder, const Calibration& cal
   const PinholeCamera& c = calibration.color;
   if (d.width <= 0 || d.height <= 0 || c.width <= 0 || c.height <= 0 || d.fx <= 0 || d.fy <= 0 ||
       c.fx <= 0 || c.fy <= 0 || !(calibration.depth_scale > 0) || !(calibration.frame_rate > 0)) {
-    throw Error(folder + ": invalid calibration for a new sequence: expected positive image sizes, "
+    throw Error(folder +
+                ": invalid calibration for a new sequence: expected positive image sizes, "
                 "focal lengths, depth_scale and frame_rate");
   }
   impl_->MakeDir("");
@@ -424,15 +434,19 @@ void SequenceWriter::AddFrame(const Frame& frame) {
   const std::string what = m.folder + ": frame " + std::to_string(frame.index);
   const PinholeCamera& d = m.calibration.depth;
   const PinholeCamera& c = m.calibration.color;
-  if (frame.depth.type() != CV_16UC1 || frame.depth.cols != d.width || frame.depth.rows != d.height) {
+  if (frame.depth.type() != CV_16UC1 || frame.depth.cols != d.width ||
+      frame.depth.rows != d.height) {
     throw Error(what + ": expected a CV_16UC1 " + std::to_string(d.width) + "x" +
-                std::to_string(d.height) + " depth image, found " + MatTypeName(frame.depth.type()) +
-                " " + std::to_string(frame.depth.cols) + "x" + std::to_string(frame.depth.rows));
+                std::to_string(d.height) + " depth image, found " +
+                MatTypeName(frame.depth.type()) + " " + std::to_string(frame.depth.cols) + "x" +
+                std::to_string(frame.depth.rows));
   }
-  if (frame.color.type() != CV_8UC3 || frame.color.cols != c.width || frame.color.rows != c.height) {
+  if (frame.color.type() != CV_8UC3 || frame.color.cols != c.width ||
+      frame.color.rows != c.height) {
     throw Error(what + ": expected a CV_8UC3 " + std::to_string(c.width) + "x" +
-                std::to_string(c.height) + " colour image, found " + MatTypeName(frame.color.type()) +
-                " " + std::to_string(frame.color.cols) + "x" + std::to_string(frame.color.rows));
+                std::to_string(c.height) + " colour image, found " +
+                MatTypeName(frame.color.type()) + " " + std::to_string(frame.color.cols) + "x" +
+                std::to_string(frame.color.rows));
   }
   if (frame.index < 0) throw Error(what + ": expected a non-negative frame index");
   if (!std::isfinite(frame.depth_timestamp) || !std::isfinite(frame.color_timestamp)) {
@@ -490,8 +504,8 @@ void SequenceWriter::AddGroundTruth(int frame_index, const GroundTruthFrame& tru
   }
   if (!truth.vertices.allFinite()) throw Error(what + ": expected finite vertices");
   if (m.num_joints >= 0 && truth.pose.num_joints() != m.num_joints) {
-    throw Error(what + ": expected " + std::to_string(m.num_joints) + " joints (as earlier frames), found " +
-                std::to_string(truth.pose.num_joints()));
+    throw Error(what + ": expected " + std::to_string(m.num_joints) +
+                " joints (as earlier frames), found " + std::to_string(truth.pose.num_joints()));
   }
   if (m.poses.count(frame_index)) throw Error(what + ": added twice");
   m.num_joints = truth.pose.num_joints();
@@ -515,7 +529,8 @@ std::string SequenceWriter::subject_path() const {
 void SequenceWriter::Finish() {
   Impl& m = *impl_;
   m.CheckOpen("Finish");
-  if (m.rows.empty()) throw Error(m.folder + ": expected at least one frame before Finish(), found none");
+  if (m.rows.empty())
+    throw Error(m.folder + ": expected at least one frame before Finish(), found none");
   if (!m.background_files.empty()) {
     std::string csv = std::string(kBackgroundHeader) + "\n";
     for (size_t i = 0; i < m.background_files.size(); ++i) {

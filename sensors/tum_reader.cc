@@ -1,13 +1,13 @@
 #include "sensors/tum_reader.h"
 
+#include <yaml-cpp/yaml.h>
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <tuple>
-
-#include <yaml-cpp/yaml.h>
 
 #include "models/error.h"
 #include "sensors/image_io.h"
@@ -57,9 +57,9 @@ std::vector<Entry> ReadList(const std::string& path) {
 double ReadNumber(const std::string& path, const YAML::Node& root, const std::string& key,
                   bool required, double fallback, bool positive) {
   const YAML::Node n = root[key];
-  const std::string where =
-      path + (n.IsDefined() ? ": line " + std::to_string(n.Mark().line + 1) : "") + ": field '" +
-      key + "'";
+  const std::string where = path +
+                            (n.IsDefined() ? ": line " + std::to_string(n.Mark().line + 1) : "") +
+                            ": field '" + key + "'";
   if (!n.IsDefined() || n.IsNull()) {
     if (required) throw Error(path + ": field '" + key + "': expected a number, found nothing");
     return fallback;
@@ -68,7 +68,8 @@ double ReadNumber(const std::string& path, const YAML::Node& root, const std::st
   try {
     v = n.as<double>();
   } catch (const YAML::Exception&) {
-    throw Error(where + ": expected a number, found " + (n.IsScalar() ? "'" + n.Scalar() + "'" : "a non-scalar"));
+    throw Error(where + ": expected a number, found " +
+                (n.IsScalar() ? "'" + n.Scalar() + "'" : "a non-scalar"));
   }
   if (!std::isfinite(v) || (positive && v <= 0)) {
     throw Error(where + ": expected a " + std::string(positive ? "positive" : "finite") +
@@ -87,13 +88,14 @@ void ReadIntrinsics(const std::string& path, Calibration* c) {
     throw Error(path + ": not valid YAML: " + e.what());
   }
   if (!root.IsMap()) throw Error(path + ": expected a mapping of intrinsics (fx, fy, cx, cy ...)");
-  const char* valid[] = {"width", "height", "fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3",
-                         "depth_scale"};
+  const char* valid[] = {"width", "height", "fx", "fy", "cx", "cy",
+                         "k1",    "k2",     "p1", "p2", "k3", "depth_scale"};
   for (const auto& kv : root) {
     const std::string key = kv.first.Scalar();
     if (std::find(std::begin(valid), std::end(valid), key) == std::end(valid)) {
       throw Error(path + ": line " + std::to_string(kv.first.Mark().line + 1) + ": unknown key '" +
-                  key + "', expected one of width, height, fx, fy, cx, cy, k1, k2, p1, p2, k3, "
+                  key +
+                  "', expected one of width, height, fx, fy, cx, cy, k1, k2, p1, p2, k3, "
                   "depth_scale");
     }
   }
@@ -151,7 +153,8 @@ TumReader::TumReader(const std::string& folder, const TumReaderOptions& options)
   std::string error;
   if (!options.IsValid(&error)) throw Error(error);
   std::error_code ec;
-  if (!fs::is_directory(folder, ec)) throw Error(folder + ": expected a TUM RGB-D folder, found none");
+  if (!fs::is_directory(folder, ec))
+    throw Error(folder + ": expected a TUM RGB-D folder, found none");
 
   // TUM defaults: 640x480, 5000 units per metre; intrinsics from the file.
   m.calibration.depth_scale = 5000.0;
@@ -178,14 +181,19 @@ TumReader::TumReader(const std::string& folder, const TumReaderOptions& options)
     m.calibration.depth = m.calibration.color = cam;
     m.calibration.depth_distortion = m.calibration.color_distortion = d;
   } else {
-    throw Error(intrinsics + ": missing intrinsics file (keys width, height, fx, fy, cx, cy; "
+    throw Error(intrinsics +
+                ": missing intrinsics file (keys width, height, fx, fy, cx, cy; "
                 "or enable freiburg1_defaults)");
   }
 
   const std::vector<Entry> depth = ReadList((fs::path(folder) / "depth.txt").string());
   const std::vector<Entry> rgb = ReadList((fs::path(folder) / "rgb.txt").string());
-  if (depth.empty()) throw Error((fs::path(folder) / "depth.txt").string() + ": expected at least one entry, found none");
-  if (rgb.empty()) throw Error((fs::path(folder) / "rgb.txt").string() + ": expected at least one entry, found none");
+  if (depth.empty())
+    throw Error((fs::path(folder) / "depth.txt").string() +
+                ": expected at least one entry, found none");
+  if (rgb.empty())
+    throw Error((fs::path(folder) / "rgb.txt").string() +
+                ": expected at least one entry, found none");
 
   // Candidate pairs within the window, then greedy one-to-one by increasing difference.
   std::vector<std::tuple<double, int, int>> candidates;

@@ -1,10 +1,10 @@
 #include "sensors/calibration.h"
 
+#include <gtest/gtest.h>
+
 #include <filesystem>
 #include <fstream>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "models/error.h"
 
@@ -29,8 +29,8 @@ Calibration MakeRig() {
   c.depth.fy = 579.5;
   c.depth.cx = 239.3;
   c.depth.cy = 321.7;
-  c.depth.world_to_camera = PinholeCamera::LookAt(Eigen::Vector3d(0.1, 1.2, 2.5),
-                                                  Eigen::Vector3d(0, 0.9, 0), Eigen::Vector3d::UnitY());
+  c.depth.world_to_camera = PinholeCamera::LookAt(
+      Eigen::Vector3d(0.1, 1.2, 2.5), Eigen::Vector3d(0, 0.9, 0), Eigen::Vector3d::UnitY());
   c.depth_distortion.k1 = -0.12;
   c.depth_distortion.p2 = 0.001;
   c.color.width = 1600;
@@ -39,8 +39,8 @@ Calibration MakeRig() {
   c.color.fy = 1811.0;
   c.color.cx = 801.5;
   c.color.cy = 1015.25;
-  c.color.world_to_camera = PinholeCamera::LookAt(Eigen::Vector3d(-0.05, 1.25, 2.45),
-                                                  Eigen::Vector3d(0, 0.9, 0), Eigen::Vector3d::UnitY());
+  c.color.world_to_camera = PinholeCamera::LookAt(
+      Eigen::Vector3d(-0.05, 1.25, 2.45), Eigen::Vector3d(0, 0.9, 0), Eigen::Vector3d::UnitY());
   c.color_distortion = {0.05, -0.2, 0.0007, -0.0003, 0.11};
   c.depth_scale = 1000.0;
   c.frame_rate = 30.0;
@@ -78,7 +78,8 @@ TEST(CalibrationTest, RoundTripIsExact) {
   WriteCalibration(c, folder + "/calibration.yaml");
   EXPECT_FALSE(fs::exists(folder + "/calibration.yaml.partial"));
   const Calibration r = ReadCalibration(folder + "/calibration.yaml");
-  for (const auto& [a, b] : {std::make_pair(&c.depth, &r.depth), std::make_pair(&c.color, &r.color)}) {
+  for (const auto& [a, b] :
+       {std::make_pair(&c.depth, &r.depth), std::make_pair(&c.color, &r.color)}) {
     EXPECT_EQ(a->width, b->width);
     EXPECT_EQ(a->height, b->height);
     EXPECT_EQ(a->fx, b->fx);
@@ -129,11 +130,13 @@ TEST(CalibrationTest, MalformedFilesNameFileFieldExpectedAndFound) {
     EXPECT_NE(msg.find("depth.width"), std::string::npos) << msg;
   }
   {
-    const std::string msg = ExpectError(Mutated(folder, "scale", "depth_scale: 1000", "depth_scale: x"));
+    const std::string msg =
+        ExpectError(Mutated(folder, "scale", "depth_scale: 1000", "depth_scale: x"));
     EXPECT_NE(msg.find("depth_scale"), std::string::npos) << msg;
   }
   {
-    const std::string msg = ExpectError(Mutated(folder, "rotation", "rotation: [", "rotation: [2, "));
+    const std::string msg =
+        ExpectError(Mutated(folder, "rotation", "rotation: [", "rotation: [2, "));
     EXPECT_NE(msg.find("rotation"), std::string::npos) << msg;  // 10 entries instead of 9
     EXPECT_NE(msg.find("9 numbers"), std::string::npos) << msg;
   }
@@ -196,7 +199,8 @@ TEST(CalibrationTest, UndistortInvertsDistortOverTheImage) {
   }
   EXPECT_LT(worst, 1e-8);
   // And the pixel actually moves (the test is not vacuous).
-  EXPECT_GT((UndistortPixel(cam, d, Eigen::Vector2d(10, 10)) - Eigen::Vector2d(10, 10)).norm(), 1.0);
+  EXPECT_GT((UndistortPixel(cam, d, Eigen::Vector2d(10, 10)) - Eigen::Vector2d(10, 10)).norm(),
+            1.0);
 }
 
 }  // namespace

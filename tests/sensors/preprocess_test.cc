@@ -1,11 +1,11 @@
 #include "sensors/preprocess.h"
 
+#include <gtest/gtest.h>
+
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <random>
-
-#include <Eigen/Eigenvalues>
-#include <gtest/gtest.h>
 
 #include "models/error.h"
 #include "sensors/background_model.h"
@@ -73,8 +73,8 @@ void RenderTruth(const PinholeCamera& cam, bool with_subject, cv::Mat* z, cv::Ma
   for (int v = 0; v < cam.height; ++v) {
     for (int u = 0; u < cam.width; ++u) {
       // Camera-frame direction with z = 1, so the hit parameter is the depth.
-      const Eigen::Vector3d d = c2w.linear() * Eigen::Vector3d((u - cam.cx) / cam.fx,
-                                                               (v - cam.cy) / cam.fy, 1.0);
+      const Eigen::Vector3d d =
+          c2w.linear() * Eigen::Vector3d((u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, 1.0);
       double t = (kWallZ - o.z()) / d.z();
       if (d.y() < 0) t = std::min(t, -o.y() / d.y());  // floor y = 0
       if (with_subject) {
@@ -99,7 +99,8 @@ cv::Mat Measure(const cv::Mat& z, std::mt19937_64* rng) {
       const double noisy = t + kSigmaAt1m * t * t * noise(*rng);
       const double disparity = std::round(kSubpixel * kFocalBaseline / noisy) / kSubpixel;
       const double q = kFocalBaseline / disparity;
-      out.at<uint16_t>(v, u) = uniform(*rng) < kDropout ? 0 : static_cast<uint16_t>(std::lround(q * 1000));
+      out.at<uint16_t>(v, u) =
+          uniform(*rng) < kDropout ? 0 : static_cast<uint16_t>(std::lround(q * 1000));
     }
   }
   return out;
@@ -154,8 +155,8 @@ TEST(BackgroundModelTest, SeparatesSubjectFromSceneAtDefaultNoise) {
   int loose_through = 0;
   for (int v = 0; v < cam.height; ++v) {
     for (int u = 0; u < cam.width; ++u) {
-      loose_through += frame.at<uint16_t>(v, u) != 0 && !subject.at<uint8_t>(v, u) &&
-                       mask.at<uint8_t>(v, u);
+      loose_through +=
+          frame.at<uint16_t>(v, u) != 0 && !subject.at<uint8_t>(v, u) && mask.at<uint8_t>(v, u);
     }
   }
   ::testing::Test::RecordProperty("background_through_without_margin", loose_through);
@@ -167,7 +168,7 @@ TEST(BackgroundModelTest, UnknownBackgroundIsForegroundWithinRange) {
   std::vector<cv::Mat> frames;
   for (int i = 0; i < 6; ++i) {
     cv::Mat f(h, w, CV_16UC1, cv::Scalar(3000));
-    f(cv::Rect(0, 0, 5, h)) = 0;  // never measured (e.g. beyond range, absorbing)
+    f(cv::Rect(0, 0, 5, h)) = 0;             // never measured (e.g. beyond range, absorbing)
     if (i < 4) f(cv::Rect(5, 0, 5, h)) = 0;  // measured only twice: below min_valid_samples
     frames.push_back(f);
   }
@@ -186,9 +187,9 @@ TEST(BackgroundModelTest, UnknownBackgroundIsForegroundWithinRange) {
   frame.at<uint16_t>(3, 16) = 200;   // closer than min_depth
   cv::Mat mask;
   model.Classify(frame, &mask);
-  EXPECT_EQ(mask.at<uint8_t>(0, 0), 255);  // unknown -> foreground
-  EXPECT_EQ(mask.at<uint8_t>(0, 7), 255);  // too few samples -> unknown -> foreground
-  EXPECT_EQ(mask.at<uint8_t>(0, 15), 255); // 1 m in front of the wall
+  EXPECT_EQ(mask.at<uint8_t>(0, 0), 255);   // unknown -> foreground
+  EXPECT_EQ(mask.at<uint8_t>(0, 7), 255);   // too few samples -> unknown -> foreground
+  EXPECT_EQ(mask.at<uint8_t>(0, 15), 255);  // 1 m in front of the wall
   EXPECT_EQ(mask.at<uint8_t>(3, 1), 0);
   EXPECT_EQ(mask.at<uint8_t>(3, 2), 0);
   EXPECT_EQ(mask.at<uint8_t>(3, 15), 0);
@@ -252,8 +253,8 @@ TEST(DepthBackProjectionTest, PlaneBackProjectsToThePlane) {
       for (int u = 0; u < cam.width; ++u) {
         // Ray of the (distorted) pixel: undistort, then intersect with the plane.
         const Eigen::Vector2d p = UndistortPixel(cam, dist, Eigen::Vector2d(u, v));
-        const Eigen::Vector3d ray = c2w.linear() * Eigen::Vector3d((p.x() - cam.cx) / cam.fx,
-                                                                   (p.y() - cam.cy) / cam.fy, 1);
+        const Eigen::Vector3d ray =
+            c2w.linear() * Eigen::Vector3d((p.x() - cam.cx) / cam.fx, (p.y() - cam.cy) / cam.fy, 1);
         const double z = (d - n.dot(c2w.translation())) / n.dot(ray);
         ASSERT_GT(z, 0.5);
         depth.at<uint16_t>(v, u) = static_cast<uint16_t>(std::lround(z * scale));
@@ -261,8 +262,8 @@ TEST(DepthBackProjectionTest, PlaneBackProjectsToThePlane) {
         // The back-projected point reprojects onto its pixel through the distortion model.
         if ((u % 97 == 0) && (v % 83 == 0)) {
           double depth_z = 0;
-          const Eigen::Vector2d back =
-              DistortPixel(cam, dist, cam.Project(exact.row(v * cam.width + u).transpose(), &depth_z));
+          const Eigen::Vector2d back = DistortPixel(
+              cam, dist, cam.Project(exact.row(v * cam.width + u).transpose(), &depth_z));
           EXPECT_LT((back - Eigen::Vector2d(u, v)).norm(), 1e-3);
           EXPECT_NEAR(depth_z, z, 1e-9);
         }
@@ -290,8 +291,8 @@ TEST(DepthBackProjectionTest, PlaneBackProjectsToThePlane) {
   for (int v = 0; v < cam.height; v += 4) {
     for (int u = 0; u < cam.width; u += 4) {
       const Eigen::Vector2d p = UndistortPixel(cam, distortion, Eigen::Vector2d(u, v));
-      const Eigen::Vector3d ray = c2w.linear() * Eigen::Vector3d((p.x() - cam.cx) / cam.fx,
-                                                                 (p.y() - cam.cy) / cam.fy, 1);
+      const Eigen::Vector3d ray =
+          c2w.linear() * Eigen::Vector3d((p.x() - cam.cx) / cam.fx, (p.y() - cam.cy) / cam.fy, 1);
       const double z = (d - n.dot(c2w.translation())) / n.dot(ray);
       wrong.row(k++) = pinhole.WorldPoint(u, v, z).transpose();
     }
@@ -500,7 +501,8 @@ TEST(PreprocessorTest, SyntheticFrameGivesTheSubjectMesh) {
   const Eigen::Isometry3d depth_to_color = cal.DepthToColor();
   int checked = 0;
   for (int i = 0; i < scan.size(); i += 97) {
-    const Eigen::Vector3d pc = depth_to_color * (cal.depth.world_to_camera * scan.points.row(i).transpose());
+    const Eigen::Vector3d pc =
+        depth_to_color * (cal.depth.world_to_camera * scan.points.row(i).transpose());
     const double u = cal.color.fx * pc.x() / pc.z() + cal.color.cx;
     const double v = cal.color.fy * pc.y() / pc.z() + cal.color.cy;
     ASSERT_EQ(scan.color_valid[i], 1);

@@ -1,12 +1,12 @@
 #include "sensors/sequence.h"
 
+#include <gtest/gtest.h>
+
 #include <filesystem>
 #include <fstream>
+#include <opencv2/imgcodecs.hpp>
 #include <random>
 #include <string>
-
-#include <gtest/gtest.h>
-#include <opencv2/imgcodecs.hpp>
 
 #include "models/error.h"
 #include "models/so3.h"
@@ -266,10 +266,10 @@ TEST(SequenceTest, BadFramesAreSkippedWithAWarning) {
   const Recorded r = MakeData(c, 7);
   WriteSequence(folder, c, r);
   fs::remove(folder + "/depth/000001.png");
-  cv::imwrite(folder + "/depth/000002.png", cv::Mat(c.depth.height, c.depth.width, CV_8UC1,
-                                                     cv::Scalar(100)));
-  cv::imwrite(folder + "/color/000000.png", cv::Mat(c.color.height + 1, c.color.width, CV_8UC3,
-                                                     cv::Scalar(1, 2, 3)));
+  cv::imwrite(folder + "/depth/000002.png",
+              cv::Mat(c.depth.height, c.depth.width, CV_8UC1, cv::Scalar(100)));
+  cv::imwrite(folder + "/color/000000.png",
+              cv::Mat(c.color.height + 1, c.color.width, CV_8UC3, cv::Scalar(1, 2, 3)));
   SequenceReader reader(folder);
   Frame f;
   std::string warning;

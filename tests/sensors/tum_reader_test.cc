@@ -1,13 +1,13 @@
 #include "sensors/tum_reader.h"
 
+#include <gtest/gtest.h>
+
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <opencv2/imgcodecs.hpp>
 #include <sstream>
 #include <string>
-
-#include <gtest/gtest.h>
-#include <opencv2/imgcodecs.hpp>
 
 #include "models/error.h"
 
