@@ -38,6 +38,7 @@ struct ExperimentCliOptions {
   int threads = 0;
   bool dry_run = false;
   bool no_plots = false;
+  bool replace_changed = false;
 };
 
 // A python3 that can import matplotlib ("" when none).
@@ -150,6 +151,7 @@ void RunExperimentCli(const ExperimentCliOptions& cli) {
   options.jobs = cli.jobs;
   options.threads_per_run = cli.threads;
   options.dry_run = cli.dry_run;
+  options.replace_changed = cli.replace_changed;
   ProgressDisplay display;
   const ExperimentSummary summary =
       RunExperiment(experiment, cli.output, options, [&](const RunnerEvent& e) { display.Handle(e); });
@@ -367,6 +369,9 @@ void RegisterExperimentCommand(CLI::App* app) {
       ->check(CLI::Range(0, 256));
   sub->add_flag("--dry-run", cli->dry_run, "Validate and list the run folders; run nothing");
   sub->add_flag("--no-plots", cli->no_plots, "Do not call scripts/plot_results.py");
+  sub->add_flag("--replace-changed", cli->replace_changed,
+                "Recompute complete runs (and regenerate sequences) whose inputs changed instead of "
+                "stopping with an error");
   sub->callback([cli]() { RunExperimentCli(*cli); });
 
   // Child entry points (not listed in the help).

@@ -946,16 +946,20 @@ ExperimentSummary RunExperiment(const Experiment& experiment, const std::string&
     s.folder = final_dir.string();
     if (fs::exists(final_dir)) {
       const std::string stored = ReadText((final_dir / "synth.yaml").string());
-      if (stored != s.synth_yaml + "\n") {
+      if (stored != s.synth_yaml + "\n" && options.replace_changed && !options.dry_run) {
+        fs::remove_all(final_dir);
+      } else if (stored != s.synth_yaml + "\n") {
         throw Error(final_dir.string() + ": this sequence was generated from a different spec (" +
                     (stored.empty() ? std::string("none") : stored.substr(0, stored.size() - 1)) +
-                    "; now " + s.synth_yaml + "); delete the folder or give the sequence another name");
+                    "; now " + s.synth_yaml + "); delete the folder, give the sequence another name or pass --replace-changed");
       }
-      RunnerEvent e;
-      e.kind = RunnerEvent::Kind::kSequenceReady;
-      e.label = s.name;
-      emit(e);
-      continue;
+      if (fs::exists(final_dir)) {
+        RunnerEvent e;
+        e.kind = RunnerEvent::Kind::kSequenceReady;
+        e.label = s.name;
+        emit(e);
+        continue;
+      }
     }
     if (options.dry_run) continue;
     const fs::path tmp = seq_root / (kTmpPrefix + s.name + "." + std::to_string(getpid()));
@@ -1040,11 +1044,15 @@ ExperimentSummary RunExperiment(const Experiment& experiment, const std::string&
                               template_identity + "\nconfiguration:\n" + config_text;
       const fs::path final_dir = seq_runs / c.id;
       const std::string label = s.name + "/" + c.id;
+      if (RunIsComplete(final_dir.string()) && options.replace_changed && !options.dry_run &&
+          ReadText((final_dir / kRunKeyFile).string()) != key) {
+        fs::remove_all(final_dir);
+      }
       if (RunIsComplete(final_dir.string())) {
         if (ReadText((final_dir / kRunKeyFile).string()) != key) {
           throw Error(final_dir.string() + ": this run was completed with different inputs (see " +
                       (final_dir / kRunKeyFile).string() +
-                      "); use another output folder or delete the run folder to recompute it");
+                      "); use another output folder, delete the run folder or pass --replace-changed");
         }
         ++skipped;
         RunnerEvent e;

@@ -80,6 +80,9 @@ struct RunnerOptions {
   int jobs = 0;             // runs at a time; 0 = hardware concurrency
   int threads_per_run = 0;  // worker threads of each child; 0 = max(1, cores / jobs)
   bool dry_run = false;     // validate, place sequences' paths, report the plan, run nothing
+  // A complete run or generated sequence whose stored inputs differ from the experiment's is
+  // an error (false) or deleted and recomputed (true).
+  bool replace_changed = false;
 };
 
 // Progress of an experiment (for the CLI's display; the runner never prints).

@@ -319,6 +319,12 @@ TEST(ExperimentRunTest, KilledRunResumesWithIdenticalResultsAndRerunSkips) {
   const int rc = std::system((ArtexCommand(file, out, 1) + " 2>" + (dir / "changed.log").string()).c_str());
   EXPECT_NE(rc, 0);
   EXPECT_NE(ReadText(dir / "changed.log").find("different inputs"), std::string::npos) << ReadText(dir / "changed.log");
+  // ... unless asked to recompute changed runs (the sequences are unchanged and reused).
+  ASSERT_EQ(std::system((ArtexCommand(file, out, 2) + " --replace-changed 2>" + (dir / "replaced.log").string()).c_str()), 0)
+      << ReadText(dir / "replaced.log");
+  EXPECT_EQ(CountDone(out), 4);
+  EXPECT_NE(ReadText(dir / "replaced.log").find("0 already complete"), std::string::npos) << ReadText(dir / "replaced.log");
+  EXPECT_NE(ReadText(out / "runs" / "arms" / "texture.lambda=1" / "run_config.yaml").find("atlas_size: 64"), std::string::npos);
   fs::remove_all(dir);
 }
 
