@@ -86,7 +86,8 @@ struct Scene {
       background.push_back(Render(calibration.depth, false, &rng));
     frame.depth = Render(calibration.depth, true, &rng);
     frame.color.create(calibration.color.height, calibration.color.width, CV_8UC3);
-    cv::randu(frame.color, 0, 255);
+    cv::RNG color_rng(kSeed);
+    color_rng.fill(frame.color, cv::RNG::UNIFORM, 0, 255);
   }
 };
 

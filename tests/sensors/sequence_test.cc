@@ -5,7 +5,6 @@
 #include <filesystem>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
-#include <random>
 #include <string>
 
 #include "models/error.h"
@@ -52,7 +51,7 @@ struct Recorded {
 };
 
 Recorded MakeData(const Calibration& c, uint64_t seed) {
-  std::mt19937_64 rng(seed);
+  cv::RNG rng(seed);  // local generator: no global random state
   Recorded r;
   for (int i = 0; i < kFrames; ++i) {
     Frame f;
@@ -61,8 +60,8 @@ Recorded MakeData(const Calibration& c, uint64_t seed) {
     f.color_timestamp = f.depth_timestamp + 0.0031 * (i + 1);
     f.depth.create(c.depth.height, c.depth.width, CV_16UC1);
     f.color.create(c.color.height, c.color.width, CV_8UC3);
-    cv::randu(f.depth, 0, 65535);
-    cv::randu(f.color, 0, 255);
+    rng.fill(f.depth, cv::RNG::UNIFORM, 0, 65535);
+    rng.fill(f.color, cv::RNG::UNIFORM, 0, 255);
     r.frames.push_back(f);
     GroundTruthFrame t;
     t.pose = Pose::Identity(kJoints);
@@ -70,17 +69,19 @@ Recorded MakeData(const Calibration& c, uint64_t seed) {
     t.pose.translation = Eigen::Vector3d(0.1 * i, 0.9, -0.2);
     t.pose.rotation = ExpSO3(Eigen::Vector3d(0.1, 0.2 * i, -0.3));
     t.pose.joint_rotations[1] = ExpSO3(Eigen::Vector3d(0.0, 0.5, 0.25 * i));
-    t.vertices = Eigen::MatrixX3d::Random(7 + i, 3);
+    t.vertices.resize(7 + i, 3);
+    for (int r = 0; r < t.vertices.rows(); ++r) {
+      for (int k = 0; k < 3; ++k) t.vertices(r, k) = rng.uniform(-1.0, 1.0);
+    }
     r.truth.push_back(t);
   }
   for (int i = 0; i < kBackground; ++i) {
     cv::Mat d(c.depth.height, c.depth.width, CV_16UC1);
-    cv::randu(d, 0, 65535);
+    rng.fill(d, cv::RNG::UNIFORM, 0, 65535);
     r.background.push_back(d);
   }
   r.texture.create(16, 16, CV_8UC3);
-  cv::randu(r.texture, 0, 255);
-  (void)rng;
+  rng.fill(r.texture, cv::RNG::UNIFORM, 0, 255);
   return r;
 }
 
@@ -217,7 +218,6 @@ TEST(SequenceTest, TimestampsOutOfOrderAreErrors) {
   WriteSequence(folder, c, r);
   // Frame 2 gets the depth timestamp of frame 0.
   std::string text = ReadText(folder + "/frames.csv");
-  const std::string t2 = std::to_string(2) + ",";
   const size_t line3 = text.find("\n2,");
   ASSERT_NE(line3, std::string::npos);
   const size_t start = line3 + 3, end = text.find(',', start);
