@@ -159,6 +159,7 @@ SynthSpec SynthSpecFromConfig(const Config& c) {
   o.kinect.frame_rate = o.motion.frame_rate;
   c.Get("amplitude", &o.motion.amplitude);
   c.Get("period_s", &o.motion.period_s);
+  c.Get("ramp_s", &o.motion.ramp_s);
   c.Get("background_frames", &o.background_frames);
   c.Get("color_width", &o.kinect.color_width);
   c.Get("color_height", &o.kinect.color_height);
@@ -501,7 +502,7 @@ std::string CombinationLabel(const ExperimentCombination& c) {
 // ---- public API --------------------------------------------------------------------------------
 
 std::vector<std::string> SynthSpecKeys() {
-  return {"motion", "bvh", "frames", "seed", "noise", "frame_rate", "amplitude", "period_s",
+  return {"motion", "bvh", "frames", "seed", "noise", "frame_rate", "amplitude", "period_s", "ramp_s",
           "background_frames", "color_width", "color_height", "texture_size",
           "subject_resolution", "subject_height", "subject_girth", "yaw_deg", "depth_width",
           "depth_height", "disparity_noise_px", "random_dropout", "color_noise",
