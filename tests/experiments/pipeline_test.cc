@@ -1,0 +1,436 @@
+// RunPipeline and `artex track` end to end on a short synthetic sequence (experiments/pipeline.h):
+// output files and their contents, determinism, configuration errors, unreadable frames, and
+// the command line's exit status. Accuracy on full sequences: tracking_accuracy_test.cc.
+#include "experiments/pipeline.h"
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <mutex>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "experiments/config.h"
+#include "models/error.h"
+#include "models/template_generator.h"
+#include "models/template_io.h"
+#include "sensors/virtual_kinect.h"
+
+namespace artex {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr int kFrames = 6;
+constexpr int kAtlasSize = 256;
+
+std::string ReadText(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+std::vector<std::string> Lines(const std::string& text) {
+  std::vector<std::string> lines;
+  std::stringstream s(text);
+  std::string line;
+  while (std::getline(s, line)) {
+    if (!line.empty()) lines.push_back(line);
+  }
+  return lines;
+}
+
+std::vector<std::string> Fields(const std::string& line) {
+  std::vector<std::string> fields;
+  std::stringstream s(line);
+  std::string f;
+  while (std::getline(s, f, ',')) fields.push_back(f);
+  return fields;
+}
+
+std::string ErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+// Per-process fixture data: a 6-frame walk from the virtual Kinect (default noise, half-size
+// depth camera, small colour camera, coarse subject) and a coarse tracking template, made once.
+class PipelineTestData {
+ public:
+  static PipelineTestData& Get() {
+    static PipelineTestData data;
+    return data;
+  }
+  ~PipelineTestData() {
+    std::error_code ec;
+    fs::remove_all(root_, ec);
+  }
+  const fs::path& root() const { return root_; }
+  const std::string& sequence() const { return sequence_; }
+  const std::string& template_path() const { return template_path_; }
+  int template_vertices() const { return template_vertices_; }
+
+ private:
+  PipelineTestData() {
+    root_ = fs::temp_directory_path() / ("artex_pipeline_test_" + std::to_string(::getpid()));
+    fs::remove_all(root_);
+    fs::create_directories(root_);
+    SynthOptions options;
+    options.motion.type = MotionType::kWalk;
+    options.motion.frames = kFrames;
+    options.kinect.SetNoiseLevel(NoiseLevel::kDefault);
+    PinholeCamera& depth = options.kinect.depth_intrinsics;
+    depth.width = 320;
+    depth.height = 240;
+    depth.fx = depth.fy = 262.5;
+    depth.cx = 159.5;
+    depth.cy = 119.5;
+    options.kinect.color_width = 160;
+    options.kinect.color_height = 204;
+    options.texture.size = 256;
+    options.subject_shape.resolution = 0;
+    options.background_frames = 5;
+    sequence_ = (root_ / "sequence").string();
+    SynthesizeSequence(options, sequence_);
+
+    BodyShapeOptions shape;
+    shape.resolution = 0;
+    const Template tmpl = GenerateTemplate(shape);
+    template_vertices_ = tmpl.num_vertices();
+    template_path_ = (root_ / "template.glb").string();
+    WriteTemplateGlb(template_path_, tmpl);
+  }
+
+  fs::path root_;
+  std::string sequence_, template_path_;
+  int template_vertices_ = 0;
+};
+
+// The default configuration with a small texture atlas (texturing on).
+Config SmallConfig() {
+  Config config = Config::Load(std::string(ARTEX_SOURCE_DIR) + "/configs/default.yaml");
+  config.Set("texture.atlas_size", std::to_string(kAtlasSize));
+  config.Set("pipeline.texture", "true");
+  return config;
+}
+
+PipelineResult Track(const std::string& sequence, const std::string& out,
+                   const Config& config = SmallConfig()) {
+  const PipelineOptions options = LoadPipelineOptions(config);
+  return RunPipeline(sequence, PipelineTestData::Get().template_path(), options, config, out);
+}
+
+fs::path OutDir(const std::string& name) { return PipelineTestData::Get().root() / name; }
+
+// One complete run, shared by the output checks.
+const PipelineResult& FirstRun() {
+  static const PipelineResult result =
+      Track(PipelineTestData::Get().sequence(), OutDir("run_a").string());
+  return result;
+}
+
+TEST(PipelineTest, ResultCoversEveryFrameWithFiniteErrors) {
+  const PipelineResult& r = FirstRun();
+  ASSERT_EQ(static_cast<int>(r.frames.size()), kFrames);
+  EXPECT_EQ(r.skipped_frames, 0);
+  EXPECT_TRUE(r.has_ground_truth);
+  EXPECT_TRUE(r.warnings.empty());
+  for (int i = 0; i < kFrames; ++i) {
+    const FrameRecord& f = r.frames[i];
+    EXPECT_EQ(f.frame, i);
+    EXPECT_FALSE(f.skipped);
+    EXPECT_GT(f.scan_points, 100);
+    EXPECT_TRUE(f.fit.ok()) << f.fit.BriefReport();
+    EXPECT_TRUE(std::isfinite(f.mean_vertex_error_mm));
+    EXPECT_GE(f.max_vertex_error_mm, f.mean_vertex_error_mm);
+    EXPECT_TRUE(std::isfinite(f.mean_joint_error_mm));
+    EXPECT_GT(f.texture.pool_size, 0);
+  }
+  // Coarse template and subject, half-size depth: tracked, not lost.
+  EXPECT_LT(r.mean_vertex_error_mm, 30.0);
+  EXPECT_EQ(r.lost_fraction, 0.0);
+  EXPECT_GT(r.mean_em_iterations, 0.0);
+  EXPECT_GT(r.texture_ms_per_frame, 0.0);
+  EXPECT_GT(r.stream_kbit_per_s, 0.0);
+}
+
+TEST(PipelineTest, PosesAndFramesCsvHaveOneRowPerFrame) {
+  FirstRun();
+  const fs::path out = OutDir("run_a");
+  const std::vector<std::string> poses = Lines(ReadText(out / "poses.csv"));
+  ASSERT_EQ(static_cast<int>(poses.size()), kFrames + 1);
+  const std::vector<std::string> header = Fields(poses[0]);
+  ASSERT_EQ(static_cast<int>(header.size()), 1 + 7 + 3 * kDefaultNumJoints);
+  EXPECT_EQ(header[0], "frame");
+  EXPECT_EQ(header[1], "scale");
+  for (int i = 1; i <= kFrames; ++i) {
+    const std::vector<std::string> row = Fields(poses[i]);
+    ASSERT_EQ(row.size(), header.size()) << poses[i];
+    EXPECT_EQ(std::stoi(row[0]), i - 1);
+    Eigen::VectorXd v(static_cast<Eigen::Index>(row.size() - 1));
+    for (size_t k = 1; k < row.size(); ++k) v[static_cast<Eigen::Index>(k - 1)] = std::stod(row[k]);
+    EXPECT_TRUE(v.allFinite());
+    EXPECT_GT(v[0], 0.5);  // scale
+    EXPECT_NO_THROW(Pose::FromVector(v, kDefaultNumJoints));
+  }
+
+  const std::vector<std::string> frames = Lines(ReadText(out / "frames.csv"));
+  ASSERT_EQ(static_cast<int>(frames.size()), kFrames + 1);
+  const std::vector<std::string> columns = Fields(frames[0]);
+  int error_column = -1;
+  for (size_t c = 0; c < columns.size(); ++c) {
+    if (columns[c] == "mean_vertex_error_mm") error_column = static_cast<int>(c);
+  }
+  ASSERT_GE(error_column, 0);
+  for (int i = 1; i <= kFrames; ++i) {
+    const std::vector<std::string> row = Fields(frames[i]);
+    ASSERT_EQ(row.size(), columns.size()) << frames[i];
+    EXPECT_EQ(std::stoi(row[0]), i - 1);
+    EXPECT_NEAR(std::stod(row[error_column]), FirstRun().frames[i - 1].mean_vertex_error_mm, 1e-3);
+  }
+}
+
+TEST(PipelineTest, MetricsAndSummaryJsonParse) {
+  const PipelineResult& r = FirstRun();
+  const fs::path out = OutDir("run_a");
+  const nlohmann::json metrics = nlohmann::json::parse(ReadText(out / "metrics.json"));
+  EXPECT_EQ(metrics.at("frames").get<int>(), kFrames);
+  EXPECT_EQ(metrics.at("skipped_frames").get<int>(), 0);
+  EXPECT_TRUE(metrics.at("has_ground_truth").get<bool>());
+  for (const char* key : {"mean_vertex_error_mm", "max_vertex_error_mm", "mean_joint_error_mm",
+                          "lost_fraction", "fit_ms_per_frame", "texture_ms_per_frame"}) {
+    ASSERT_TRUE(metrics.at(key).is_number()) << key;
+    EXPECT_TRUE(std::isfinite(metrics.at(key).get<double>())) << key;
+  }
+  EXPECT_NEAR(metrics.at("mean_vertex_error_mm").get<double>(), r.mean_vertex_error_mm, 1e-9);
+
+  const nlohmann::json summary = nlohmann::json::parse(ReadText(out / "summary.json"));
+  ASSERT_EQ(static_cast<int>(summary.at("frames").size()), kFrames);
+  EXPECT_TRUE(summary.at("frames")[0].contains("texture"));
+  // The resolved configuration reloads to the same options.
+  const Config resolved = Config::Load((out / "config.yaml").string());
+  const PipelineOptions options = LoadPipelineOptions(resolved);
+  EXPECT_EQ(options.texturing.atlas_size, kAtlasSize);
+  EXPECT_TRUE(options.texture);
+}
+
+TEST(PipelineTest, TextureAndTrackedGlbAreReadable) {
+  FirstRun();
+  const fs::path out = OutDir("run_a");
+  const cv::Mat atlas = cv::imread((out / "texture.png").string(), cv::IMREAD_COLOR);
+  ASSERT_FALSE(atlas.empty());
+  EXPECT_EQ(atlas.cols, kAtlasSize);
+  EXPECT_EQ(atlas.rows, kAtlasSize);
+  // Something was textured: not a single flat colour.
+  cv::Scalar mean, stddev;
+  cv::meanStdDev(atlas, mean, stddev);
+  EXPECT_GT(stddev[0] + stddev[1] + stddev[2], 5.0);
+  EXPECT_FALSE(cv::imread((out / "labels.png").string(), cv::IMREAD_UNCHANGED).empty());
+
+  GlbTexture texture;
+  const Template tracked = ReadTemplateGlb((out / "tracked.glb").string(), &texture);
+  EXPECT_EQ(tracked.num_vertices(), PipelineTestData::Get().template_vertices());
+  EXPECT_EQ(tracked.num_joints(), kDefaultNumJoints);
+  ASSERT_FALSE(texture.png.empty());
+  const cv::Mat embedded = cv::imdecode(texture.png, cv::IMREAD_COLOR);
+  ASSERT_FALSE(embedded.empty());
+  EXPECT_EQ(embedded.cols, kAtlasSize);
+  EXPECT_EQ(cv::norm(embedded, atlas, cv::NORM_INF), 0.0);
+  // No per-frame meshes unless asked.
+  EXPECT_FALSE(fs::exists(out / "meshes"));
+}
+
+TEST(PipelineTest, TwoRunsGiveIdenticalPoses) {
+  FirstRun();
+  Track(PipelineTestData::Get().sequence(), OutDir("run_b").string());
+  const std::string a = ReadText(OutDir("run_a") / "poses.csv");
+  const std::string b = ReadText(OutDir("run_b") / "poses.csv");
+  ASSERT_FALSE(a.empty());
+  EXPECT_EQ(a, b);
+  EXPECT_EQ(ReadText(OutDir("run_a") / "texture.png"), ReadText(OutDir("run_b") / "texture.png"));
+}
+
+TEST(PipelineTest, MissingSequenceFolderNamesIt) {
+  const std::string missing = (PipelineTestData::Get().root() / "no_such_sequence").string();
+  const std::string msg = ErrorOf([&] { Track(missing, OutDir("run_missing").string()); });
+  EXPECT_NE(msg.find("no_such_sequence"), std::string::npos) << msg;
+  EXPECT_FALSE(fs::exists(OutDir("run_missing") / "metrics.json"));
+}
+
+TEST(PipelineTest, UnknownConfigKeyListsTheValidKeys) {
+  {
+    const Config c = Config::FromString("fitting:\n  solverr: ceres_lm\n", "bad.yaml");
+    const std::string msg = ErrorOf([&] { LoadPipelineOptions(c); });
+    EXPECT_NE(msg.find("solverr"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("bad.yaml"), std::string::npos) << msg;
+    for (const char* valid : {"solver", "correspondence", "tracking_radii", "scale_mode"})
+      EXPECT_NE(msg.find(valid), std::string::npos) << valid << " missing in: " << msg;
+  }
+  {
+    const Config c = Config::FromString("fiting:\n  solver: ceres_lm\n", "top.yaml");
+    const std::string msg = ErrorOf([&] { LoadPipelineOptions(c); });
+    EXPECT_NE(msg.find("fiting"), std::string::npos) << msg;
+    for (const char* valid : {"preprocess", "fitting", "texture", "pipeline"})
+      EXPECT_NE(msg.find(valid), std::string::npos) << valid << " missing in: " << msg;
+  }
+}
+
+TEST(PipelineTest, WrongTypeNamesFileAndKey) {
+  const Config c = Config::FromString("texture:\n  atlas_size: large\n", "typed.yaml");
+  const std::string msg = ErrorOf([&] { LoadPipelineOptions(c); });
+  EXPECT_NE(msg.find("typed.yaml"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("texture.atlas_size"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("large"), std::string::npos) << msg;
+
+  const Config b = Config::FromString("pipeline:\n  texture: [1, 2]\n", "typed.yaml");
+  const std::string msg2 = ErrorOf([&] { LoadPipelineOptions(b); });
+  EXPECT_NE(msg2.find("typed.yaml"), std::string::npos) << msg2;
+  EXPECT_NE(msg2.find("pipeline.texture"), std::string::npos) << msg2;
+}
+
+TEST(PipelineTest, InvalidOptionValuesAreRejected) {
+  {
+    const Config c = Config::FromString("fitting:\n  solver: newton\n", "v.yaml");
+    const std::string msg = ErrorOf([&] { LoadPipelineOptions(c); });
+    EXPECT_NE(msg.find("newton"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("gauss_newton"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("ceres_lm"), std::string::npos) << msg;
+  }
+  {
+    const Config c = Config::FromString("texture:\n  solver: simulated_annealing\n", "v.yaml");
+    const std::string msg = ErrorOf([&] { LoadPipelineOptions(c); });
+    EXPECT_NE(msg.find("simulated_annealing"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("alpha_expansion"), std::string::npos) << msg;
+  }
+  {
+    const Config c = Config::FromString("pipeline:\n  lost_threshold_mm: -5\n", "v.yaml");
+    const std::string msg = ErrorOf([&] { LoadPipelineOptions(c); });
+    EXPECT_NE(msg.find("lost_threshold_mm"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("-5"), std::string::npos) << msg;
+  }
+  {
+    const Config c = Config::FromString("fitting:\n  max_iterations: 0\n", "v.yaml");
+    const std::string msg = ErrorOf([&] { LoadPipelineOptions(c); });
+    EXPECT_NE(msg.find("max_iterations"), std::string::npos) << msg;
+  }
+  // Invalid options passed directly are rejected before any output is written.
+  PipelineOptions options;
+  options.max_frames = -1;
+  const std::string msg = ErrorOf([&] {
+    RunPipeline(PipelineTestData::Get().sequence(), "", options, Config(),
+                OutDir("run_invalid").string());
+  });
+  EXPECT_NE(msg.find("max_frames"), std::string::npos) << msg;
+  EXPECT_FALSE(fs::exists(OutDir("run_invalid")));
+}
+
+TEST(PipelineTest, UnreadableFramesAreSkippedWarnedAndCounted) {
+  const fs::path copy = OutDir("sequence_damaged");
+  fs::copy(PipelineTestData::Get().sequence(), copy, fs::copy_options::recursive);
+  // Frame 2 without its colour image, frame 4 without its depth image (names from frames.csv).
+  const std::vector<std::string> rows = Lines(ReadText(copy / "frames.csv"));
+  ASSERT_EQ(static_cast<int>(rows.size()), kFrames + 1);
+  const std::vector<std::string> header = Fields(rows[0]);
+  ASSERT_EQ(header.size(), 5u);
+  ASSERT_EQ(header[3], "depth_file");
+  ASSERT_EQ(header[4], "color_file");
+  const std::string color2 = Fields(rows[3])[4], depth4 = Fields(rows[5])[3];
+  ASSERT_TRUE(fs::remove(copy / color2));
+  ASSERT_TRUE(fs::remove(copy / depth4));
+
+  const PipelineResult r = Track(copy.string(), OutDir("run_damaged").string());
+  ASSERT_EQ(static_cast<int>(r.frames.size()), kFrames);
+  EXPECT_EQ(r.skipped_frames, 2);
+  ASSERT_EQ(r.warnings.size(), 2u);
+  EXPECT_NE(r.warnings[0].find(fs::path(color2).filename().string()), std::string::npos)
+      << r.warnings[0];
+  EXPECT_NE(r.warnings[1].find(fs::path(depth4).filename().string()), std::string::npos)
+      << r.warnings[1];
+  for (const FrameRecord& f : r.frames) {
+    EXPECT_EQ(f.skipped, f.frame == 2 || f.frame == 4) << "frame " << f.frame;
+    if (!f.skipped) {
+      EXPECT_TRUE(f.fit.ok()) << "frame " << f.frame;
+      EXPECT_LT(f.mean_vertex_error_mm, 50.0) << "frame " << f.frame;
+    }
+  }
+  EXPECT_EQ(r.lost_fraction, 0.0);
+  const std::vector<std::string> poses = Lines(ReadText(OutDir("run_damaged") / "poses.csv"));
+  ASSERT_EQ(static_cast<int>(poses.size()), 1 + kFrames - 2);
+  std::vector<int> written;
+  for (size_t i = 1; i < poses.size(); ++i) written.push_back(std::stoi(Fields(poses[i])[0]));
+  EXPECT_EQ(written, (std::vector<int>{0, 1, 3, 5}));
+  const nlohmann::json metrics =
+      nlohmann::json::parse(ReadText(OutDir("run_damaged") / "metrics.json"));
+  EXPECT_EQ(metrics.at("skipped_frames").get<int>(), 2);
+  const nlohmann::json summary =
+      nlohmann::json::parse(ReadText(OutDir("run_damaged") / "summary.json"));
+  EXPECT_EQ(summary.at("warnings").size(), 2u);
+}
+
+// Runs a shell command; returns its exit status and its combined output in *output.
+int RunCommand(const std::string& command, std::string* output) {
+  const fs::path log = PipelineTestData::Get().root() / "command.log";
+  const int status = std::system((command + " > '" + log.string() + "' 2>&1").c_str());
+  *output = ReadText(log);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+TEST(PipelineTest, TrackCommandExitStatus) {
+  const PipelineTestData& data = PipelineTestData::Get();
+  const std::string binary = ARTEX_BINARY;
+  ASSERT_TRUE(fs::exists(binary)) << binary;
+  const fs::path config = data.root() / "small.yaml";
+  {
+    std::ofstream out(config);
+    out << "texture:\n  atlas_size: " << kAtlasSize << "\n";
+  }
+  std::string output;
+  const std::string missing = (data.root() / "missing_sequence").string();
+  EXPECT_NE(RunCommand("'" + binary + "' track '" + missing + "' -o '" +
+                           (data.root() / "cli_missing").string() + "' -q",
+                       &output),
+            0);
+  EXPECT_NE(output.find("missing_sequence"), std::string::npos) << output;
+
+  const fs::path out = data.root() / "cli_out";
+  EXPECT_EQ(RunCommand("'" + binary + "' track '" + data.sequence() + "' -c '" + config.string() +
+                           "' -t '" + data.template_path() + "' -o '" + out.string() + "' -q",
+                       &output),
+            0)
+      << output;
+  EXPECT_NE(output.find("mean vertex error"), std::string::npos) << output;
+  EXPECT_EQ(static_cast<int>(Lines(ReadText(out / "poses.csv")).size()), kFrames + 1);
+  EXPECT_TRUE(fs::exists(out / "tracked.glb"));
+
+  // A configuration with an unknown key fails and names the file.
+  const fs::path bad = data.root() / "bad_config.yaml";
+  {
+    std::ofstream o(bad);
+    o << "fitting:\n  radius: 0.1\n";
+  }
+  EXPECT_NE(RunCommand("'" + binary + "' track '" + data.sequence() + "' -c '" + bad.string() +
+                           "' -o '" + (data.root() / "cli_bad").string() + "' -q",
+                       &output),
+            0);
+  EXPECT_NE(output.find("bad_config.yaml"), std::string::npos) << output;
+  EXPECT_NE(output.find("radius"), std::string::npos) << output;
+}
+
+}  // namespace
+}  // namespace artex
