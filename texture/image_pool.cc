@@ -14,6 +14,10 @@
 #include "models/error.h"
 
 namespace artex {
+namespace {
+// Surface-aware sampling: qualities below this are clamped (bounds the slope tolerance).
+constexpr double kMinSurfaceQuality = 0.05;
+}  // namespace
 
 TextureMesh TextureMesh::Build(const Eigen::MatrixX3i& triangles) {
   TextureMesh mesh;
@@ -55,7 +59,42 @@ bool ImagePoolOptions::IsValid(std::string* error) const {
 
 std::size_t PoolEntry::MemoryBytes() const {
   return image.total() * image.elemSize() + vertices.size() * sizeof(double) +
-         visibility.visible.size() * 5 + vertex_colors.size() * 4 + edge_colors.size() * 4;
+         visibility.visible.size() * 5 + vertex_colors.size() * 4 + edge_colors.size() * 4 +
+         surface.MemoryBytes();
+}
+
+bool PoolEntry::SampleSurface(const Eigen::Vector3d& point, double quality, bool fallback,
+                              Eigen::Vector3f* color) const {
+  const double z = point.z();
+  const Eigen::Vector2d pixel(camera.fx * point.x() / z + camera.cx,
+                              camera.fy * point.y() / z + camera.cy);
+  if (surface.depth.empty()) return Sample(pixel, color);
+  const double x = pixel.x() - offset.x();
+  const double y = pixel.y() - offset.y();
+  if (!(x >= 0.0 && y >= 0.0 && x <= image.cols - 1 && y <= image.rows - 1)) return false;
+  const int x0 = std::min(static_cast<int>(x), image.cols - 2 < 0 ? 0 : image.cols - 2);
+  const int y0 = std::min(static_cast<int>(y), image.rows - 2 < 0 ? 0 : image.rows - 2);
+  const int x1 = std::min(x0 + 1, image.cols - 1);
+  const int y1 = std::min(y0 + 1, image.rows - 1);
+  const float fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
+  const double w = std::max(quality, kMinSurfaceQuality);
+  const double tolerance =
+      depth_tolerance + std::sqrt(2.0) * (z / camera.fx) * std::sqrt(1.0 - w * w) / w;
+  const int xs[4] = {x0, x1, x0, x1}, ys[4] = {y0, y0, y1, y1};
+  const float weights[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy};
+  float total = 0.0f;
+  Eigen::Vector3f sum = Eigen::Vector3f::Zero();
+  for (int k = 0; k < 4; ++k) {
+    if (weights[k] <= 0.0f) continue;
+    const float d = surface.At(xs[k] + offset.x(), ys[k] + offset.y());
+    if (!(std::abs(d - z) <= tolerance)) continue;
+    const cv::Vec3b& c = image.ptr<cv::Vec3b>(ys[k])[xs[k]];
+    sum += weights[k] * Eigen::Vector3f(c[0], c[1], c[2]);
+    total += weights[k];
+  }
+  if (total <= 0.0f) return fallback && Sample(pixel, color);
+  *color = sum / (255.0f * total);
+  return true;
 }
 
 ImagePool::ImagePool(const TextureMesh* mesh, const ImagePoolOptions& pool_options,
@@ -81,7 +120,9 @@ int ImagePool::Add(int frame_index, const cv::Mat& color_bgr, const PinholeCamer
   entry->camera = camera;
   entry->vertices = posed_vertices;
   entry->visibility =
-      ComputeVisibility(posed_vertices, mesh_->triangles, camera, visibility_options_);
+      ComputeVisibility(posed_vertices, mesh_->triangles, camera, visibility_options_,
+                        options_.surface_aware_sampling ? &entry->surface : nullptr);
+  entry->depth_tolerance = visibility_options_.depth_tolerance;
   // Camera coordinates of every vertex (sample points along edges are linear in them).
   const int v_count = static_cast<int>(posed_vertices.rows());
   const Eigen::Matrix3d rotation = camera.world_to_camera.linear();
@@ -117,17 +158,29 @@ int ImagePool::Add(int frame_index, const cv::Mat& color_bgr, const PinholeCamer
     entry->image = cv::Mat(1, 1, CV_8UC3, cv::Scalar(0, 0, 0));
     entry->offset = {-10, -10};  // nothing samples inside
   }
-  // Colours at vertices that belong to a visible triangle.
+  // Colours at vertices that belong to a visible triangle (with vertex_colors_need_full_ring:
+  // whose triangles are all visible), seen at the lowest quality of those.
   const float nan = std::numeric_limits<float>::quiet_NaN();
-  std::vector<uint8_t> vertex_seen(v_count, 0);
+  const TriangleVisibility& vis = entry->visibility;
+  std::vector<float> vertex_quality(v_count, 2.0f);  // > 1: not seen
   for (int f = 0; f < mesh_->triangles.rows(); ++f) {
-    if (!entry->visibility.visible[f]) continue;
-    for (int c = 0; c < 3; ++c) vertex_seen[mesh_->triangles(f, c)] = 1;
+    if (!vis.visible[f]) continue;
+    for (int c = 0; c < 3; ++c) {
+      float& q = vertex_quality[mesh_->triangles(f, c)];
+      q = std::min(q, vis.quality[f]);
+    }
+  }
+  if (options_.vertex_colors_need_full_ring) {
+    for (int f = 0; f < mesh_->triangles.rows(); ++f) {
+      if (vis.visible[f]) continue;
+      for (int c = 0; c < 3; ++c) vertex_quality[mesh_->triangles(f, c)] = 2.0f;
+    }
   }
   entry->vertex_colors.setConstant(v_count, 3, nan);
   for (int v = 0; v < v_count; ++v) {
     Eigen::Vector3f color;
-    if (vertex_seen[v] && pixels[v].allFinite() && entry->Sample(pixels[v], &color))
+    if (vertex_quality[v] <= 1.0f && pixels[v].allFinite() &&
+        entry->SampleSurface(cam.col(v), vertex_quality[v], false, &color))
       entry->vertex_colors.row(v) = color.transpose();
   }
   // Colours along edges with a visible side (edges are independent: parallel).
@@ -139,15 +192,16 @@ int ImagePool::Add(int frame_index, const cv::Mat& color_bgr, const PinholeCamer
   tbb::parallel_for(tbb::blocked_range<int>(0, e_count, 4096),
                     [&](const tbb::blocked_range<int>& range) {
     for (int e = range.begin(); e < range.end(); ++e) {
-      if (!e_ref.visibility.visible[mesh_->edge_faces(e, 0)] &&
-          !e_ref.visibility.visible[mesh_->edge_faces(e, 1)])
-        continue;
+      const int f0 = mesh_->edge_faces(e, 0), f1 = mesh_->edge_faces(e, 1);
+      if (!vis.visible[f0] && !vis.visible[f1]) continue;
+      const float quality = std::min(vis.visible[f0] ? vis.quality[f0] : 1.0f,
+                                     vis.visible[f1] ? vis.quality[f1] : 1.0f);
       const Eigen::Vector3d a = cam.col(mesh_->edges(e, 0));
       const Eigen::Vector3d b = cam.col(mesh_->edges(e, 1));
       for (int k = 0; k < samples; ++k) {
         const double t = (k + 0.5) / samples;
         Eigen::Vector3f color;
-        if (e_ref.Sample(project((1 - t) * a + t * b), &color))
+        if (e_ref.SampleSurface((1 - t) * a + t * b, quality, false, &color))
           edge_colors.row(static_cast<Eigen::Index>(e) * samples + k) = color.transpose();
       }
     }

@@ -34,6 +34,23 @@ struct ImagePoolOptions {
   int histogram_bins = 4;    // coarse histogram of W over the pool (pruning rule); >= 1
   int crop_margin = 8;       // pixels kept around the subject's projection; >= 0
   int edge_samples = 5;      // colour samples along each edge for the seam cost; >= 2
+  // Sample colours only from pixels showing the sampled surface: a pixel of the bilinear
+  // footprint counts when the visibility z-buffer there is within
+  //   depth_tolerance + sqrt(2) (z / fx) tan(acos W)
+  // of the sample's depth z (VisibilityOptions::depth_tolerance plus the depth change across
+  // one pixel diagonal of a surface seen at quality W, W clamped at >= 0.05), and the bilinear
+  // weights are renormalised over those.
+  // Near silhouettes and occlusion borders plain bilinear sampling mixes in the background or
+  // the occluder. Vertex and edge colours without any such pixel are unknown (NaN); texels
+  // then fall back to plain bilinear. Keeps the z-buffer with each image (4 bytes per pixel of
+  // the subject's bounding box at VisibilityOptions::raster_scale^2). false: plain bilinear
+  // sampling everywhere.
+  bool surface_aware_sampling = true;
+  // A vertex's colour (the seam levelling's input and the fitting's rgb(v')) is measured in an
+  // image only when every triangle around the vertex is visible there: at silhouettes and
+  // occlusion borders the one sample mixes surfaces or is seen edge-on. false: when any
+  // triangle around it is visible.
+  bool vertex_colors_need_full_ring = true;
 
   bool IsValid(std::string* error) const;
 };
@@ -46,9 +63,12 @@ struct PoolEntry {
   cv::Mat image;                 // CV_8UC3 (BGR), cropped
   Eigen::Vector2i offset{0, 0};  // crop origin in the full image (pixels)
   PinholeCamera camera;          // full-image colour camera
+  SurfaceDepth surface;          // visibility z-buffer (empty without surface-aware sampling)
+  double depth_tolerance = 0.0;  // VisibilityOptions::depth_tolerance used for `surface`
   Eigen::MatrixX3d vertices;     // V x 3 posed template of that frame (world, m)
   TriangleVisibility visibility;
-  // V x 3 colours (channel order of `image`, [0, 1]) at the projected vertices; NaN outside.
+  // V x 3 colours (channel order of `image`, [0, 1]) at the projected vertices; NaN where not
+  // measured (ImagePoolOptions::vertex_colors_need_full_ring, surface_aware_sampling).
   ColorRows vertex_colors;
   // (E * edge_samples) x 3 colours along every edge (rows e * samples + k); NaN where the edge
   // is not seen (neither side visible).
@@ -56,6 +76,12 @@ struct PoolEntry {
 
   // Bilinear colour at a full-image pixel position; false outside the crop.
   inline bool Sample(const Eigen::Vector2d& pixel, Eigen::Vector3f* color) const;
+  // Colour of the surface point at camera coordinates `point` (m) seen at quality W = quality:
+  // surface-aware bilinear sampling (ImagePoolOptions::surface_aware_sampling) when the entry
+  // keeps its z-buffer, else plain. Without a pixel on the surface: plain bilinear when
+  // `fallback`, else false. false outside the crop.
+  bool SampleSurface(const Eigen::Vector3d& point, double quality, bool fallback,
+                     Eigen::Vector3f* color) const;
   std::size_t MemoryBytes() const;
 };
 

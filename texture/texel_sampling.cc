@@ -72,20 +72,18 @@ int SampleTriangle(const AtlasMap& map, int f, const Eigen::MatrixX3i& triangles
                    const PoolEntry& entry, TexelBuffer* texels) {
   // The texel's surface point w . (a, b, c) is projected through the entry's camera; camera
   // coordinates are linear in the barycentrics, so the corners are transformed once.
-  const PinholeCamera& camera = entry.camera;
   Eigen::Vector3d corner[3];
   for (int k = 0; k < 3; ++k)
-    corner[k] = camera.world_to_camera * entry.vertices.row(triangles(f, k)).transpose();
+    corner[k] = entry.camera.world_to_camera * entry.vertices.row(triangles(f, k)).transpose();
   Eigen::Vector3f* color = texels->color.data();
   uint8_t* valid = texels->valid.data();
   int written = 0;
+  const double quality = entry.visibility.quality[f];
   for (int p = map.first(f); p < map.last(f); ++p) {
     const Eigen::Vector3f& w = map.barycentric_at(p);
     const Eigen::Vector3d c = w.x() * corner[0] + w.y() * corner[1] + w.z() * corner[2];
-    const Eigen::Vector2d pixel(camera.fx * c.x() / c.z() + camera.cx,
-                                camera.fy * c.y() / c.z() + camera.cy);
     Eigen::Vector3f value;
-    if (!entry.Sample(pixel, &value)) continue;
+    if (!entry.SampleSurface(c, quality, true, &value)) continue;
     color[p] = value;
     valid[p] = 1;
     ++written;

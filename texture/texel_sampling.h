@@ -64,7 +64,8 @@ struct TexelBuffer {
 };
 
 // Samples every texel of triangle f from pool entry `entry` (bilinear, through the entry's
-// posed vertices and camera). Texels whose point falls outside the crop keep their old value.
+// posed vertices and camera; surface-aware, PoolEntry::SampleSurface at the triangle's quality
+// in that image). Texels whose point falls outside the crop keep their old value.
 // Returns the number of texels written. Different triangles may be sampled concurrently.
 int SampleTriangle(const AtlasMap& map, int f, const Eigen::MatrixX3i& triangles,
                    const PoolEntry& entry, TexelBuffer* texels);

@@ -32,7 +32,8 @@ bool VisibilityOptions::IsValid(std::string* error) const {
 TriangleVisibility ComputeVisibility(const Eigen::MatrixX3d& vertices,
                                      const Eigen::MatrixX3i& triangles,
                                      const PinholeCamera& camera,
-                                     const VisibilityOptions& options) {
+                                     const VisibilityOptions& options,
+                                     SurfaceDepth* surface) {
   const int num_vertices = static_cast<int>(vertices.rows());
   const int num_triangles = static_cast<int>(triangles.rows());
   const RasterOptions raster_options;
@@ -84,6 +85,7 @@ TriangleVisibility ComputeVisibility(const Eigen::MatrixX3d& vertices,
     Rasterize(vertices, triangles, zcam, raster_options, &buffers);
   }
   const float kNoSurface = std::numeric_limits<float>::infinity();
+  const float* depth = buffers.depth.data();  // stays valid when moved into *surface
   const auto zbuffer = [&](double u, double v) {
     if (!any_pixels) return kNoSurface;
     const double su = s == 1.0 ? u : (u + 0.5) * s - 0.5;
@@ -91,8 +93,16 @@ TriangleVisibility ComputeVisibility(const Eigen::MatrixX3d& vertices,
     const int x = static_cast<int>(std::lround(su)) - x0;
     const int y = static_cast<int>(std::lround(sv)) - y0;
     if (x < 0 || y < 0 || x >= buffers.width || y >= buffers.height) return kNoSurface;
-    return buffers.depth[buffers.index(x, y)];
+    return depth[static_cast<std::size_t>(y) * buffers.width + x];
   };
+  if (surface != nullptr) {
+    surface->scale = s;
+    surface->x0 = x0;
+    surface->y0 = y0;
+    surface->width = any_pixels ? buffers.width : 0;
+    surface->height = any_pixels ? buffers.height : 0;
+    surface->depth = any_pixels ? std::move(buffers.depth) : std::vector<float>();
+  }
 
   Eigen::MatrixX3d normals;
   ComputeTriangleNormals(vertices, triangles, &normals);

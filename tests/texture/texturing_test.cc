@@ -1,8 +1,11 @@
 // End-to-end texturing on a synthetic textured sphere seen by an orbiting colour camera with
 // per-frame exposure changes: the texture built on the fly is compared against ground truth.
+// Also: surface-aware sampling at a silhouette, the reduced-resolution z-buffer, the seam
+// leveller against a dense least-squares solve, and the switch cost.
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <map>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -14,6 +17,7 @@
 #include "solvers/seam_levelling.h"
 #include "models/error.h"
 #include "texture/texturer.h"
+#include "texture/visibility.h"
 
 namespace artex {
 namespace {
@@ -233,6 +237,156 @@ TEST(TexturingTest, TermsFollowThePaper) {
   const auto d = MeshDistanceField(v, t, {0});
   EXPECT_DOUBLE_EQ(d[2], 2.0);
   EXPECT_DOUBLE_EQ(d[3], std::sqrt(2.0));
+}
+
+// A white square (z = 1 m) in the left half of a black image, its right border on the pixel
+// boundary u = 31.5: colours sampled at that border come from the square only with
+// surface-aware sampling.
+TEST(TexturingTest, SurfaceAwareSamplingIgnoresTheBackground) {
+  Eigen::MatrixX3d v(4, 3);
+  v << -0.4, -0.4, 1.0, 0.0, -0.4, 1.0, 0.0, 0.4, 1.0, -0.4, 0.4, 1.0;
+  Eigen::MatrixX3i t(2, 3);
+  t << 0, 2, 1, 0, 3, 2;  // facing the camera (-z)
+  PinholeCamera camera;
+  camera.width = camera.height = 64;
+  camera.fx = camera.fy = 64.0;
+  camera.cx = camera.cy = 31.5;
+  cv::Mat image(64, 64, CV_8UC3, cv::Scalar(0, 0, 0));
+  image(cv::Rect(0, 0, 32, 64)).setTo(cv::Scalar(255, 255, 255));  // the square: u <= 31.5
+  const TextureMesh mesh = TextureMesh::Build(t);
+  for (const bool aware : {false, true}) {
+    ImagePoolOptions o;
+    o.surface_aware_sampling = aware;
+    ImagePool pool(&mesh, o, VisibilityOptions());
+    pool.Add(0, image, camera, v);
+    const PoolEntry& e = pool.entry(0);
+    ASSERT_TRUE(e.visibility.visible[0] && e.visibility.visible[1]);
+    // Half a pixel inside the border: the bilinear footprint straddles it.
+    const Eigen::Vector3d point(-0.004, 0.0, 1.0);
+    Eigen::Vector3f c;
+    ASSERT_TRUE(e.SampleSurface(point, 1.0, false, &c));
+    if (aware) {
+      EXPECT_NEAR(c.x(), 1.0f, 1e-6);
+    } else {
+      EXPECT_LT(c.x(), 0.9f);
+    }
+  }
+}
+
+TEST(TexturingTest, HalfResolutionVisibilityMostlyAgrees) {
+  const Template sphere = UvSphere(24, 48, 0.3, Eigen::Vector3d(0, 1, 0));
+  const PinholeCamera camera = OrbitCamera(0.3, 320);
+  VisibilityOptions full, half;
+  half.raster_scale = 0.5;
+  SurfaceDepth depth;
+  const TriangleVisibility a = ComputeVisibility(sphere.vertices, sphere.triangles, camera, full, &depth);
+  const TriangleVisibility b = ComputeVisibility(sphere.vertices, sphere.triangles, camera, half);
+  int visible = 0, agree = 0;
+  for (int f = 0; f < sphere.num_triangles(); ++f) {
+    visible += a.visible[f];
+    agree += a.visible[f] == b.visible[f];
+  }
+  EXPECT_GT(visible, sphere.num_triangles() / 4);
+  EXPECT_GT(agree, 0.95 * sphere.num_triangles());
+  // The kept z-buffer: the sphere's nearest point is 0.3 m nearer than its centre, 1.2
+  // sqrt(1.09) m from the camera (up to the tessellation); nothing outside the sphere.
+  const Eigen::Vector2d centre = camera.Project(Eigen::Vector3d(0, 1, 0));
+  const float z = depth.At(static_cast<int>(std::lround(centre.x())),
+                           static_cast<int>(std::lround(centre.y())));
+  EXPECT_NEAR(z, 1.2 * std::sqrt(1.09) - 0.3, 0.01);
+  EXPECT_TRUE(std::isinf(depth.At(0, 0)));
+}
+
+// The leveller's corrections solve the normal equations of its least-squares problem, built
+// here densely and independently on a small labelled sphere.
+TEST(TexturingTest, SeamLevellerSolvesTheLeastSquaresProblem) {
+  const Template sphere = UvSphere(6, 8, 1.0, Eigen::Vector3d::Zero());
+  const int f_count = sphere.num_triangles(), v_count = sphere.num_vertices();
+  std::vector<int> labels(f_count);
+  for (int f = 0; f < f_count; ++f) {
+    const Eigen::Vector3d c = (sphere.vertices.row(sphere.triangles(f, 0)) +
+                               sphere.vertices.row(sphere.triangles(f, 1)) +
+                               sphere.vertices.row(sphere.triangles(f, 2))) / 3.0;
+    labels[f] = c.y() > 0.5 ? -1 : (c.x() > 0 ? 3 : (c.z() > 0 ? 7 : 9));
+  }
+  const auto colour = [](int v, int l, Eigen::Vector3f* c) {
+    if ((v + l) % 11 == 0) return false;  // some unknown colours
+    *c = Eigen::Vector3f(0.1f * l + 0.01f * v, 0.5f - 0.03f * l, 0.2f + 0.002f * v * l);
+    return true;
+  };
+  SeamLevellingOptions options;
+  Eigen::MatrixX3f corrections;
+  SeamLevellingSummary summary;
+  LevelSeams(v_count, sphere.triangles, labels, colour, options, &corrections, &summary);
+  ASSERT_GT(summary.seam_equations, 0);
+  // Dense reference: unknowns (v, l) in order of first use.
+  std::map<std::pair<int, int>, int> index;
+  for (int f = 0; f < f_count; ++f)
+    for (int c = 0; c < 3; ++c)
+      if (labels[f] >= 0) index.emplace(std::make_pair(sphere.triangles(f, c), labels[f]), index.size());
+  const int n = static_cast<int>(index.size());
+  EXPECT_EQ(n, summary.unknowns);
+  Eigen::MatrixXd a = options.regularisation * Eigen::MatrixXd::Identity(n, n);
+  Eigen::MatrixXd b = Eigen::MatrixXd::Zero(n, 3);
+  for (auto i = index.begin(); i != index.end(); ++i) {
+    for (auto j = std::next(i); j != index.end(); ++j) {
+      if (i->first.first != j->first.first) continue;  // same vertex, two labels
+      Eigen::Vector3f ci, cj;
+      if (!colour(i->first.first, i->first.second, &ci) || !colour(j->first.first, j->first.second, &cj)) continue;
+      const int p = i->second, q = j->second;
+      a(p, p) += 1; a(q, q) += 1; a(p, q) -= 1; a(q, p) -= 1;
+      b.row(p) += (cj - ci).cast<double>().transpose();
+      b.row(q) -= (cj - ci).cast<double>().transpose();
+    }
+  }
+  for (int f = 0; f < f_count; ++f) {
+    if (labels[f] < 0) continue;
+    for (int c = 0; c < 3; ++c) {
+      const int p = index.at({sphere.triangles(f, c), labels[f]});
+      const int q = index.at({sphere.triangles(f, (c + 1) % 3), labels[f]});
+      const double w = options.smoothness;
+      a(p, p) += w; a(q, q) += w; a(p, q) -= w; a(q, p) -= w;
+    }
+  }
+  const Eigen::MatrixXd g = a.ldlt().solve(b);
+  for (int f = 0; f < f_count; ++f) {
+    for (int c = 0; c < 3; ++c) {
+      if (labels[f] < 0) {
+        EXPECT_EQ(corrections.row(3 * f + c).norm(), 0.0f);
+        continue;
+      }
+      const int p = index.at({sphere.triangles(f, c), labels[f]});
+      EXPECT_NEAR((corrections.row(3 * f + c).cast<double>() - g.row(p)).norm(), 0.0, 1e-5)
+          << "triangle " << f << " corner " << c;
+    }
+  }
+  EXPECT_LT(summary.seam_residual_after, summary.seam_residual_before);
+}
+
+// With a switch cost, triangles keep their source image unless another is clearly better.
+TEST(TexturingTest, SwitchCostKeepsSources) {
+  Scene scene;
+  TexturingOptions plain = SmallOptions(), sticky = SmallOptions();
+  sticky.selection.terms.switch_cost = 0.05;
+  Texturer a(scene.sphere, plain), b(scene.sphere, sticky);
+  long changed_plain = 0, changed_sticky = 0;
+  for (int f = 0; f < 12; ++f) {
+    const double angle = 0.03 * f;  // a slow orbit: consecutive views are nearly equal
+    const cv::Mat image = scene.Image(f, angle, 1.0);
+    const auto sa = a.AddFrame(f, image, OrbitCamera(angle, scene.image_size), scene.sphere.vertices);
+    const auto sb = b.AddFrame(f, image, OrbitCamera(angle, scene.image_size), scene.sphere.vertices);
+    if (f > 0) {
+      changed_plain += sa.changed_triangles;
+      changed_sticky += sb.changed_triangles;
+    }
+    EXPECT_NEAR(sa.textured_triangles, sb.textured_triangles, 0.01 * sa.textured_triangles);
+  }
+  std::printf("changed triangles over 11 frames: %ld (switch cost 0), %ld (0.05)\n",
+              changed_plain, changed_sticky);
+  EXPECT_LT(changed_sticky, changed_plain / 4);
+  TexturingOptions bad = SmallOptions();
+  bad.selection.terms.switch_cost = -1.0;
+  EXPECT_THROW(Texturer(scene.sphere, bad), Error);
 }
 
 TEST(TexturingTest, BadInputIsRejected) {
