@@ -1,15 +1,30 @@
-// One full frame of kinematic fitting (paper sec. 3): the default template (resolution 1),
-// a front-facing scan with the density of a preprocessed 640x480 frame (~20k points on the
-// body, 4 mm noise), a tracking frame starting ~1-2 cm / a few degrees per joint away from the
-// truth. Variants: truncated-radius E-step + Gauss-Newton (default), Ceres LM backend, dense
-// exact E-step. Counters: EM iterations, mean vertex error vs truth (mm), and for the dense
-// variant the mean per-vertex difference to the default fit (mm).
+// Kinematic fitting (paper sec. 3) on the default template (resolution 1) with scans of the
+// density of a preprocessed 640x480 frame (~20k points on the body, 4 mm noise along the ray):
+//   BM_Track*:    a tracking sequence (a walking-like motion at 30 Hz: joints swinging up to
+//                 ~0.35 rad, the body turning and moving ~2 cm per frame); each benchmark
+//                 iteration fits its tracking frames in order, starting from the fitted first
+//                 frame, with the fitter's own constant-velocity prediction. Time = per frame.
+//   BM_FitFrame*: one hard tracking frame starting ~50 mm mean vertex error from the truth.
+// Variants side by side: truncated-radius E-step + Gauss-Newton (default options), Ceres LM
+// backend, dense exact E-step (single frame only: it takes seconds per EM iteration).
+// Counters: cpu_ms (process CPU per frame, all threads; wall times are unreliable on a shared
+// machine), wall_ratio / cpu_ratio to the default of the same kind, EM iterations, E-/M-step
+// ms, kd-tree queries and scan candidates visited per frame, error_mm (mean per-vertex error
+// against the true pose, i.e. including tangential sliding), and for the dense variant the mean
+// per-vertex difference to the default fit (mm).
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
 #include <memory>
 #include <random>
+#include <vector>
 
 #include <benchmark/benchmark.h>
 
 #include "models/error.h"
+#include "models/so3.h"
 #include "models/template_generator.h"
 #include "solvers/em_fitter.h"
 #include "tests/solvers/fitting_test_util.h"
@@ -17,15 +32,43 @@
 namespace artex {
 namespace {
 
+constexpr int kSequenceFrames = 12;  // 1 first frame + 11 tracking frames
+constexpr double kScanPoints = 20000.0;
+constexpr double kNoise = 0.004;     // m, along the viewing ray
+constexpr uint64_t kSeed = 2014;
+
 struct Fixture {
   Template model;
   std::string template_name;
   std::unique_ptr<Skinning> skinning;
+  // Single hard frame.
   Pose truth, guess;
   Scan scan;
-  Pose default_result;  // filled by the default variant (for the dense deviation)
+  // Tracking sequence.
+  std::vector<Pose> sequence_truth;
+  std::vector<Scan> sequence_scans;
+  // Results of the default variants (for the ratios and the dense deviation).
+  Pose default_result;
   bool has_default_result = false;
+  double default_wall_ms[2] = {0.0, 0.0}, default_cpu_ms[2] = {0.0, 0.0};  // frame, track
 };
+
+// CPU time of the whole process (all threads), s.
+double ProcessCpuSeconds() {
+  rusage usage;
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_utime.tv_sec + usage.ru_stime.tv_sec +
+         1e-6 * (usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
+}
+
+Scan ScanOf(const Fixture& f, const Pose& pose, std::mt19937_64* rng) {
+  Eigen::MatrixX3d posed;
+  f.skinning->Apply(pose, &posed);
+  const Eigen::Vector3d camera(0.0, 1.0, 2.5);
+  const Scan probe = testing_util::SampleScan(posed, f.model.triangles, camera, 1000.0, 0.0, rng);
+  const double density = 1000.0 * kScanPoints / std::max(1, probe.size());
+  return testing_util::SampleScan(posed, f.model.triangles, camera, density, kNoise, rng);
+}
 
 Fixture& GetFixture() {
   static Fixture* fixture = [] {
@@ -40,50 +83,106 @@ Fixture& GetFixture() {
       f->template_name = "synthetic tubes";
     }
     f->skinning = std::make_unique<Skinning>(f->model);
-    std::mt19937_64 rng(2014);
+    std::mt19937_64 rng(kSeed);
     f->truth = testing_util::RandomPose(f->model.num_joints(), 0.25, 0.15, 0.05, &rng);
-    Eigen::MatrixX3d posed;
-    f->skinning->Apply(f->truth, &posed);
-    const Eigen::Vector3d camera(0.0, 1.0, 2.5);
-    // Scale the sampling density to ~20k points.
-    const Scan probe = testing_util::SampleScan(posed, f->model.triangles, camera, 1000.0, 0.0, &rng);
-    const double density = 1000.0 * 20000.0 / std::max(1, probe.size());
-    f->scan = testing_util::SampleScan(posed, f->model.triangles, camera, density, 0.004, &rng);
+    f->scan = ScanOf(*f, f->truth, &rng);
     Eigen::VectorXd d = Eigen::VectorXd::Zero(f->truth.num_parameters());
     std::normal_distribution<double> g(0.0, 1.0);
     for (int i = 0; i < 3; ++i) d[kTranslationIndex + i] = 0.01 * g(rng);
     for (int i = 0; i < 3; ++i) d[kGlobalRotationIndex + i] = 0.02 * g(rng);
     for (int i = kNumGlobalParameters; i < d.size(); ++i) d[i] = 0.03 * g(rng);
     f->guess = f->truth.Retracted(d);
+
+    // Sequence: every joint swings about a random axis (amplitude up to 0.35 rad, period
+    // 1 s at 30 Hz, random phase), the body turns by 0.02 rad and moves 2 cm per frame.
+    const int joints = f->model.num_joints();
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    std::vector<Eigen::Vector3d> axis(joints);
+    std::vector<double> amplitude(joints), phase(joints);
+    for (int j = 0; j < joints; ++j) {
+      axis[j] = Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized();
+      amplitude[j] = 0.35 * u(rng);
+      phase[j] = 2.0 * M_PI * u(rng);
+    }
+    for (int frame = 0; frame < kSequenceFrames; ++frame) {
+      Pose pose = Pose::Identity(joints);
+      const double time = frame / 30.0;
+      pose.translation = Eigen::Vector3d(0.6 * time, 0.0, -0.1 * time);
+      pose.rotation = ExpSO3(Eigen::Vector3d(0.0, 0.6 * time, 0.0));
+      for (int j = 0; j < joints; ++j) {
+        pose.joint_rotations[j] =
+            ExpSO3(amplitude[j] * std::sin(2.0 * M_PI * time + phase[j]) * axis[j]);
+      }
+      f->sequence_truth.push_back(pose);
+      f->sequence_scans.push_back(ScanOf(*f, pose, &rng));
+    }
     return f;
   }();
   return *fixture;
 }
 
-void RunFrames(benchmark::State& state, EMFitterOptions options, bool is_default, bool is_dense) {
+struct Totals {
+  double iterations = 0.0, estep = 0.0, mstep = 0.0, queries = 0.0, visited = 0.0;
+  double error = 0.0, max_error = 0.0, first_error = 0.0;
+  int frames = 0;
+
+  void Add(const FitSummary& s) {
+    iterations += s.iterations;
+    estep += s.estep_seconds;
+    mstep += s.mstep_seconds;
+    queries += s.kdtree_queries;
+    visited += s.candidates_visited;
+    ++frames;
+  }
+};
+
+void Report(benchmark::State& state, const Totals& totals, double cpu_seconds, double wall_seconds,
+            bool is_default, int kind) {
+  Fixture& f = GetFixture();
+  const int frames = std::max(1, totals.frames);
+  const double cpu_ms = 1e3 * cpu_seconds / frames;
+  const double wall_ms = 1e3 * wall_seconds / frames;
+  if (is_default) {
+    f.default_wall_ms[kind] = wall_ms;
+    f.default_cpu_ms[kind] = cpu_ms;
+  }
+  state.counters["cpu_ms"] = cpu_ms;
+  if (f.default_cpu_ms[kind] > 0.0) {
+    state.counters["wall_ratio"] = wall_ms / f.default_wall_ms[kind];
+    state.counters["cpu_ratio"] = cpu_ms / f.default_cpu_ms[kind];
+  }
+  state.counters["em_iterations"] = totals.iterations / frames;
+  state.counters["estep_ms"] = 1e3 * totals.estep / frames;
+  state.counters["mstep_ms"] = 1e3 * totals.mstep / frames;
+  state.counters["kdtree_queries"] = totals.queries / frames;
+  state.counters["candidates"] = totals.visited / frames;
+  state.counters["error_mm"] = 1e3 * totals.error / frames;
+  if (totals.max_error > 0.0) state.counters["max_error_mm"] = 1e3 * totals.max_error;
+  if (totals.first_error > 0.0) state.counters["first_frame_error_mm"] = 1e3 * totals.first_error;
+  state.counters["template_vertices"] = f.model.num_vertices();
+  state.SetLabel(f.template_name);
+}
+
+void RunFrame(benchmark::State& state, EMFitterOptions options, bool is_default, bool is_dense) {
   Fixture& f = GetFixture();
   options.icp_first_frame = false;
   EMFitter fitter(f.model, options);
   fitter.SetInitialPose(f.truth);
   fitter.FitFrame(f.scan);  // history: the next frames are tracking frames
-  double iterations = 0.0, error = 0.0, estep = 0.0, mstep = 0.0;
-  int frames = 0;
+  Totals totals;
+  const double cpu_start = ProcessCpuSeconds();
+  const auto wall_start = std::chrono::steady_clock::now();
   for (auto _ : state) {
     fitter.BeginFrame(f.scan, f.guess);
     while (!fitter.frame_done()) fitter.Iterate();
-    const FitSummary s = fitter.EndFrame();
-    iterations += s.iterations;
-    estep += s.estep_seconds;
-    mstep += s.mstep_seconds;
-    ++frames;
+    totals.Add(fitter.EndFrame());
   }
-  error = testing_util::MeanVertexError(*f.skinning, fitter.pose(), f.truth);
-  state.counters["em_iterations"] = iterations / frames;
-  state.counters["estep_ms"] = 1e3 * estep / frames;
-  state.counters["mstep_ms"] = 1e3 * mstep / frames;
-  state.counters["error_mm"] = error * 1e3;
+  const double cpu = ProcessCpuSeconds() - cpu_start;
+  const double wall =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
+  totals.error = totals.frames * testing_util::MeanVertexError(*f.skinning, fitter.pose(), f.truth);
+  Report(state, totals, cpu, wall, is_default, 0);
   state.counters["scan_points"] = f.scan.size();
-  state.counters["template_vertices"] = f.model.num_vertices();
   if (is_default) {
     f.default_result = fitter.pose();
     f.has_default_result = true;
@@ -92,19 +191,62 @@ void RunFrames(benchmark::State& state, EMFitterOptions options, bool is_default
     state.counters["dense_vs_truncated_mm"] =
         1e3 * testing_util::MeanVertexError(*f.skinning, fitter.pose(), f.default_result);
   }
-  state.SetLabel(f.template_name);
 }
 
+void RunSequence(benchmark::State& state, EMFitterOptions options, bool is_default) {
+  Fixture& f = GetFixture();
+  options.icp_first_frame = false;
+  Totals totals;
+  double cpu = 0.0, wall = 0.0;
+  for (auto _ : state) {
+    state.PauseTiming();
+    EMFitter fitter(f.model, options);
+    fitter.SetInitialPose(f.sequence_truth[0]);
+    fitter.FitFrame(f.sequence_scans[0]);  // first frame: not measured
+    totals.first_error =
+        testing_util::MeanVertexError(*f.skinning, fitter.pose(), f.sequence_truth[0]);
+    state.ResumeTiming();
+    const double cpu_start = ProcessCpuSeconds();
+    const auto wall_start = std::chrono::steady_clock::now();
+    for (int frame = 1; frame < kSequenceFrames; ++frame) {
+      const FitSummary s = fitter.FitFrame(f.sequence_scans[frame]);
+      totals.Add(s);
+      const double error = testing_util::MeanVertexError(*f.skinning, fitter.pose(),
+                                                         f.sequence_truth[frame]);
+      totals.error += error;
+      totals.max_error = std::max(totals.max_error, error);
+    }
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
+    cpu += ProcessCpuSeconds() - cpu_start;
+    wall += seconds;
+    state.SetIterationTime(seconds / (kSequenceFrames - 1));
+  }
+  Report(state, totals, cpu, wall, is_default, 1);
+  state.counters["scan_points"] = f.sequence_scans[1].size();
+}
+
+EMFitterOptions CeresOptions() {
+  EMFitterOptions options;
+  options.solver.type = FitSolverType::kCeresLevenbergMarquardt;
+  return options;
+}
+
+void BM_TrackTruncatedGaussNewton(benchmark::State& state) {
+  RunSequence(state, EMFitterOptions(), true);
+}
+BENCHMARK(BM_TrackTruncatedGaussNewton)->Unit(benchmark::kMillisecond)->UseManualTime();
+
+void BM_TrackCeresLm(benchmark::State& state) { RunSequence(state, CeresOptions(), false); }
+BENCHMARK(BM_TrackCeresLm)->Unit(benchmark::kMillisecond)->UseManualTime();
+
 void BM_FitFrameTruncatedGaussNewton(benchmark::State& state) {
-  RunFrames(state, EMFitterOptions(), true, false);
+  RunFrame(state, EMFitterOptions(), true, false);
 }
 BENCHMARK(BM_FitFrameTruncatedGaussNewton)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 void BM_FitFrameCeresLm(benchmark::State& state) {
-  EMFitterOptions options;
-  options.solver.type = FitSolverType::kCeresLevenbergMarquardt;
-  options.solver.max_iterations = 3;
-  RunFrames(state, options, false, false);
+  RunFrame(state, CeresOptions(), false, false);
 }
 BENCHMARK(BM_FitFrameCeresLm)->Unit(benchmark::kMillisecond)->UseRealTime();
 
@@ -112,7 +254,7 @@ void BM_FitFrameDenseEStep(benchmark::State& state) {
   EMFitterOptions options;
   options.estep.mode = EStepMode::kDense;
   options.max_mean_motion = 1e3;  // measure the dense optimum, do not reject it
-  RunFrames(state, options, false, true);
+  RunFrame(state, options, false, true);
 }
 BENCHMARK(BM_FitFrameDenseEStep)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);
 

@@ -5,7 +5,7 @@
 #include <sstream>
 
 #include <tbb/blocked_range.h>
-#include <tbb/parallel_reduce.h>
+#include <tbb/parallel_for.h>
 
 #include "models/pose.h"
 
@@ -67,20 +67,6 @@ double OneToManyCorrespondenceTerm::Cost(const FitEvaluation& eval) const {
 
 namespace {
 
-// Per-thread accumulator: one dense (n x n, n) block per column set (keyed by joint).
-struct NormalAccumulator {
-  std::vector<Eigen::MatrixXd> h;
-  std::vector<Eigen::VectorXd> g;
-  double cost = 0.0;
-  bool with_jacobian = false;
-
-  NormalAccumulator(int num_joints, bool with_jac) : with_jacobian(with_jac) {
-    if (!with_jacobian) return;
-    h.resize(num_joints);
-    g.resize(num_joints);
-  }
-};
-
 // Multiplies the rotation column triples of a vertex block by J_l (delta != 0).
 void MapBlockToDelta(const FitEvaluation& eval, const std::vector<int>& cols,
                      Eigen::Matrix<double, 3, Eigen::Dynamic>* block) {
@@ -100,6 +86,12 @@ void MapBlockToDelta(const FitEvaluation& eval, const std::vector<int>& cols,
   }
 }
 
+// Vertices with w_t > 0 grouped by joint (all vertices of a joint share its column set).
+struct JointGroups {
+  std::vector<int> offset;  // per joint + 1
+  std::vector<int> vertex;
+};
+
 }  // namespace
 
 double AccumulateVertexResiduals(const FitEvaluation& eval, const Eigen::VectorXd& weights,
@@ -109,78 +101,87 @@ double AccumulateVertexResiduals(const FitEvaluation& eval, const Eigen::VectorX
   const int t_count = static_cast<int>(weights.size());
   const bool with_jacobian = jtj != nullptr && jtr != nullptr;
   const Eigen::VectorXi& vertex_joint = eval.skinning->model().vertex_joint;
-  NormalAccumulator init(eval.skinning->model().num_joints(), with_jacobian);
-  constexpr int kGrain = 1024;
-  NormalAccumulator total = tbb::parallel_reduce(
-      tbb::blocked_range<int>(0, t_count, kGrain), init,
-      [&](const tbb::blocked_range<int>& range, NormalAccumulator acc) {
-        Eigen::Matrix<double, 3, Eigen::Dynamic> block;
-        for (int t = range.begin(); t != range.end(); ++t) {
-          const double w = c * weights[t];
-          if (!(w > 0.0)) continue;
-          Eigen::Vector3d d = (eval.posed.row(t) - targets.row(t)).transpose();
-          double r2;
-          if (normals != nullptr) {
-            const Eigen::Vector3d n = normals->row(t).transpose();
-            const double e = n.dot(d);
-            r2 = e * e;
-            d = e * n;  // B^T n n^T d == B^T (n e)
-          } else {
-            r2 = d.squaredNorm();
-          }
-          acc.cost += w * r2;
-          if (!acc.with_jacobian) continue;
-          const std::vector<int>& cols = eval.jacobian.Columns(t);
-          block = eval.jacobian.Block(t);
-          MapBlockToDelta(eval, cols, &block);
-          const int k = vertex_joint[t];
-          const int n = static_cast<int>(cols.size());
-          if (acc.h[k].rows() != n) {
-            acc.h[k].setZero(n, n);
-            acc.g[k].setZero(n);
-          }
-          if (normals != nullptr) {
-            const Eigen::VectorXd bn = block.transpose() * normals->row(t).transpose();
-            acc.h[k].selfadjointView<Eigen::Lower>().rankUpdate(bn, w);
-          } else {
-            acc.h[k].selfadjointView<Eigen::Lower>().rankUpdate(block.transpose(), w);
-          }
-          acc.g[k].noalias() += w * (block.transpose() * d);
-        }
-        return acc;
-      },
-      [](NormalAccumulator a, const NormalAccumulator& b) {
-        a.cost += b.cost;
-        for (size_t k = 0; k < b.h.size(); ++k) {
-          if (b.h[k].size() == 0) continue;
-          if (a.h[k].size() == 0) {
-            a.h[k] = b.h[k];
-            a.g[k] = b.g[k];
-          } else {
-            a.h[k] += b.h[k];
-            a.g[k] += b.g[k];
-          }
-        }
-        return a;
-      });
-  if (with_jacobian) {
-    // Any vertex of joint k carries the column set of joint k.
-    std::vector<int> first_vertex(total.h.size(), -1);
-    for (int t = 0; t < t_count; ++t) {
-      if (first_vertex[vertex_joint[t]] < 0) first_vertex[vertex_joint[t]] = t;
+  const int num_joints = eval.skinning->model().num_joints();
+  // Residuals and cost (cheap; serial).
+  double cost = 0.0;
+  for (int t = 0; t < t_count; ++t) {
+    const double w = c * weights[t];
+    if (!(w > 0.0)) continue;
+    const Eigen::Vector3d d = (eval.posed.row(t) - targets.row(t)).transpose();
+    if (normals != nullptr) {
+      const double e = normals->row(t).dot(d);
+      cost += w * e * e;
+    } else {
+      cost += w * d.squaredNorm();
     }
-    for (size_t k = 0; k < total.h.size(); ++k) {
-      if (total.h[k].size() == 0) continue;
-      const std::vector<int>& cols = eval.jacobian.Columns(first_vertex[k]);
-      const int n = static_cast<int>(cols.size());
-      const Eigen::MatrixXd full = total.h[k].selfadjointView<Eigen::Lower>();
-      for (int a = 0; a < n; ++a) {
-        (*jtr)[cols[a]] += total.g[k][a];
-        for (int b = 0; b < n; ++b) (*jtj)(cols[a], cols[b]) += full(a, b);
+  }
+  if (!std::isfinite(cost)) return std::numeric_limits<double>::quiet_NaN();
+  if (!with_jacobian) return cost;
+
+  // Normal equations per joint k: stack the weighted rows of its vertices,
+  // A_k = [sqrt(w_t) B_t] (3 rows per vertex; point-to-plane: 1 row sqrt(w_t) n_t^T B_t) over
+  // the joint's column set, and r_k likewise; then H_k = A_k^T A_k (one symmetric rank update,
+  // blocked by Eigen) and g_k = A_k^T r_k, scattered into the P x P system.
+  JointGroups groups;
+  groups.offset.assign(num_joints + 1, 0);
+  for (int t = 0; t < t_count; ++t) {
+    if (c * weights[t] > 0.0) ++groups.offset[vertex_joint[t] + 1];
+  }
+  for (int k = 0; k < num_joints; ++k) groups.offset[k + 1] += groups.offset[k];
+  groups.vertex.resize(groups.offset.back());
+  {
+    std::vector<int> fill(groups.offset.begin(), groups.offset.end() - 1);
+    for (int t = 0; t < t_count; ++t) {
+      if (c * weights[t] > 0.0) groups.vertex[fill[vertex_joint[t]]++] = t;
+    }
+  }
+  const int rows_per_vertex = normals != nullptr ? 1 : 3;
+  std::vector<Eigen::MatrixXd> h(num_joints);
+  std::vector<Eigen::VectorXd> g(num_joints);
+  std::vector<int> first_vertex(num_joints, -1);
+  tbb::parallel_for(0, num_joints, [&](int k) {
+    const int begin = groups.offset[k], end = groups.offset[k + 1];
+    if (begin == end) return;
+    const int first = groups.vertex[begin];
+    first_vertex[k] = first;
+    const int n = static_cast<int>(eval.jacobian.Columns(first).size());
+    const int m = end - begin;
+    Eigen::MatrixXd a(rows_per_vertex * m, n);
+    Eigen::VectorXd r(rows_per_vertex * m);
+    Eigen::Matrix<double, 3, Eigen::Dynamic> block;
+    for (int i = 0; i < m; ++i) {
+      const int t = groups.vertex[begin + i];
+      const double sw = std::sqrt(c * weights[t]);
+      const Eigen::Vector3d d = (eval.posed.row(t) - targets.row(t)).transpose();
+      block = eval.jacobian.Block(t);
+      MapBlockToDelta(eval, eval.jacobian.Columns(t), &block);
+      if (normals != nullptr) {
+        const Eigen::Vector3d nt = normals->row(t).transpose();
+        a.row(i).noalias() = sw * (nt.transpose() * block);
+        r[i] = sw * nt.dot(d);
+      } else {
+        a.middleRows<3>(3 * i) = sw * block;
+        r.segment<3>(3 * i) = sw * d;
+      }
+    }
+    h[k].setZero(n, n);
+    h[k].selfadjointView<Eigen::Lower>().rankUpdate(a.transpose());
+    g[k].noalias() = a.transpose() * r;
+  });
+  for (int k = 0; k < num_joints; ++k) {
+    if (first_vertex[k] < 0) continue;
+    const std::vector<int>& cols = eval.jacobian.Columns(first_vertex[k]);
+    const int n = static_cast<int>(cols.size());
+    for (int a = 0; a < n; ++a) {
+      (*jtr)[cols[a]] += g[k][a];
+      for (int b = 0; b <= a; ++b) {
+        const double v = h[k](a, b);
+        (*jtj)(cols[a], cols[b]) += v;
+        if (a != b) (*jtj)(cols[b], cols[a]) += v;
       }
     }
   }
-  return std::isfinite(total.cost) ? total.cost : std::numeric_limits<double>::quiet_NaN();
+  return cost;
 }
 
 }  // namespace artex

@@ -112,6 +112,9 @@ bool EMFitterOptions::IsValid(std::string* error) const {
     msg << "scale_prior_weight: expected a finite value >= 0, found " << scale_prior_weight;
   } else if (!(std::isfinite(scale_max_radius) && scale_max_radius > 0.0)) {
     msg << "scale_max_radius: expected a finite value > 0 (m), found " << scale_max_radius;
+  } else if (normal_refresh_iterations < 0) {
+    msg << "normal_refresh_iterations: expected >= 0 (0: once per stage), found "
+        << normal_refresh_iterations;
   } else if (max_fit_vertices < 0) {
     msg << "max_fit_vertices: expected >= 0 (0: all), found " << max_fit_vertices;
   } else if (min_scan_points < 0) {
@@ -149,6 +152,8 @@ struct EMFitter::FrameState {
   bool scale_free = true;
   int stage = 0;
   int stage_iteration = 0;
+  int normals_pose_stage = -1;  // stage of the last normal refresh (-1: none yet)
+  int normals_age = 0;          // EM iterations since that refresh
   double stage_last_cost = std::numeric_limits<double>::quiet_NaN();
   bool done = false;
   bool converged = false;
@@ -331,22 +336,35 @@ EMIterationInfo EMFitter::Iterate() {
   }
   const Template& model = skinning_->model();
 
-  // Pose the template and its normals.
+  // Pose the template and its normals (normals need the whole mesh; between refreshes only the
+  // fitted vertices are posed and the normals of the last refresh are kept).
   auto start = Clock::now();
-  skinning_->Apply(pose_, &st.full_posed);
-  ComputeVertexNormals(st.full_posed, model.triangles, &st.full_normals);
   const bool subset = fit_skinning_ != skinning_.get();
   const bool colored = !st.first_frame && template_colors_.rows() == model.num_vertices();
-  if (subset) {
-    const int n = static_cast<int>(fit_vertices_.size());
-    st.posed.resize(n, 3);
-    st.normals.resize(n, 3);
-    if (colored) st.colors.resize(n, 3);
-    for (int i = 0; i < n; ++i) {
-      st.posed.row(i) = st.full_posed.row(fit_vertices_[i]);
-      st.normals.row(i) = st.full_normals.row(fit_vertices_[i]);
-      if (colored) st.colors.row(i) = template_colors_.row(fit_vertices_[i]);
+  const bool refresh_normals =
+      st.normals_pose_stage != st.stage || (options_.normal_refresh_iterations > 0 &&
+                                            st.normals_age + 1 >= options_.normal_refresh_iterations);
+  const int n_fit = static_cast<int>(fit_vertices_.size());
+  if (refresh_normals) {
+    skinning_->Apply(pose_, &st.full_posed);
+    ComputeVertexNormals(st.full_posed, model.triangles, &st.full_normals);
+    if (subset) {
+      st.posed.resize(n_fit, 3);
+      st.normals.resize(n_fit, 3);
+      for (int i = 0; i < n_fit; ++i) {
+        st.posed.row(i) = st.full_posed.row(fit_vertices_[i]);
+        st.normals.row(i) = st.full_normals.row(fit_vertices_[i]);
+      }
     }
+    st.normals_pose_stage = st.stage;
+    st.normals_age = 0;
+  } else {
+    fit_skinning_->Apply(pose_, subset ? &st.posed : &st.full_posed);
+    ++st.normals_age;
+  }
+  if (subset && colored) {
+    st.colors.resize(n_fit, 3);
+    for (int i = 0; i < n_fit; ++i) st.colors.row(i) = template_colors_.row(fit_vertices_[i]);
   }
   st.summary.skinning_seconds += SecondsSince(start);
 
@@ -465,6 +483,10 @@ FitSummary EMFitter::EndFrame() {
   FrameState& st = *state_;
   FitSummary summary = std::move(st.summary);
   summary.scale = pose_.scale;
+  if (st.estep) {
+    summary.kdtree_queries = st.estep->kdtree_queries();
+    summary.candidates_visited = st.estep->candidates_visited();
+  }
   bool ok = !summary.too_few_points && !summary.non_finite;
   if (ok && st.initial_posed.rows() > 0) {
     Eigen::MatrixX3d posed;

@@ -86,6 +86,11 @@ struct EMFitterOptions {
   // Fit on a uniform subset (index stride) of at most this many template vertices (0: all).
   // E-step, Jacobians and normal equations scale with it; normals use the full mesh.
   int max_fit_vertices = 4000;
+  // Template normals (for n_s . n'_t of eq. 4) are recomputed on the whole posed mesh at the
+  // first EM iteration of every stage and, when > 0, every this many iterations (1: every
+  // iteration); in between only the fitted vertices are posed. Within a frame the template
+  // turns by a few degrees, which changes the weights by well under 1 %.
+  int normal_refresh_iterations = 0;
 
   // Robustness.
   int min_scan_points = 100;           // fewer: frame flagged too_few_points, pose kept
@@ -127,6 +132,9 @@ struct FitSummary {
   int num_scan_points = 0;
   double scale = 1.0;
   double mean_motion = 0.0;    // mean vertex displacement from the initial guess (m)
+  // E-step work: kd-tree queries and candidate scan points visited (solvers/estep.h).
+  long long kdtree_queries = 0;
+  long long candidates_visited = 0;
   // Timings (s).
   double icp_seconds = 0.0;
   double estep_seconds = 0.0;

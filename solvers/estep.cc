@@ -36,6 +36,8 @@ bool EStepOptions::IsValid(std::string* error) const {
     msg << "k: expected >= 1, found " << k;
   } else if (!(std::isfinite(voxel_fraction) && voxel_fraction >= 0.0 && voxel_fraction <= 1.0)) {
     msg << "voxel_fraction: expected a value in [0, 1], found " << voxel_fraction;
+  } else if (!(std::isfinite(candidate_margin) && candidate_margin >= 0.0)) {
+    msg << "candidate_margin: expected a finite value >= 0 (m), found " << candidate_margin;
   } else if (kdtree_leaf_size < 1) {
     msg << "kdtree_leaf_size: expected >= 1, found " << kdtree_leaf_size;
   } else if (grain_size < 1) {
@@ -288,6 +290,44 @@ struct EStep::Cloud {
   Eigen::VectorXd color_valid;  // 1 / 0
   Eigen::VectorXd count;        // multiplicity (1 for the full scan)
   std::unique_ptr<PointCloudIndex> index;
+  // Row-major copies for the pair loops: kPacked values per point (x y z nx ny nz count -)
+  // and 4 per point (r g b valid) when the cloud has colours.
+  static constexpr int kPacked = 8;
+  std::vector<double> packed;
+  std::vector<double> packed_colors;
+
+  void Pack() {
+    const Eigen::Index m = points.rows();
+    packed.assign(static_cast<size_t>(kPacked * m), 0.0);
+    for (Eigen::Index i = 0; i < m; ++i) {
+      double* q = packed.data() + kPacked * i;
+      for (int d = 0; d < 3; ++d) {
+        q[d] = points(i, d);
+        q[3 + d] = normals(i, d);
+      }
+      q[6] = count[i];
+    }
+    packed_colors.clear();
+    if (colors.rows() == m) {
+      packed_colors.resize(static_cast<size_t>(4 * m));
+      for (Eigen::Index i = 0; i < m; ++i) {
+        for (int d = 0; d < 3; ++d) packed_colors[4 * i + d] = colors(i, d);
+        packed_colors[4 * i + 3] = color_valid[i];
+      }
+    }
+  }
+};
+
+// Candidate lists of one radius, per block of grain_size template vertices (CSR).
+struct EStep::Candidates {
+  struct Block {
+    bool valid = false;
+    std::vector<double> anchor;  // 3 per vertex: its position when gathered
+    std::vector<int> offset;     // per vertex of the block, + 1
+    std::vector<int> index;      // cloud indices within radius + margin of the anchor
+  };
+  int t_count = -1;
+  std::vector<Block> blocks;
 };
 
 EStep::EStep(const Scan& scan, const EStepOptions& options) : scan_(scan), options_(options) {
@@ -306,14 +346,21 @@ EStep::EStep(const Scan& scan, const EStepOptions& options) : scan_(scan), optio
     }
   }
   full_->count = Eigen::VectorXd::Ones(n);
-  full_->index = std::make_unique<PointCloudIndex>(scan.points, options.kdtree_leaf_size);
+}
+
+const EStep::Cloud& EStep::FullCloud() const {
+  std::call_once(full_index_once_, [this] {
+    full_->index = std::make_unique<PointCloudIndex>(full_->points, options_.kdtree_leaf_size);
+    full_->Pack();
+  });
+  return *full_;
 }
 
 EStep::~EStep() = default;
 
 const EStep::Cloud& EStep::CloudForRadius(double radius) {
   const double cell = radius * options_.voxel_fraction;
-  if (options_.mode != EStepMode::kRadius || !(cell > 0.0)) return *full_;
+  if (options_.mode != EStepMode::kRadius || !(cell > 0.0)) return FullCloud();
   auto it = subsampled_.find(cell);
   if (it != subsampled_.end()) return *it->second;
   // Voxel grid: mean position, summed then normalised normal, mean valid colour, count.
@@ -332,6 +379,30 @@ const EStep::Cloud& EStep::CloudForRadius(double radius) {
   for (int s = 0; s < n; ++s) {
     auto ins = cells.emplace(key_of(scan_.points.row(s)), static_cast<int>(cells.size()));
     cell_of[s] = ins.first->second;
+  }
+  {
+    // Number the cells in Morton (Z-curve) order of their grid coordinates, so that cells
+    // close in space are close in memory (the pair loops gather them per template vertex).
+    const auto spread = [](uint64_t v) {  // 21 bits -> every third bit
+      v &= 0x1fffff;
+      v = (v | v << 32) & 0x1f00000000ffffULL;
+      v = (v | v << 16) & 0x1f0000ff0000ffULL;
+      v = (v | v << 8) & 0x100f00f00f00f00fULL;
+      v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+      v = (v | v << 2) & 0x1249249249249249ULL;
+      return v;
+    };
+    std::vector<std::pair<uint64_t, int>> order;
+    order.reserve(cells.size());
+    for (const auto& [key, id] : cells) {
+      const uint64_t k = static_cast<uint64_t>(key);
+      const uint64_t morton = spread(k >> 42) << 2 | spread(k >> 21) << 1 | spread(k);
+      order.emplace_back(morton, id);
+    }
+    std::sort(order.begin(), order.end());
+    std::vector<int> rank(order.size());
+    for (size_t i = 0; i < order.size(); ++i) rank[order[i].second] = static_cast<int>(i);
+    for (int& c : cell_of) c = rank[c];
   }
   const int m = static_cast<int>(cells.size());
   auto cloud = std::make_unique<Cloud>();
@@ -361,6 +432,7 @@ const EStep::Cloud& EStep::CloudForRadius(double radius) {
     if (has_color && color_count[c] > 0.0) cloud->colors.row(c) /= color_count[c];
   }
   cloud->index = std::make_unique<PointCloudIndex>(cloud->points, options_.kdtree_leaf_size);
+  cloud->Pack();
   const Cloud& result = *cloud;
   subsampled_.emplace(cell, std::move(cloud));
   return result;
@@ -384,93 +456,178 @@ void EStep::Compute(const PosedTemplateView& posed, double radius,
   const int m = static_cast<int>(cloud.points.rows());
   if (m == 0 || t_count == 0) return;
   const OneToManyOptions& w = options_.weights;
-  const bool color =
-      w.use_color && posed.colors != nullptr && cloud.colors.rows() == cloud.points.rows();
+  const bool color = w.use_color && posed.colors != nullptr && !cloud.packed_colors.empty();
   const bool normalize = w.normalize_per_scan_point;
   const int grain = options_.grain_size;
   const int num_chunks = (t_count + grain - 1) / grain;
+  const bool knn = options_.mode == EStepMode::kKNearest;
+  const double radius2 = radius * radius;
 
-  // Pass 1: per chunk of template vertices, the (s, p_st) pairs in CSR form.
+  // Candidate lists (radius mode with a margin): one per radius, blocks of `grain` vertices.
+  Candidates* candidates = nullptr;
+  const double margin = options_.candidate_margin;
+  if (!knn && margin > 0.0) {
+    std::unique_ptr<Candidates>& slot = candidates_[radius];
+    if (!slot) slot = std::make_unique<Candidates>();
+    if (slot->t_count != t_count) {
+      slot->t_count = t_count;
+      slot->blocks.assign(num_chunks, Candidates::Block());
+    }
+    candidates = slot.get();
+  }
+
+  // Pass 1: per chunk of template vertices, either the sums directly (no normalisation) or
+  // the (s, p_st) pairs in CSR form (normalisation needs sum_t p_st first).
   struct ChunkPairs {
     std::vector<int> offset;  // per vertex of the chunk, + 1
     std::vector<int> s;
     std::vector<double> p;
   };
-  std::vector<ChunkPairs> chunks(num_chunks);
-  const bool knn = options_.mode == EStepMode::kKNearest;
+  std::vector<ChunkPairs> chunks(normalize ? num_chunks : 0);
+  std::vector<double> constants(num_chunks, 0.0);
+  std::vector<long long> pairs(num_chunks, 0);
+  std::vector<long long> queries(num_chunks, 0), visited(num_chunks, 0);
+  const double* packed = cloud.packed.data();
+  const double* packed_colors = color ? cloud.packed_colors.data() : nullptr;
+  constexpr int kP = Cloud::kPacked;
   ForRange(num_chunks, 1, options_.parallel, [&](int chunk_begin, int chunk_end) {
     std::vector<std::pair<int, double>> found;
     std::vector<int> knn_index(knn ? options_.k : 0);
     std::vector<double> knn_d2(knn ? options_.k : 0);
     for (int chunk = chunk_begin; chunk < chunk_end; ++chunk) {
-      ChunkPairs& out = chunks[chunk];
       const int t0 = chunk * grain, t1 = std::min(t_count, t0 + grain);
-      out.offset.assign(1, 0);
-      out.s.clear();
-      out.p.clear();
+      ChunkPairs* out = normalize ? &chunks[chunk] : nullptr;
+      if (out) {
+        out->offset.assign(1, 0);
+        out->s.clear();
+        out->p.clear();
+      }
+      Candidates::Block* block = candidates ? &candidates->blocks[chunk] : nullptr;
+      if (block) {
+        // Gather again when a vertex of the block left its margin.
+        bool gather = !block->valid;
+        for (int t = t0; t < t1 && !gather; ++t) {
+          const double* a = block->anchor.data() + 3 * (t - t0);
+          const double dx = (*posed.vertices)(t, 0) - a[0], dy = (*posed.vertices)(t, 1) - a[1],
+                       dz = (*posed.vertices)(t, 2) - a[2];
+          gather = dx * dx + dy * dy + dz * dz > margin * margin;
+        }
+        if (gather) {
+          block->anchor.resize(3 * (t1 - t0));
+          block->offset.assign(1, 0);
+          block->index.clear();
+          for (int t = t0; t < t1; ++t) {
+            const Eigen::Vector3d x = posed.vertices->row(t).transpose();
+            for (int d = 0; d < 3; ++d) block->anchor[3 * (t - t0) + d] = x[d];
+            cloud.index->Radius(x, radius + margin, &found);
+            ++queries[chunk];
+            for (const auto& entry : found) block->index.push_back(entry.first);
+            block->offset.push_back(static_cast<int>(block->index.size()));
+          }
+          block->valid = true;
+        }
+      }
       for (int t = t0; t < t1; ++t) {
-        const Eigen::Vector3d x = posed.vertices->row(t).transpose();
-        const Eigen::Vector3d nt = posed.normals->row(t).transpose();
-        if (knn) {
-          const int got = cloud.index->KNearest(x, options_.k, knn_index.data(), knn_d2.data());
-          found.resize(got);
-          for (int i = 0; i < got; ++i) found[i] = {knn_index[i], knn_d2[i]};
+        const double x0 = (*posed.vertices)(t, 0), x1 = (*posed.vertices)(t, 1),
+                     x2 = (*posed.vertices)(t, 2);
+        const double n0 = (*posed.normals)(t, 0), n1 = (*posed.normals)(t, 1),
+                     n2 = (*posed.normals)(t, 2);
+        double c0 = 0.0, c1 = 0.0, c2 = 0.0;
+        if (color) {
+          c0 = (*posed.colors)(t, 0);
+          c1 = (*posed.colors)(t, 1);
+          c2 = (*posed.colors)(t, 2);
+        }
+        VertexSums sums;
+        // One candidate pair (s, d2 = |v_s - x_t|^2 within the truncation).
+        auto pair = [&](int s, double d2) {
+          const double* q = packed + kP * s;
+          const double dot = q[3] * n0 + q[4] * n1 + q[5] * n2;
+          if (!(dot > 0.0)) return;
+          double color2 = 0.0;
+          if (color) {
+            const double* qc = packed_colors + 4 * s;
+            if (qc[3] > 0.0) {
+              color2 = (qc[0] - c0) * (qc[0] - c0) + (qc[1] - c1) * (qc[1] - c1) +
+                       (qc[2] - c2) * (qc[2] - c2);
+            }
+          }
+          const double p = q[6] * CorrespondenceWeight(dot, d2, color2, w);
+          if (!(p > 0.0)) return;
+          if (out) {
+            out->s.push_back(s);
+            out->p.push_back(p);
+          } else {
+            sums.Add(p, Eigen::Vector3d(q[0] - x0, q[1] - x1, q[2] - x2), d2);
+          }
+        };
+        if (block) {
+          const int* index = block->index.data();
+          visited[chunk] += block->offset[t - t0 + 1] - block->offset[t - t0];
+          for (int i = block->offset[t - t0]; i < block->offset[t - t0 + 1]; ++i) {
+            const int s = index[i];
+            const double* q = packed + kP * s;
+            const double dx = q[0] - x0, dy = q[1] - x1, dz = q[2] - x2;
+            const double d2 = dx * dx + dy * dy + dz * dz;
+            if (d2 <= radius2) pair(s, d2);
+          }
         } else {
-          cloud.index->Radius(x, radius, &found);
-        }
-        for (const auto& [s, d2] : found) {
-          const double dot = cloud.normals.row(s).dot(nt.transpose());
-          double c2 = 0.0;
-          if (color && cloud.color_valid[s] > 0.0) {
-            c2 = (cloud.colors.row(s) - posed.colors->row(t)).squaredNorm();
-          }
-          const double p = cloud.count[s] * CorrespondenceWeight(dot, d2, c2, w);
-          if (p > 0.0) {
-            out.s.push_back(s);
-            out.p.push_back(p);
+          const Eigen::Vector3d x(x0, x1, x2);
+          ++queries[chunk];
+          if (knn) {
+            const int got = cloud.index->KNearest(x, options_.k, knn_index.data(), knn_d2.data());
+            for (int i = 0; i < got; ++i) pair(knn_index[i], knn_d2[i]);
+          } else {
+            cloud.index->Radius(x, radius, &found);
+            for (const auto& [s, d2] : found) pair(s, d2);
           }
         }
-        out.offset.push_back(static_cast<int>(out.s.size()));
+        if (out) {
+          out->offset.push_back(static_cast<int>(out->s.size()));
+        } else {
+          constants[chunk] += Finish(sums, Eigen::Vector3d(x0, x1, x2), t, targets);
+          pairs[chunk] += sums.pairs;
+        }
       }
     }
   });
 
-  // Per-scan-point normalisation: p_st / sum_t p_st over the pairs found (a cell of
-  // multiplicity c stands for c points with the same weights, so it divides the same way).
-  Eigen::VectorXd inv_sum;
   if (normalize) {
+    // Per-scan-point normalisation: p_st / sum_t p_st over the pairs found (a cell of
+    // multiplicity c stands for c points with the same weights, so it divides the same way).
     Eigen::VectorXd sum = Eigen::VectorXd::Zero(m);
     for (const ChunkPairs& chunk : chunks) {
       for (size_t i = 0; i < chunk.s.size(); ++i) sum[chunk.s[i]] += chunk.p[i];
     }
     // sum counts every member of a cell: per member the sum is sum / count.
-    inv_sum = (sum.array() > 0.0).select(cloud.count.array() / sum.array(), 0.0);
-  }
-
-  // Pass 2: P_t, mu_t, c_t.
-  std::vector<double> constants(num_chunks, 0.0);
-  std::vector<long long> pairs(num_chunks, 0);
-  ForRange(num_chunks, 1, options_.parallel, [&](int chunk_begin, int chunk_end) {
-    for (int chunk = chunk_begin; chunk < chunk_end; ++chunk) {
-      const ChunkPairs& in = chunks[chunk];
-      const int t0 = chunk * grain, t1 = std::min(t_count, t0 + grain);
-      for (int t = t0; t < t1; ++t) {
-        const Eigen::Vector3d x = posed.vertices->row(t).transpose();
-        VertexSums sums;
-        for (int i = in.offset[t - t0]; i < in.offset[t - t0 + 1]; ++i) {
-          const int s = in.s[i];
-          const double p = normalize ? in.p[i] * inv_sum[s] : in.p[i];
-          const Eigen::Vector3d d = cloud.points.row(s).transpose() - x;
-          sums.Add(p, d, d.squaredNorm());
+    const Eigen::VectorXd inv_sum =
+        (sum.array() > 0.0).select(cloud.count.array() / sum.array(), 0.0);
+    // Pass 2: P_t, mu_t, c_t.
+    ForRange(num_chunks, 1, options_.parallel, [&](int chunk_begin, int chunk_end) {
+      for (int chunk = chunk_begin; chunk < chunk_end; ++chunk) {
+        const ChunkPairs& in = chunks[chunk];
+        const int t0 = chunk * grain, t1 = std::min(t_count, t0 + grain);
+        for (int t = t0; t < t1; ++t) {
+          const Eigen::Vector3d x = posed.vertices->row(t).transpose();
+          VertexSums sums;
+          for (int i = in.offset[t - t0]; i < in.offset[t - t0 + 1]; ++i) {
+            const int s = in.s[i];
+            const double p = in.p[i] * inv_sum[s];
+            const double* q = packed + kP * s;
+            const Eigen::Vector3d d(q[0] - x[0], q[1] - x[1], q[2] - x[2]);
+            sums.Add(p, d, d.squaredNorm());
+          }
+          constants[chunk] += Finish(sums, x, t, targets);
+          pairs[chunk] += sums.pairs;
         }
-        constants[chunk] += Finish(sums, x, t, targets);
-        pairs[chunk] += sums.pairs;
       }
-    }
-  });
+    });
+  }
   for (int chunk = 0; chunk < num_chunks; ++chunk) {
     targets->constant += constants[chunk];
     targets->num_pairs += pairs[chunk];
+    kdtree_queries_ += queries[chunk];
+    candidates_visited_ += visited[chunk];
   }
 }
 
@@ -485,10 +642,11 @@ void EStep::FindNearest(const PosedTemplateView& posed, const OneToOneOptions& o
   targets->normal.setZero(t_count, 3);
   targets->index.setConstant(t_count, -1);
   const double max_d2 = options.max_distance * options.max_distance;
+  const Cloud& full = FullCloud();
   ForRange(t_count, options_.grain_size, options_.parallel, [&](int begin, int end) {
     for (int t = begin; t < end; ++t) {
       double d2 = 0.0;
-      const int s = full_->index->Nearest(posed.vertices->row(t).transpose(), &d2);
+      const int s = full.index->Nearest(posed.vertices->row(t).transpose(), &d2);
       if (s < 0 || d2 > max_d2) continue;
       if (scan_.normals.row(s).dot(posed.normals->row(t)) < options.min_normal_dot) continue;
       targets->weight[t] = 1.0;

@@ -11,6 +11,7 @@
 
 #include <map>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <utility>
 #include <vector>
@@ -33,6 +34,13 @@ struct EStepOptions {
   // kRadius: scan subsampled on a voxel grid of cell radius * voxel_fraction (0: full scan).
   // The weights are smooth at the radius scale, so 0.25 keeps ~50 cells per template vertex.
   double voxel_fraction = 0.25;
+  // kRadius: per-frame candidate lists. The first E-step at a radius gathers, per template
+  // vertex, the (subsampled) scan points within radius + candidate_margin (m) of its position;
+  // later E-steps at that radius only re-weight these candidates. Exact: a block of vertices is
+  // gathered again as soon as one of them has moved more than the margin since its gather
+  // (the template moves little within a frame, so that is rare). 0: a kd-tree radius search
+  // per vertex and E-step.
+  double candidate_margin = 0.01;
   int kdtree_leaf_size = 10;     // nanoflann leaf size
   bool parallel = true;          // TBB over template vertices
   int grain_size = 256;          // template vertices per TBB task
@@ -74,8 +82,8 @@ struct PosedTemplateView {
 void DenseEStep(const Scan& scan, const PosedTemplateView& posed, const OneToManyOptions& options,
                 CorrespondenceTargets* targets, bool parallel = true);
 
-// Per-frame correspondence search: builds the scan's kd-tree once (voxel-subsampled trees are
-// built on first use per radius and cached), then serves E-steps for successive poses.
+// Per-frame correspondence search: builds the kd-trees it needs once (the full scan's, and the
+// voxel-subsampled scans' per radius, on first use), then serves E-steps for successive poses.
 class EStep {
  public:
   // Throws artex::Error on invalid options or a scan with inconsistent shapes.
@@ -92,14 +100,25 @@ class EStep {
   void FindNearest(const PosedTemplateView& posed, const OneToOneOptions& options,
                    NearestTargets* targets) const;
 
+  // Work counters since construction: kd-tree queries (radius, k-nearest) and the scan
+  // candidates visited by the candidate-list E-steps.
+  long long kdtree_queries() const { return kdtree_queries_; }
+  long long candidates_visited() const { return candidates_visited_; }
+
  private:
-  struct Cloud;  // a (possibly subsampled) scan with multiplicities and its kd-tree
+  struct Cloud;       // a (possibly subsampled) scan with multiplicities and its kd-tree
+  struct Candidates;  // per-radius candidate lists (candidate_margin > 0)
   const Cloud& CloudForRadius(double radius);
+  const Cloud& FullCloud() const;  // the whole scan; its kd-tree is built on first use
 
   Scan scan_;
   EStepOptions options_;
   std::unique_ptr<Cloud> full_;
+  mutable std::once_flag full_index_once_;
   std::map<double, std::unique_ptr<Cloud>> subsampled_;  // keyed by voxel size
+  std::map<double, std::unique_ptr<Candidates>> candidates_;  // keyed by radius
+  long long kdtree_queries_ = 0;
+  long long candidates_visited_ = 0;
 };
 
 }  // namespace artex

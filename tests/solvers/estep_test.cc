@@ -177,6 +177,40 @@ TEST(EStepTest, RadiusTruncationMatchesTruncatedBruteForce) {
   }
 }
 
+TEST(EStepTest, CandidateListsEqualAFreshRadiusSearch) {
+  // Successive E-steps at the same radius re-weight the candidates gathered within
+  // radius + margin; moves below and beyond the margin must give the result of a fresh search.
+  const PointSets sets = MakePointSets(600, 150, 17);
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> g(0.0, 1.0);
+  for (bool normalize : {false, true}) {
+    for (bool color : {false, true}) {
+      EStepOptions cached_options;
+      cached_options.voxel_fraction = 0.25;
+      cached_options.candidate_margin = 0.02;
+      cached_options.grain_size = 16;
+      cached_options.weights.normalize_per_scan_point = normalize;
+      cached_options.weights.lambda_color = 0.01;
+      EStepOptions fresh_options = cached_options;
+      fresh_options.candidate_margin = 0.0;
+      EStep cached(sets.scan, cached_options), fresh(sets.scan, fresh_options);
+      PointSets moved = sets;
+      // Steps of ~3 mm (inside the margin), then ~4 cm (outside), alternating radii.
+      for (double step : {0.0, 0.003, 0.003, 0.04, 0.003}) {
+        for (int i = 0; i < moved.vertices.size(); ++i) moved.vertices.data()[i] += step * g(rng);
+        for (double radius : {0.08, 0.05}) {
+          CorrespondenceTargets a, b;
+          cached.Compute(View(moved, color), radius, &a);
+          fresh.Compute(View(moved, color), radius, &b);
+          ExpectTargetsNear(a, b, 1e-12);
+          EXPECT_EQ(a.num_pairs, b.num_pairs);
+          EXPECT_GT(a.num_pairs, 0);
+        }
+      }
+    }
+  }
+}
+
 TEST(EStepTest, KeyIdentityOfTheMStep) {
   // sum_s sum_t p_st |v_s - x_t|^2 == sum_t P_t |x_t - mu_t|^2 + constant for any x (p fixed).
   const PointSets sets = MakePointSets(200, 80, 14);
@@ -284,6 +318,9 @@ TEST(EStepTest, RejectsBadInput) {
   const PointSets sets = MakePointSets(10, 5, 16);
   EStepOptions options;
   options.k = 0;
+  EXPECT_THROW(EStep(sets.scan, options), Error);
+  options.k = 8;
+  options.candidate_margin = -0.01;
   EXPECT_THROW(EStep(sets.scan, options), Error);
   Scan broken = sets.scan;
   broken.normals.resize(3, 3);
