@@ -50,7 +50,8 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
                "smoothness", "joint_limit_weight", "scale_mode", "scale_estimation_frames",
                "scale_max_radius", "scale_prior_weight", "icp_first_frame",
                "constant_velocity_prediction", "max_fit_vertices", "min_scan_points",
-               "max_mean_motion", "max_scale_change", "ceres_max_iterations", "solver_threads"});
+               "max_mean_motion", "max_scale_change", "ceres_max_iterations", "solver_threads",
+               "candidate_margin", "normal_refresh_iterations"});
   c.GetEnum("correspondence", CorrespondenceModelNames(), &o->correspondence);
   c.GetEnum("solver", FitSolverTypeNames(), &o->solver.type);
   c.GetEnum("estep", std::map<std::string, EStepMode>{{"dense", EStepMode::kDense},
@@ -94,6 +95,8 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   c.Get("max_scale_change", &o->max_scale_change);
   c.Get("ceres_max_iterations", &o->solver.max_iterations);
   c.Get("solver_threads", &o->solver.num_threads);
+  c.Get("candidate_margin", &o->estep.candidate_margin);
+  c.Get("normal_refresh_iterations", &o->normal_refresh_iterations);
 }
 
 void BindTexture(const Config& c, TexturingOptions* o) {
