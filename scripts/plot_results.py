@@ -111,7 +111,12 @@ def plot_per_frame_error(runs, path, dpi):
     has_truth = any(math.isfinite(to_float(row["vertex_error_mm"])) for r in runs for row in r["trace"])
     if not has_truth:
         return
-    fig, axes = plt.subplots(1, len(sequences), figsize=(4.2 * len(sequences), 3.2), squeeze=False)
+    cols = min(3, len(sequences))
+    rows = (len(sequences) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.0 * rows), squeeze=False)
+    axes = [[ax for row in axes for ax in row]]
+    for ax in axes[0][len(sequences):]:
+        ax.axis("off")
     for ax, seq in zip(axes[0], sequences):
         for r in (r for r in runs if r["sequence"] == seq):
             rows = [row for row in r["trace"] if row["skipped"] == "0"]
@@ -121,7 +126,7 @@ def plot_per_frame_error(runs, path, dpi):
         ax.set_xlabel("frame")
         ax.set_ylabel("mean vertex error (mm)")
         ax.grid(alpha=0.3)
-    axes[0][-1].legend(fontsize=7)
+    axes[0][len(sequences) - 1].legend(fontsize=7)
     save(fig, path, dpi)
 
 
