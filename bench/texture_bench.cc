@@ -102,6 +102,10 @@ void BM_AddFrame(benchmark::State& state) {
   const Sequence& seq = Walk();
   TexturingOptions options = BenchOptions();
   options.selection.terms.switch_cost = 1e-3 * static_cast<double>(state.range(0));
+  if (state.range(1) == 0) {  // plain bilinear sampling, as without the z-buffer
+    options.pool.surface_aware_sampling = false;
+    options.pool.vertex_colors_need_full_ring = false;
+  }
   Texturer texturer(seq.body, options);
   for (int f = 0; f < kWarmupFrames; ++f) texturer.AddFrame(f, seq.color[f], seq.camera, seq.posed[f]);
   std::vector<double> wall, cpu, pool, mrf, sampling, levelling, changed, seams, pool_size;
@@ -153,11 +157,14 @@ void BM_AddFrame(benchmark::State& state) {
   // Identifies the sequence of labellings (equal hashes: identical view selection).
   state.counters["labels_hash"] = static_cast<double>(labels_hash % 1000000007ull);
 }
-// Argument: TextureTermOptions::switch_cost in thousandths (0: the paper's energy, default).
+// Arguments: TextureTermOptions::switch_cost in thousandths (0: the paper's energy, default);
+// surface-aware sampling (1: default, 0: plain bilinear sampling and vertex colours wherever a
+// triangle around the vertex is visible).
 BENCHMARK(BM_AddFrame)
-    ->ArgName("switch_cost_x1000")
-    ->Arg(0)
-    ->Arg(20)
+    ->ArgNames({"switch_cost_x1000", "surface_aware"})
+    ->Args({0, 1})
+    ->Args({0, 0})
+    ->Args({20, 1})
     ->Iterations(kTimedFrames)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();

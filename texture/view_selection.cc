@@ -181,6 +181,8 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
 
   const int num_free = static_cast<int>(triangle_of.size());
   MrfProblem problem(slots + 1);
+  // One extra isolated node carries the fixed triangles' constant, so that every energy the
+  // solver sees (its relative stopping tests, the callback) is that of the whole labelling.
   {
     std::vector<int> labels;
     std::vector<double> costs;
@@ -192,6 +194,7 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
       problem.AddNode(labels, costs);
     }
   }
+  if (num_free < f_count) problem.AddNode({untextured}, {constant});
   for (int e = 0; e < e_count; ++e) {
     const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
     if (node_of[fi] < 0 || node_of[fj] < 0) continue;
@@ -209,23 +212,12 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
   problem.set_smoothness(lambda);
 
   // Warm start: previous labels where still candidates, else the best unary.
-  std::vector<int> x = problem.UnaryArgmin();
+  std::vector<int> x = problem.UnaryArgmin();  // the constant node: its only label
   for (int i = 0; i < num_free; ++i) {
     const int f = triangle_of[i];
     if (warm[f] >= 0 && problem.CandidateIndex(i, warm[f]) >= 0) x[i] = warm[f];
   }
-  if (num_free > 0) {
-    result.mrf = solver->Solve(problem, &x);
-  } else {
-    result.mrf.termination = "optimal";
-    result.mrf.lower_bound = 0.0;
-  }
-  // Energies of the whole labelling: add the fixed triangles' constant.
-  result.mrf.initial_energy += constant;
-  result.mrf.energy += constant;
-  if (std::isfinite(result.mrf.lower_bound)) result.mrf.lower_bound += constant;
-  for (double& value : result.mrf.trace) value += constant;
-  for (double& value : result.mrf.bound_trace) value += constant;
+  result.mrf = solver->Solve(problem, &x);
   result.frames.assign(f_count, -1);
   for (int i = 0; i < num_free; ++i)
     result.frames[triangle_of[i]] = x[i] == untextured ? -1 : pool.entry(x[i]).frame_index;

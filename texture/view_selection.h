@@ -45,10 +45,9 @@ struct ViewSelectionResult {
 };
 
 // Triangles seen by no pooled image (only "untextured" is possible) are not MRF nodes: their
-// costs enter as a constant and as unaries of their neighbours. result.mrf reports energies and
-// bounds of the whole labelling (constant included); the solver's progress callback
-// (MrfSolverOptions::callback) sees those of the reduced problem, without the constant.
-// Throws artex::Error for invalid options.
+// pairwise terms become unaries of their neighbours and their data costs one isolated node with
+// a single label; energies and bounds are those of the whole labelling. Throws artex::Error for
+// invalid options.
 ViewSelectionResult SelectViews(const ViewSelectionInput& input,
                                 const ViewSelectionOptions& options, MrfSolver* solver);
 
