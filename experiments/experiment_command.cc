@@ -68,8 +68,6 @@ class ProgressDisplay {
         Line("experiment: " + std::to_string(e.runs_total) + " runs, " +
              std::to_string(e.runs_skipped) + " already complete (skipped), " +
              std::to_string(e.total) + " to run");
-        total_ = e.runs_total;
-        done_ = e.runs_skipped;
         break;
       case K::kSequenceStarted:
         Line("experiment: generating sequence " + e.label);
@@ -91,7 +89,6 @@ class ProgressDisplay {
         break;
       case K::kRunFinished:
         active_.erase(e.label);
-        done_ = e.runs_done;
         Line("experiment: [" + std::to_string(e.runs_done) + "/" + std::to_string(e.runs_total) +
              "] done " + e.label + " in " + Seconds(e.seconds));
         break;
@@ -130,7 +127,6 @@ class ProgressDisplay {
 
   bool tty_;
   bool status_shown_ = false;
-  int total_ = 0, done_ = 0;
   std::map<std::string, std::string> active_;
 };
 

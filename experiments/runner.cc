@@ -1257,7 +1257,8 @@ int WriteExperimentResults(const Experiment& experiment, const std::string& out_
     if (!best) continue;
     md << "| " << info.name << (info.timing ? " (timing)" : "") << " | "
        << (info.lower_is_better ? "lower" : "higher") << " | "
-       << (ranked > 1 ? CombinationLabel(*best->combination) : CombinationLabel(*best->combination) + " (only one)")
+       << CombinationLabel(*best->combination)
+       << (ranked == 1 ? " (only one)" : best_v == worst_v ? " (all equal)" : "")
        << " | " << FormatNumber(best_v) << " | " << FormatNumber(worst_v) << " | "
        << FormatNumber(std::fabs(worst_v - best_v)) << " |\n";
   }
