@@ -13,6 +13,8 @@
 // BM_ViewSelection/<solver>: the MRF of one frame (pool after kWarmupFrames + 1 images, warm start
 //   and Psi from the previous frame's labelling) built and solved by SelectViews with each
 //   solver: energy, TRW-S lower bound, iterations, solve time.
+// BM_ExpansionSweeps/<n>: the same with alpha-expansion limited to n sweeps.
+// BM_LevelSeams: seam levelling of one labelling.
 // Median figures: --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
 #include <time.h>
 
@@ -228,6 +230,32 @@ void BM_ViewSelection(benchmark::State& state) {
 }
 BENCHMARK(BM_ViewSelection)
     ->DenseRange(0, 3)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(0.5);
+
+// Alpha-expansion on the same problem with at most state.range(0) sweeps.
+void BM_ExpansionSweeps(benchmark::State& state) {
+  const SelectionSetup& setup = Selection();
+  const TexturingOptions options = BenchOptions();
+  MrfSolverOptions mrf = options.mrf;
+  mrf.max_iterations = static_cast<int>(state.range(0));
+  const std::unique_ptr<MrfSolver> solver = MrfSolver::Create(mrf);
+  ViewSelectionResult result;
+  std::vector<double> solve_seconds;
+  for (auto _ : state) {
+    result = SelectViews(setup.input, options.selection, solver.get());
+    solve_seconds.push_back(result.mrf.seconds);
+  }
+  state.counters["energy"] = result.mrf.energy;
+  state.counters["initial_energy"] = result.mrf.initial_energy;
+  state.counters["solve_ms"] = 1e3 * Median(solve_seconds);
+}
+BENCHMARK(BM_ExpansionSweeps)
+    ->ArgName("max_sweeps")
+    ->Arg(1)
+    ->Arg(2)
+    ->Arg(50)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->MinTime(0.5);

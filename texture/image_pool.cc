@@ -63,38 +63,21 @@ std::size_t PoolEntry::MemoryBytes() const {
          surface.MemoryBytes();
 }
 
+void PoolEntry::SurfaceTolerance(double quality, double* tolerance_offset,
+                                 double* tolerance_slope) const {
+  const double w = std::max(quality, kMinSurfaceQuality);
+  *tolerance_offset = depth_tolerance;
+  // Depth change across one pixel diagonal (sqrt(2) z / fx) of a surface tilted by acos(W).
+  *tolerance_slope = std::sqrt(2.0) / camera.fx * std::sqrt(1.0 - w * w) / w;
+}
+
 bool PoolEntry::SampleSurface(const Eigen::Vector3d& point, double quality, bool fallback,
                               Eigen::Vector3f* color) const {
   const double z = point.z();
-  const Eigen::Vector2d pixel(camera.fx * point.x() / z + camera.cx,
-                              camera.fy * point.y() / z + camera.cy);
-  if (surface.depth.empty()) return Sample(pixel, color);
-  const double x = pixel.x() - offset.x();
-  const double y = pixel.y() - offset.y();
-  if (!(x >= 0.0 && y >= 0.0 && x <= image.cols - 1 && y <= image.rows - 1)) return false;
-  const int x0 = std::min(static_cast<int>(x), image.cols - 2 < 0 ? 0 : image.cols - 2);
-  const int y0 = std::min(static_cast<int>(y), image.rows - 2 < 0 ? 0 : image.rows - 2);
-  const int x1 = std::min(x0 + 1, image.cols - 1);
-  const int y1 = std::min(y0 + 1, image.rows - 1);
-  const float fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
-  const double w = std::max(quality, kMinSurfaceQuality);
-  const double tolerance =
-      depth_tolerance + std::sqrt(2.0) * (z / camera.fx) * std::sqrt(1.0 - w * w) / w;
-  const int xs[4] = {x0, x1, x0, x1}, ys[4] = {y0, y0, y1, y1};
-  const float weights[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy};
-  float total = 0.0f;
-  Eigen::Vector3f sum = Eigen::Vector3f::Zero();
-  for (int k = 0; k < 4; ++k) {
-    if (weights[k] <= 0.0f) continue;
-    const float d = surface.At(xs[k] + offset.x(), ys[k] + offset.y());
-    if (!(std::abs(d - z) <= tolerance)) continue;
-    const cv::Vec3b& c = image.ptr<cv::Vec3b>(ys[k])[xs[k]];
-    sum += weights[k] * Eigen::Vector3f(c[0], c[1], c[2]);
-    total += weights[k];
-  }
-  if (total <= 0.0f) return fallback && Sample(pixel, color);
-  *color = sum / (255.0f * total);
-  return true;
+  double offset0 = 0.0, slope = 0.0;
+  SurfaceTolerance(quality, &offset0, &slope);
+  return SampleSurfaceAt(camera.fx * point.x() / z + camera.cx, camera.fy * point.y() / z + camera.cy,
+                         z, offset0 + slope * z, fallback, color);
 }
 
 ImagePool::ImagePool(const TextureMesh* mesh, const ImagePoolOptions& pool_options,

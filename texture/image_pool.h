@@ -82,6 +82,13 @@ struct PoolEntry {
   // `fallback`, else false. false outside the crop.
   bool SampleSurface(const Eigen::Vector3d& point, double quality, bool fallback,
                      Eigen::Vector3f* color) const;
+  // SampleSurface at full-image pixel (u, v) for a point at camera depth z, with the accepted
+  // depth difference `tolerance` (m) already computed (SurfaceTolerance).
+  inline bool SampleSurfaceAt(double u, double v, double z, double tolerance, bool fallback,
+                              Eigen::Vector3f* color) const;
+  // The accepted depth difference is tolerance_offset + tolerance_slope * z for a surface seen
+  // at quality W (see ImagePoolOptions::surface_aware_sampling).
+  void SurfaceTolerance(double quality, double* tolerance_offset, double* tolerance_slope) const;
   std::size_t MemoryBytes() const;
 };
 
@@ -101,6 +108,35 @@ inline bool PoolEntry::Sample(const Eigen::Vector2d& pixel, Eigen::Vector3f* col
     const float bottom = r1[x0][c] * (1 - fx) + r1[x1][c] * fx;
     (*color)[c] = (top * (1 - fy) + bottom * fy) / 255.0f;
   }
+  return true;
+}
+
+inline bool PoolEntry::SampleSurfaceAt(double u, double v, double z, double tolerance,
+                                       bool fallback, Eigen::Vector3f* color) const {
+  if (surface.depth.empty()) return Sample(Eigen::Vector2d(u, v), color);
+  const double x = u - offset.x();
+  const double y = v - offset.y();
+  if (!(x >= 0.0 && y >= 0.0 && x <= image.cols - 1 && y <= image.rows - 1)) return false;
+  const int x0 = std::min(static_cast<int>(x), image.cols - 2 < 0 ? 0 : image.cols - 2);
+  const int y0 = std::min(static_cast<int>(y), image.rows - 2 < 0 ? 0 : image.rows - 2);
+  const int x1 = std::min(x0 + 1, image.cols - 1);
+  const int y1 = std::min(y0 + 1, image.rows - 1);
+  const float fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
+  const int xs[4] = {x0, x1, x0, x1}, ys[4] = {y0, y0, y1, y1};
+  const float weights[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy};
+  float total = 0.0f;
+  float sum[3] = {0.0f, 0.0f, 0.0f};
+  for (int k = 0; k < 4; ++k) {
+    if (weights[k] <= 0.0f) continue;
+    const float d = surface.At(xs[k] + offset.x(), ys[k] + offset.y());
+    if (!(std::abs(d - z) <= tolerance)) continue;
+    const cv::Vec3b& c = image.ptr<cv::Vec3b>(ys[k])[xs[k]];
+    for (int ch = 0; ch < 3; ++ch) sum[ch] += weights[k] * c[ch];
+    total += weights[k];
+  }
+  if (total <= 0.0f) return fallback && Sample(Eigen::Vector2d(u, v), color);
+  const float scale = 1.0f / (255.0f * total);
+  *color = Eigen::Vector3f(sum[0] * scale, sum[1] * scale, sum[2] * scale);
   return true;
 }
 

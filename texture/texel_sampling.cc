@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 #include <tbb/blocked_range.h>
@@ -10,6 +11,11 @@
 #include "models/error.h"
 
 namespace artex {
+namespace {
+// Triangles projecting onto more pixels than this skip the whole-triangle z-buffer check of
+// SampleTriangle (the per-texel tests are then cheaper).
+constexpr int kMaxSurfaceCheckPixels = 4096;
+}  // namespace
 
 AtlasMap::AtlasMap(const Template& tmpl, int size) : size_(size) {
   if (!tmpl.has_uvs()) throw Error("texture atlas: the template has no UV atlas (uv_triangles)");
@@ -78,12 +84,49 @@ int SampleTriangle(const AtlasMap& map, int f, const Eigen::MatrixX3i& triangles
   Eigen::Vector3f* color = texels->color.data();
   uint8_t* valid = texels->valid.data();
   int written = 0;
-  const double quality = entry.visibility.quality[f];
+  double tolerance_offset = 0.0, tolerance_slope = 0.0;
+  entry.SurfaceTolerance(entry.visibility.quality[f], &tolerance_offset, &tolerance_slope);
+  const PinholeCamera& camera = entry.camera;
+  // When every z-buffer pixel around the triangle's projection is within the tolerance of every
+  // depth on the triangle, each texel's bilinear footprint lies on the surface: plain sampling
+  // gives the same colours without the per-pixel tests.
+  bool on_surface = entry.surface.depth.empty();
+  if (!on_surface && corner[0].z() > 0.0 && corner[1].z() > 0.0 && corner[2].z() > 0.0) {
+    double u_min = std::numeric_limits<double>::infinity(), v_min = u_min;
+    double u_max = -u_min, v_max = -u_min, z_min = u_min, z_max = -u_min;
+    for (const Eigen::Vector3d& k : corner) {
+      const double u = camera.fx * k.x() / k.z() + camera.cx;
+      const double v = camera.fy * k.y() / k.z() + camera.cy;
+      u_min = std::min(u_min, u);
+      u_max = std::max(u_max, u);
+      v_min = std::min(v_min, v);
+      v_max = std::max(v_max, v);
+      z_min = std::min(z_min, k.z());
+      z_max = std::max(z_max, k.z());
+    }
+    const double tolerance = tolerance_offset + tolerance_slope * z_min;
+    const int x0 = static_cast<int>(std::floor(u_min)), x1 = static_cast<int>(std::floor(u_max)) + 1;
+    const int y0 = static_cast<int>(std::floor(v_min)), y1 = static_cast<int>(std::floor(v_max)) + 1;
+    on_surface = (x1 - x0 + 1) * (y1 - y0 + 1) <= kMaxSurfaceCheckPixels;
+    for (int y = y0; y <= y1 && on_surface; ++y) {
+      for (int x = x0; x <= x1 && on_surface; ++x) {
+        const float d = entry.surface.At(x, y);
+        on_surface = d - z_min <= tolerance && z_max - d <= tolerance;
+      }
+    }
+  }
   for (int p = map.first(f); p < map.last(f); ++p) {
     const Eigen::Vector3f& w = map.barycentric_at(p);
     const Eigen::Vector3d c = w.x() * corner[0] + w.y() * corner[1] + w.z() * corner[2];
+    const double inv_z = 1.0 / c.z();
+    const double u = camera.fx * c.x() * inv_z + camera.cx;
+    const double v = camera.fy * c.y() * inv_z + camera.cy;
     Eigen::Vector3f value;
-    if (!entry.SampleSurface(c, quality, true, &value)) continue;
+    const bool sampled =
+        on_surface ? entry.Sample(Eigen::Vector2d(u, v), &value)
+                   : entry.SampleSurfaceAt(u, v, c.z(), tolerance_offset + tolerance_slope * c.z(),
+                                           true, &value);
+    if (!sampled) continue;
     color[p] = value;
     valid[p] = 1;
     ++written;
