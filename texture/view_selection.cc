@@ -137,11 +137,18 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
       const int* li = &cand_labels[static_cast<std::size_t>(fi) * width];
       const int* lj = &cand_labels[static_cast<std::size_t>(fj) * width];
       double* table = &tables[table_offset[e]];
-      for (int p = 0; p < count[fi]; ++p) {
-        for (int q = 0; q < count[fj]; ++q) {
+      const int ni = count[fi], nj = count[fj];
+      for (int p = 0; p < ni; ++p) {
+        for (int q = 0; q < nj; ++q) {
           const int a = li[p], b = lj[q];
           double cost = 0.0;
-          if (a != b) {
+          // V is symmetric in the two images: reuse (b, a) when already computed.
+          const int p2 = static_cast<int>(std::lower_bound(li, li + ni, b) - li);
+          const int q2 = static_cast<int>(std::lower_bound(lj, lj + nj, a) - lj);
+          if (a != b && p2 < ni && li[p2] == b && q2 < nj && lj[q2] == a &&
+              p2 * nj + q2 < p * nj + q) {
+            cost = table[p2 * nj + q2];
+          } else if (a != b) {
             double pi = options.unseen_colour_cost;
             if (a != untextured && b != untextured && samples > 0) {
               const ColorRows& ca = pool.entry(a).edge_colors;
@@ -158,7 +165,7 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
             }
             cost = SeamPairCost(pi, psi, options.terms);
           }
-          table[p * count[fj] + q] = cost;
+          table[p * nj + q] = cost;
         }
       }
     }
