@@ -16,6 +16,7 @@
 // BM_ExpansionSweeps/<n>: the same with alpha-expansion limited to n sweeps.
 // BM_LevelSeams: seam levelling of one labelling.
 // Median figures: --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
+#include <benchmark/benchmark.h>
 #include <time.h>
 
 #include <algorithm>
@@ -24,8 +25,6 @@
 #include <cstdint>
 #include <memory>
 #include <vector>
-
-#include <benchmark/benchmark.h>
 
 #include "energies/texture_terms.h"
 #include "models/skinning.h"
@@ -109,7 +108,8 @@ void BM_AddFrame(benchmark::State& state) {
     options.pool.vertex_colors_need_full_ring = false;
   }
   Texturer texturer(seq.body, options);
-  for (int f = 0; f < kWarmupFrames; ++f) texturer.AddFrame(f, seq.color[f], seq.camera, seq.posed[f]);
+  for (int f = 0; f < kWarmupFrames; ++f)
+    texturer.AddFrame(f, seq.color[f], seq.camera, seq.posed[f]);
   std::vector<double> wall, cpu, pool, mrf, sampling, levelling, changed, seams, pool_size;
   std::vector<double> to_newest, from_dropped, textured;
   uint64_t labels_hash = 1469598103934665603ull;  // FNV-1a over every frame's labels
@@ -276,9 +276,9 @@ void BM_LevelSeams(benchmark::State& state) {
   };
   Eigen::MatrixX3f corrections;
   SeamLevellingSummary summary;
-  const SeamLeveller leveller(seq.body.num_vertices(), seq.body.triangles, BenchOptions().levelling);
-  for (auto _ : state)
-    leveller.Level(texturer.triangle_frames(), colour, &corrections, &summary);
+  const SeamLeveller leveller(seq.body.num_vertices(), seq.body.triangles,
+                              BenchOptions().levelling);
+  for (auto _ : state) leveller.Level(texturer.triangle_frames(), colour, &corrections, &summary);
   state.counters["unknowns"] = summary.unknowns;
   state.counters["seam_equations"] = summary.seam_equations;
   state.counters["rms_before"] = summary.seam_residual_before;

@@ -12,9 +12,12 @@ namespace artex {
 
 bool TextureTermOptions::IsValid(std::string* error) const {
   std::ostringstream msg;
-  if (!(beta >= 0.0 && beta <= 1.0)) msg << "texture.beta: expected [0, 1], found " << beta;
-  else if (!(t_max > 0.0)) msg << "texture.t_max: expected > 0, found " << t_max;
-  else if (!(alpha >= 0.0 && alpha <= 1.0)) msg << "texture.alpha: expected [0, 1], found " << alpha;
+  if (!(beta >= 0.0 && beta <= 1.0))
+    msg << "texture.beta: expected [0, 1], found " << beta;
+  else if (!(t_max > 0.0))
+    msg << "texture.t_max: expected > 0, found " << t_max;
+  else if (!(alpha >= 0.0 && alpha <= 1.0))
+    msg << "texture.alpha: expected [0, 1], found " << alpha;
   else if (!(lambda >= 0.0) || !std::isfinite(lambda))
     msg << "texture.lambda: expected a finite value >= 0, found " << lambda;
   else if (!(seam_distance_scale > 0.0))

@@ -4,18 +4,17 @@
 // the image sampling that produces Pi's colour differences lives in texture/.
 #pragma once
 
+#include <Eigen/Core>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 namespace artex {
 
 struct TextureTermOptions {
-  double beta = 0.7;     // D = beta (1 - W) + (1 - beta) min(t_max, age) / t_max; [0, 1]
-  double t_max = 60.0;   // lifetime saturation (frames); > 0
-  double alpha = 0.3;    // V = (1 - alpha) Pi + alpha Psi; [0, 1]
-  double lambda = 1.0;   // smoothness weight of sum V (eq. 14); >= 0
+  double beta = 0.7;    // D = beta (1 - W) + (1 - beta) min(t_max, age) / t_max; [0, 1]
+  double t_max = 60.0;  // lifetime saturation (frames); > 0
+  double alpha = 0.3;   // V = (1 - alpha) Pi + alpha Psi; [0, 1]
+  double lambda = 1.0;  // smoothness weight of sum V (eq. 14); >= 0
   // Psi = min(1, d / seam_distance_scale), d = distance (m, along the rest mesh) from the edge
   // to the nearest seam of the previous labelling; > 0.
   double seam_distance_scale = 0.10;
@@ -66,9 +65,9 @@ class MeshGeodesics {
   std::vector<double> DistanceField(const std::vector<int>& sources) const;
 
  private:
-  std::vector<int> offsets_;      // V + 1 (CSR)
-  std::vector<int> neighbours_;   // unique neighbours per vertex
-  std::vector<double> lengths_;   // edge length per neighbour entry
+  std::vector<int> offsets_;     // V + 1 (CSR)
+  std::vector<int> neighbours_;  // unique neighbours per vertex
+  std::vector<double> lengths_;  // edge length per neighbour entry
 };
 
 }  // namespace artex

@@ -1,13 +1,12 @@
 #include "solvers/seam_levelling.h"
 
+#include <Eigen/OrderingMethods>
+#include <Eigen/SparseCholesky>
+#include <Eigen/SparseCore>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <sstream>
-
-#include <Eigen/OrderingMethods>
-#include <Eigen/SparseCholesky>
-#include <Eigen/SparseCore>
 
 #include "models/error.h"
 
@@ -15,7 +14,8 @@ namespace artex {
 
 bool SeamLevellingOptions::IsValid(std::string* error) const {
   std::ostringstream msg;
-  if (!(smoothness > 0.0)) msg << "levelling.smoothness: expected > 0, found " << smoothness;
+  if (!(smoothness > 0.0))
+    msg << "levelling.smoothness: expected > 0, found " << smoothness;
   else if (!(regularisation > 0.0))
     msg << "levelling.regularisation: expected > 0, found " << regularisation;
   if (msg.str().empty()) return true;
@@ -161,7 +161,8 @@ void SeamLeveller::Level(const std::vector<int>& labels,
         for (int b = a + 1; b < vertex_first[i + 1]; ++b) {
           if (!known[a] || !known[b]) continue;
           after += ((f_value[a].cast<double>() + g.row(a).transpose()) -
-                    (f_value[b].cast<double>() + g.row(b).transpose())).squaredNorm();
+                    (f_value[b].cast<double>() + g.row(b).transpose()))
+                       .squaredNorm();
         }
       }
     }

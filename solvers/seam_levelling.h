@@ -7,12 +7,11 @@
 // is interpolated over triangles from their corners.
 #pragma once
 
+#include <Eigen/Core>
 #include <functional>
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 namespace artex {
 
@@ -23,7 +22,7 @@ struct SeamLevellingOptions {
 };
 
 struct SeamLevellingSummary {
-  int unknowns = 0;         // (vertex, label) pairs
+  int unknowns = 0;  // (vertex, label) pairs
   int seam_equations = 0;
   double seam_residual_before = 0.0;  // RMS colour jump at seam vertices
   double seam_residual_after = 0.0;

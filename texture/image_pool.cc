@@ -1,5 +1,8 @@
 #include "texture/image_pool.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -7,9 +10,6 @@
 #include <map>
 #include <sstream>
 #include <utility>
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include "models/error.h"
 
@@ -45,13 +45,17 @@ TextureMesh TextureMesh::Build(const Eigen::MatrixX3i& triangles) {
 
 bool ImagePoolOptions::IsValid(std::string* error) const {
   std::ostringstream msg;
-  if (max_images < 1) msg << "pool.max_images: expected >= 1, found " << max_images;
+  if (max_images < 1)
+    msg << "pool.max_images: expected >= 1, found " << max_images;
   else if (hard_max_images < max_images)
     msg << "pool.hard_max_images: expected >= pool.max_images (" << max_images << "), found "
         << hard_max_images;
-  else if (histogram_bins < 1) msg << "pool.histogram_bins: expected >= 1, found " << histogram_bins;
-  else if (crop_margin < 0) msg << "pool.crop_margin: expected >= 0, found " << crop_margin;
-  else if (edge_samples < 2) msg << "pool.edge_samples: expected >= 2, found " << edge_samples;
+  else if (histogram_bins < 1)
+    msg << "pool.histogram_bins: expected >= 1, found " << histogram_bins;
+  else if (crop_margin < 0)
+    msg << "pool.crop_margin: expected >= 0, found " << crop_margin;
+  else if (edge_samples < 2)
+    msg << "pool.edge_samples: expected >= 2, found " << edge_samples;
   if (msg.str().empty()) return true;
   if (error) *error = msg.str();
   return false;
@@ -76,8 +80,9 @@ bool PoolEntry::SampleSurface(const Eigen::Vector3d& point, double quality, bool
   const double z = point.z();
   double offset0 = 0.0, slope = 0.0;
   SurfaceTolerance(quality, &offset0, &slope);
-  return SampleSurfaceAt(camera.fx * point.x() / z + camera.cx, camera.fy * point.y() / z + camera.cy,
-                         z, offset0 + slope * z, fallback, color);
+  return SampleSurfaceAt(camera.fx * point.x() / z + camera.cx,
+                         camera.fy * point.y() / z + camera.cy, z, offset0 + slope * z, fallback,
+                         color);
 }
 
 ImagePool::ImagePool(const TextureMesh* mesh, const ImagePoolOptions& pool_options,
@@ -94,8 +99,8 @@ int ImagePool::Add(int frame_index, const cv::Mat& color_bgr, const PinholeCamer
       color_bgr.rows != camera.height) {
     std::ostringstream msg;
     msg << "frame " << frame_index << ": expected a " << camera.width << "x" << camera.height
-        << " 8-bit BGR colour image, found " << color_bgr.cols << "x" << color_bgr.rows
-        << " with " << color_bgr.channels() << " channel(s)";
+        << " 8-bit BGR colour image, found " << color_bgr.cols << "x" << color_bgr.rows << " with "
+        << color_bgr.channels() << " channel(s)";
     throw Error(msg.str());
   }
   auto entry = std::make_unique<PoolEntry>();
@@ -130,10 +135,14 @@ int ImagePool::Add(int frame_index, const cv::Mat& color_bgr, const PinholeCamer
     max_x = std::max(max_x, pixels[v].x());
     max_y = std::max(max_y, pixels[v].y());
   }
-  const int x0 = std::clamp(static_cast<int>(std::floor(min_x)) - options_.crop_margin, 0, camera.width);
-  const int y0 = std::clamp(static_cast<int>(std::floor(min_y)) - options_.crop_margin, 0, camera.height);
-  const int x1 = std::clamp(static_cast<int>(std::ceil(max_x)) + options_.crop_margin + 1, 0, camera.width);
-  const int y1 = std::clamp(static_cast<int>(std::ceil(max_y)) + options_.crop_margin + 1, 0, camera.height);
+  const int x0 =
+      std::clamp(static_cast<int>(std::floor(min_x)) - options_.crop_margin, 0, camera.width);
+  const int y0 =
+      std::clamp(static_cast<int>(std::floor(min_y)) - options_.crop_margin, 0, camera.height);
+  const int x1 =
+      std::clamp(static_cast<int>(std::ceil(max_x)) + options_.crop_margin + 1, 0, camera.width);
+  const int y1 =
+      std::clamp(static_cast<int>(std::ceil(max_y)) + options_.crop_margin + 1, 0, camera.height);
   if (x1 > x0 && y1 > y0) {
     entry->image = color_bgr(cv::Rect(x0, y0, x1 - x0, y1 - y0)).clone();
     entry->offset = {x0, y0};
@@ -172,23 +181,23 @@ int ImagePool::Add(int frame_index, const cv::Mat& color_bgr, const PinholeCamer
   entry->edge_colors.setConstant(static_cast<Eigen::Index>(e_count) * samples, 3, nan);
   const PoolEntry& e_ref = *entry;
   ColorRows& edge_colors = entry->edge_colors;
-  tbb::parallel_for(tbb::blocked_range<int>(0, e_count, 4096),
-                    [&](const tbb::blocked_range<int>& range) {
-    for (int e = range.begin(); e < range.end(); ++e) {
-      const int f0 = mesh_->edge_faces(e, 0), f1 = mesh_->edge_faces(e, 1);
-      if (!vis.visible[f0] && !vis.visible[f1]) continue;
-      const float quality = std::min(vis.visible[f0] ? vis.quality[f0] : 1.0f,
-                                     vis.visible[f1] ? vis.quality[f1] : 1.0f);
-      const Eigen::Vector3d a = cam.col(mesh_->edges(e, 0));
-      const Eigen::Vector3d b = cam.col(mesh_->edges(e, 1));
-      for (int k = 0; k < samples; ++k) {
-        const double t = (k + 0.5) / samples;
-        Eigen::Vector3f color;
-        if (e_ref.SampleSurface((1 - t) * a + t * b, quality, false, &color))
-          edge_colors.row(static_cast<Eigen::Index>(e) * samples + k) = color.transpose();
-      }
-    }
-  });
+  tbb::parallel_for(
+      tbb::blocked_range<int>(0, e_count, 4096), [&](const tbb::blocked_range<int>& range) {
+        for (int e = range.begin(); e < range.end(); ++e) {
+          const int f0 = mesh_->edge_faces(e, 0), f1 = mesh_->edge_faces(e, 1);
+          if (!vis.visible[f0] && !vis.visible[f1]) continue;
+          const float quality = std::min(vis.visible[f0] ? vis.quality[f0] : 1.0f,
+                                         vis.visible[f1] ? vis.quality[f1] : 1.0f);
+          const Eigen::Vector3d a = cam.col(mesh_->edges(e, 0));
+          const Eigen::Vector3d b = cam.col(mesh_->edges(e, 1));
+          for (int k = 0; k < samples; ++k) {
+            const double t = (k + 0.5) / samples;
+            Eigen::Vector3f color;
+            if (e_ref.SampleSurface((1 - t) * a + t * b, quality, false, &color))
+              edge_colors.row(static_cast<Eigen::Index>(e) * samples + k) = color.transpose();
+          }
+        }
+      });
   entries_.push_back(std::move(entry));
   return size() - 1;
 }

@@ -5,14 +5,13 @@
 // Pruning follows the paper's coarse-histogram rule; a hard cap bounds memory.
 #pragma once
 
+#include <Eigen/Core>
 #include <algorithm>
 #include <cstdint>
 #include <memory>
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <opencv2/core.hpp>
 
 #include "render/camera.h"
 #include "texture/visibility.h"
@@ -22,9 +21,9 @@ namespace artex {
 // Mesh connectivity used by texturing: the F triangles and the E interior edges, each shared by
 // exactly two triangles (the MRF's neighbourhood).
 struct TextureMesh {
-  Eigen::MatrixX3i triangles;    // F x 3
-  Eigen::MatrixX2i edges;        // E x 2 vertex indices
-  Eigen::MatrixX2i edge_faces;   // E x 2 triangles on either side
+  Eigen::MatrixX3i triangles;   // F x 3
+  Eigen::MatrixX2i edges;       // E x 2 vertex indices
+  Eigen::MatrixX2i edge_faces;  // E x 2 triangles on either side
   static TextureMesh Build(const Eigen::MatrixX3i& triangles);
 };
 

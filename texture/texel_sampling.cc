@@ -1,12 +1,12 @@
 #include "texture/texel_sampling.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <sstream>
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include "models/error.h"
 
@@ -31,17 +31,24 @@ AtlasMap::AtlasMap(const Template& tmpl, int size) : size_(size) {
   for (int f = 0; f < f_count; ++f) {
     Eigen::Vector2d p[3];
     for (int c = 0; c < 3; ++c) p[c] = tmpl.uvs.row(tmpl.uv_triangles(f, c)).transpose() * size;
-    const double area = (p[1] - p[0]).x() * (p[2] - p[0]).y() - (p[1] - p[0]).y() * (p[2] - p[0]).x();
+    const double area =
+        (p[1] - p[0]).x() * (p[2] - p[0]).y() - (p[1] - p[0]).y() * (p[2] - p[0]).x();
     if (std::abs(area) < 1e-12) continue;
-    const int x0 = std::max(0, static_cast<int>(std::floor(std::min({p[0].x(), p[1].x(), p[2].x()}))));
-    const int x1 = std::min(size - 1, static_cast<int>(std::ceil(std::max({p[0].x(), p[1].x(), p[2].x()}))));
-    const int y0 = std::max(0, static_cast<int>(std::floor(std::min({p[0].y(), p[1].y(), p[2].y()}))));
-    const int y1 = std::min(size - 1, static_cast<int>(std::ceil(std::max({p[0].y(), p[1].y(), p[2].y()}))));
+    const int x0 =
+        std::max(0, static_cast<int>(std::floor(std::min({p[0].x(), p[1].x(), p[2].x()}))));
+    const int x1 =
+        std::min(size - 1, static_cast<int>(std::ceil(std::max({p[0].x(), p[1].x(), p[2].x()}))));
+    const int y0 =
+        std::max(0, static_cast<int>(std::floor(std::min({p[0].y(), p[1].y(), p[2].y()}))));
+    const int y1 =
+        std::min(size - 1, static_cast<int>(std::ceil(std::max({p[0].y(), p[1].y(), p[2].y()}))));
     for (int y = y0; y <= y1; ++y) {
       for (int x = x0; x <= x1; ++x) {
         const Eigen::Vector2d q(x + 0.5, y + 0.5);
-        const double b1 = ((q - p[0]).x() * (p[2] - p[0]).y() - (q - p[0]).y() * (p[2] - p[0]).x()) / area;
-        const double b2 = ((p[1] - p[0]).x() * (q - p[0]).y() - (p[1] - p[0]).y() * (q - p[0]).x()) / area;
+        const double b1 =
+            ((q - p[0]).x() * (p[2] - p[0]).y() - (q - p[0]).y() * (p[2] - p[0]).x()) / area;
+        const double b2 =
+            ((p[1] - p[0]).x() * (q - p[0]).y() - (p[1] - p[0]).y() * (q - p[0]).x()) / area;
         const double b0 = 1.0 - b1 - b2;
         if (b0 < 0 || b1 < 0 || b2 < 0) continue;
         const int texel = y * size + x;
@@ -105,8 +112,10 @@ int SampleTriangle(const AtlasMap& map, int f, const Eigen::MatrixX3i& triangles
       z_max = std::max(z_max, k.z());
     }
     const double tolerance = tolerance_offset + tolerance_slope * z_min;
-    const int x0 = static_cast<int>(std::floor(u_min)), x1 = static_cast<int>(std::floor(u_max)) + 1;
-    const int y0 = static_cast<int>(std::floor(v_min)), y1 = static_cast<int>(std::floor(v_max)) + 1;
+    const int x0 = static_cast<int>(std::floor(u_min)),
+              x1 = static_cast<int>(std::floor(u_max)) + 1;
+    const int y0 = static_cast<int>(std::floor(v_min)),
+              y1 = static_cast<int>(std::floor(v_max)) + 1;
     on_surface = (x1 - x0 + 1) * (y1 - y0 + 1) <= kMaxSurfaceCheckPixels;
     for (int y = y0; y <= y1 && on_surface; ++y) {
       for (int x = x0; x <= x1 && on_surface; ++x) {
@@ -150,23 +159,23 @@ cv::Mat ComposeAtlas(const AtlasMap& map, const TexelBuffer& base,
   auto* color = reinterpret_cast<cv::Vec3f*>(out.data);
   tbb::parallel_for(tbb::blocked_range<int>(0, map.num_triangles(), 256),
                     [&](const tbb::blocked_range<int>& range) {
-    for (int f = range.begin(); f < range.end(); ++f) {
-      for (int p = map.first(f); p < map.last(f); ++p) {
-        const int t = *(map.texels_begin(f) + (p - map.first(f)));
-        Eigen::Vector3f c = base.color[p];
-        if (base.valid[p]) {
-          mask.data[t] = 255;
-          if (correct) {
-            const Eigen::Vector3f& w = map.barycentric_at(p);
-            c += w.x() * corner_corrections->row(3 * f).transpose() +
-                 w.y() * corner_corrections->row(3 * f + 1).transpose() +
-                 w.z() * corner_corrections->row(3 * f + 2).transpose();
-          }
-        }
-        color[t] = cv::Vec3f(c.x(), c.y(), c.z());
-      }
-    }
-  });
+                      for (int f = range.begin(); f < range.end(); ++f) {
+                        for (int p = map.first(f); p < map.last(f); ++p) {
+                          const int t = *(map.texels_begin(f) + (p - map.first(f)));
+                          Eigen::Vector3f c = base.color[p];
+                          if (base.valid[p]) {
+                            mask.data[t] = 255;
+                            if (correct) {
+                              const Eigen::Vector3f& w = map.barycentric_at(p);
+                              c += w.x() * corner_corrections->row(3 * f).transpose() +
+                                   w.y() * corner_corrections->row(3 * f + 1).transpose() +
+                                   w.z() * corner_corrections->row(3 * f + 2).transpose();
+                            }
+                          }
+                          color[t] = cv::Vec3f(c.x(), c.y(), c.z());
+                        }
+                      }
+                    });
   // Padding: each pass fills empty texels with the mean of their filled 8-neighbours.
   for (int pass = 0; pass < padding; ++pass) {
     cv::Mat next = out.clone();

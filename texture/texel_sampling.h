@@ -8,11 +8,10 @@
 // memory; ComposeAtlas scatters them into the 2D image.
 #pragma once
 
-#include <cstdint>
-#include <vector>
-
 #include <Eigen/Core>
+#include <cstdint>
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "models/template.h"
 #include "texture/image_pool.h"
@@ -46,11 +45,11 @@ class AtlasMap {
 
  private:
   int size_;
-  std::vector<int32_t> texel_triangle_;   // size^2
-  std::vector<int32_t> texel_position_;   // size^2
-  std::vector<int> offsets_;              // F + 1
-  std::vector<int> texels_;               // covered texels, triangle-major
-  std::vector<Eigen::Vector3f> bary_;     // per position
+  std::vector<int32_t> texel_triangle_;  // size^2
+  std::vector<int32_t> texel_position_;  // size^2
+  std::vector<int> offsets_;             // F + 1
+  std::vector<int> texels_;              // covered texels, triangle-major
+  std::vector<Eigen::Vector3f> bary_;    // per position
 };
 
 // Texel colours (channel order of the pool images, [0, 1]) in the AtlasMap's triangle-major

@@ -1,18 +1,18 @@
 #include "texture/texturer.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
+
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <opencv2/imgproc.hpp>
 #include <sstream>
 
 #include "models/error.h"
 #include "render/rasterizer.h"
-
-#include <algorithm>
-#include <opencv2/imgproc.hpp>
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-#include <tbb/parallel_invoke.h>
 
 namespace artex {
 namespace {
@@ -26,9 +26,12 @@ bool TexturingOptions::IsValid(std::string* error) const {
       !visibility.IsValid(error) || !levelling.IsValid(error))
     return false;
   std::ostringstream msg;
-  if (atlas_size < 16) msg << "texture.atlas_size: expected >= 16, found " << atlas_size;
-  else if (padding_texels < 0) msg << "texture.padding_texels: expected >= 0, found " << padding_texels;
-  else if (add_every < 1) msg << "texture.add_every: expected >= 1, found " << add_every;
+  if (atlas_size < 16)
+    msg << "texture.atlas_size: expected >= 16, found " << atlas_size;
+  else if (padding_texels < 0)
+    msg << "texture.padding_texels: expected >= 0, found " << padding_texels;
+  else if (add_every < 1)
+    msg << "texture.add_every: expected >= 1, found " << add_every;
   if (msg.str().empty()) return true;
   if (error) *error = msg.str();
   return false;
@@ -54,8 +57,9 @@ Texturer::Texturer(const Template& tmpl, const TexturingOptions& options)
   edge_weight_.resize(e_count);
   double mean = 0.0;
   for (int e = 0; e < e_count; ++e) {
-    edge_weight_[e] = (template_.vertices.row(mesh_.edges(e, 0)) -
-                       template_.vertices.row(mesh_.edges(e, 1))).norm();
+    edge_weight_[e] =
+        (template_.vertices.row(mesh_.edges(e, 0)) - template_.vertices.row(mesh_.edges(e, 1)))
+            .norm();
     mean += edge_weight_[e];
   }
   mean = e_count > 0 ? mean / e_count : 1.0;
@@ -117,16 +121,16 @@ TextureFrameSummary Texturer::AddFrame(int frame, const cv::Mat& color_bgr,
     // texel belongs to one triangle, so triangles are written in parallel.
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, changed_.size(), 16),
                       [&](const tbb::blocked_range<std::size_t>& range) {
-      for (std::size_t k = range.begin(); k < range.end(); ++k) {
-        const int f = changed_[k];
-        if (frames_[f] < 0) {
-          ClearTriangle(*map_, f, &base_);
-        } else {
-          SampleTriangle(*map_, f, template_.triangles,
-                         pool_->entry(pool_->SlotOfFrame(frames_[f])), &base_);
-        }
-      }
-    });
+                        for (std::size_t k = range.begin(); k < range.end(); ++k) {
+                          const int f = changed_[k];
+                          if (frames_[f] < 0) {
+                            ClearTriangle(*map_, f, &base_);
+                          } else {
+                            SampleTriangle(*map_, f, template_.triangles,
+                                           pool_->entry(pool_->SlotOfFrame(frames_[f])), &base_);
+                          }
+                        }
+                      });
     s.seconds_sampling = SecondsSince(t_sample);
   };
   const auto seams = [&] {
@@ -144,16 +148,17 @@ TextureFrameSummary Texturer::AddFrame(int frame, const cv::Mat& color_bgr,
     const auto t_level = std::chrono::steady_clock::now();
     if (options_.seam_levelling) {
       SeamLevellingSummary ls;
-      leveller_->Level(frames_,
-                       [this](int v, int frame_index, Eigen::Vector3f* c) {
-                         const int slot = pool_->SlotOfFrame(frame_index);
-                         if (slot < 0) return false;
-                         const auto row = pool_->entry(slot).vertex_colors.row(v);
-                         if (!row.allFinite()) return false;
-                         *c = row.transpose();
-                         return true;
-                       },
-                       &corrections_, &ls);
+      leveller_->Level(
+          frames_,
+          [this](int v, int frame_index, Eigen::Vector3f* c) {
+            const int slot = pool_->SlotOfFrame(frame_index);
+            if (slot < 0) return false;
+            const auto row = pool_->entry(slot).vertex_colors.row(v);
+            if (!row.allFinite()) return false;
+            *c = row.transpose();
+            return true;
+          },
+          &corrections_, &ls);
       s.seam_rms_before = ls.seam_residual_before;
       s.seam_rms_after = ls.seam_residual_after;
     } else {
@@ -256,9 +261,9 @@ void RenderTextured(const Template& tmpl, const Eigen::MatrixX3d& posed_vertices
                                 fx * cv::Vec3d(atlas.at<cv::Vec3b>(y0, x0 + 1))) +
                     fy * ((1 - fx) * cv::Vec3d(atlas.at<cv::Vec3b>(y0 + 1, x0)) +
                           fx * cv::Vec3d(atlas.at<cv::Vec3b>(y0 + 1, x0 + 1)));
-      image->at<cv::Vec3b>(v, u) = cv::Vec3b(cv::saturate_cast<uchar>(c[0]),
-                                             cv::saturate_cast<uchar>(c[1]),
-                                             cv::saturate_cast<uchar>(c[2]));
+      image->at<cv::Vec3b>(v, u) =
+          cv::Vec3b(cv::saturate_cast<uchar>(c[0]), cv::saturate_cast<uchar>(c[1]),
+                    cv::saturate_cast<uchar>(c[2]));
       mask->at<uint8_t>(v, u) = 255;
     }
   }

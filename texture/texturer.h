@@ -5,13 +5,12 @@
 // from the current state at any time.
 #pragma once
 
+#include <Eigen/Core>
 #include <cstdint>
 #include <memory>
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <opencv2/core.hpp>
 
 #include "models/template.h"
 #include "solvers/mrf.h"
@@ -27,11 +26,11 @@ struct TexturingOptions {
   MrfSolverOptions mrf;
   ImagePoolOptions pool;
   VisibilityOptions visibility;
-  int atlas_size = 1024;        // atlas side (texels); >= 16
-  int padding_texels = 4;       // dilation passes at chart borders when composing the atlas
-  bool seam_levelling = true;   // Lempitsky-Ivanov levelling on/off
+  int atlas_size = 1024;       // atlas side (texels); >= 16
+  int padding_texels = 4;      // dilation passes at chart borders when composing the atlas
+  bool seam_levelling = true;  // Lempitsky-Ivanov levelling on/off
   SeamLevellingOptions levelling;
-  int add_every = 1;            // add every n-th frame's image to the pool; >= 1
+  int add_every = 1;  // add every n-th frame's image to the pool; >= 1
 
   bool IsValid(std::string* error) const;
 };
@@ -44,13 +43,13 @@ struct TextureFrameSummary {
   int mrf_iterations = 0;
   int pool_size = 0;
   std::size_t pool_bytes = 0;
-  int seam_edges = 0;           // interior edges whose triangles use different images
-  int changed_triangles = 0;    // triangles whose source image changed
+  int seam_edges = 0;         // interior edges whose triangles use different images
+  int changed_triangles = 0;  // triangles whose source image changed
   int textured_triangles = 0;
-  double seam_rms_before = 0.0; // RMS colour jump at seam vertices before levelling
+  double seam_rms_before = 0.0;  // RMS colour jump at seam vertices before levelling
   double seam_rms_after = 0.0;
-  double seconds_pool = 0.0, seconds_mrf = 0.0, seconds_sampling = 0.0,
-         seconds_levelling = 0.0, seconds_total = 0.0;
+  double seconds_pool = 0.0, seconds_mrf = 0.0, seconds_sampling = 0.0, seconds_levelling = 0.0,
+         seconds_total = 0.0;
 };
 
 class Texturer {
@@ -95,11 +94,11 @@ class Texturer {
   std::unique_ptr<MrfSolver> solver_;
   std::unique_ptr<MeshGeodesics> geodesics_;  // rest mesh, for Psi's distance field
   std::unique_ptr<SeamLeveller> leveller_;
-  TexelBuffer base_;                 // unlevelled texel colours (triangle-major)
-  std::vector<int> frames_;          // F
+  TexelBuffer base_;         // unlevelled texel colours (triangle-major)
+  std::vector<int> frames_;  // F
   std::vector<double> seam_distance_;
   std::vector<double> edge_weight_;
-  Eigen::MatrixX3f corrections_;     // 3F x 3
+  Eigen::MatrixX3f corrections_;  // 3F x 3
   std::vector<int> changed_;
   int frames_seen_ = 0;
 };

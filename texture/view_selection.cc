@@ -1,5 +1,8 @@
 #include "texture/view_selection.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -7,9 +10,6 @@
 #include <numeric>
 #include <sstream>
 #include <unordered_map>
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include "models/error.h"
 
@@ -64,42 +64,43 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
   std::vector<int> count(f_count, 0);
   std::vector<int> cand_labels(static_cast<std::size_t>(f_count) * width);
   std::vector<double> cand_costs(static_cast<std::size_t>(f_count) * width);
-  tbb::parallel_for(tbb::blocked_range<int>(0, f_count, 1024),
-                    [&](const tbb::blocked_range<int>& range) {
-    std::vector<double> d(slots);
-    std::vector<int> order(slots);
-    std::vector<uint8_t> chosen(width);
-    for (int f = range.begin(); f < range.end(); ++f) {
-      for (int s = 0; s < slots; ++s) {
-        const PoolEntry& e = pool.entry(s);
-        d[s] = ViewDataCost(e.visibility.visible[f] != 0, e.visibility.quality[f],
-                            input.current_frame - e.frame_index, options.terms);
-      }
-      std::iota(order.begin(), order.end(), 0);
-      std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return d[a] < d[b]; });
-      std::fill(chosen.begin(), chosen.end(), 0);
-      const int keep = options.max_candidates > 0 ? options.max_candidates : slots;
-      for (int k = 0; k < slots; ++k) {
-        const int s = order[k];
-        if (!std::isfinite(d[s])) break;
-        if (k < keep || s == warm[f]) chosen[s] = 1;
-      }
-      chosen[untextured] = 1;
-      int* labels = &cand_labels[static_cast<std::size_t>(f) * width];
-      double* costs = &cand_costs[static_cast<std::size_t>(f) * width];
-      int n = 0;
-      // Hysteresis: other labels than a pooled previous image pay switch_cost.
-      const bool keeps = warm[f] >= 0 && warm[f] != untextured && options.terms.switch_cost > 0.0;
-      for (int l = 0; l < width; ++l) {
-        if (!chosen[l]) continue;
-        labels[n] = l;
-        costs[n] = l == untextured ? options.untextured_cost : d[l];
-        if (keeps && l != warm[f]) costs[n] += options.terms.switch_cost;
-        ++n;
-      }
-      count[f] = n;
-    }
-  });
+  tbb::parallel_for(
+      tbb::blocked_range<int>(0, f_count, 1024), [&](const tbb::blocked_range<int>& range) {
+        std::vector<double> d(slots);
+        std::vector<int> order(slots);
+        std::vector<uint8_t> chosen(width);
+        for (int f = range.begin(); f < range.end(); ++f) {
+          for (int s = 0; s < slots; ++s) {
+            const PoolEntry& e = pool.entry(s);
+            d[s] = ViewDataCost(e.visibility.visible[f] != 0, e.visibility.quality[f],
+                                input.current_frame - e.frame_index, options.terms);
+          }
+          std::iota(order.begin(), order.end(), 0);
+          std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return d[a] < d[b]; });
+          std::fill(chosen.begin(), chosen.end(), 0);
+          const int keep = options.max_candidates > 0 ? options.max_candidates : slots;
+          for (int k = 0; k < slots; ++k) {
+            const int s = order[k];
+            if (!std::isfinite(d[s])) break;
+            if (k < keep || s == warm[f]) chosen[s] = 1;
+          }
+          chosen[untextured] = 1;
+          int* labels = &cand_labels[static_cast<std::size_t>(f) * width];
+          double* costs = &cand_costs[static_cast<std::size_t>(f) * width];
+          int n = 0;
+          // Hysteresis: other labels than a pooled previous image pay switch_cost.
+          const bool keeps =
+              warm[f] >= 0 && warm[f] != untextured && options.terms.switch_cost > 0.0;
+          for (int l = 0; l < width; ++l) {
+            if (!chosen[l]) continue;
+            labels[n] = l;
+            costs[n] = l == untextured ? options.untextured_cost : d[l];
+            if (keeps && l != warm[f]) costs[n] += options.terms.switch_cost;
+            ++n;
+          }
+          count[f] = n;
+        }
+      });
 
   // Triangles whose only candidate is "untextured" (seen by no pooled image) are fixed: they are
   // left out of the MRF, their data cost is a constant and their pairwise terms become unaries
@@ -122,54 +123,55 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
       slots > 0 ? static_cast<int>(pool.entry(0).edge_colors.rows() / std::max(1, e_count)) : 0;
   std::vector<std::int64_t> table_offset(e_count + 1, 0);
   for (int e = 0; e < e_count; ++e)
-    table_offset[e + 1] = table_offset[e] + static_cast<std::int64_t>(count[mesh.edge_faces(e, 0)]) *
-                                                count[mesh.edge_faces(e, 1)];
+    table_offset[e + 1] =
+        table_offset[e] +
+        static_cast<std::int64_t>(count[mesh.edge_faces(e, 0)]) * count[mesh.edge_faces(e, 1)];
   std::vector<double> tables(table_offset[e_count]);
-  tbb::parallel_for(tbb::blocked_range<int>(0, e_count, 1024),
-                    [&](const tbb::blocked_range<int>& range) {
-    for (int e = range.begin(); e < range.end(); ++e) {
-      const int u = mesh.edges(e, 0), v = mesh.edges(e, 1);
-      double distance = inf;
-      if (!input.seam_distance.empty())
-        distance = 0.5 * (input.seam_distance[u] + input.seam_distance[v]);
-      const double psi = TemporalSeamCost(distance, options.terms);
-      const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
-      const int* li = &cand_labels[static_cast<std::size_t>(fi) * width];
-      const int* lj = &cand_labels[static_cast<std::size_t>(fj) * width];
-      double* table = &tables[table_offset[e]];
-      const int ni = count[fi], nj = count[fj];
-      for (int p = 0; p < ni; ++p) {
-        for (int q = 0; q < nj; ++q) {
-          const int a = li[p], b = lj[q];
-          double cost = 0.0;
-          // V is symmetric in the two images: reuse (b, a) when already computed.
-          const int p2 = static_cast<int>(std::lower_bound(li, li + ni, b) - li);
-          const int q2 = static_cast<int>(std::lower_bound(lj, lj + nj, a) - lj);
-          if (a != b && p2 < ni && li[p2] == b && q2 < nj && lj[q2] == a &&
-              p2 * nj + q2 < p * nj + q) {
-            cost = table[p2 * nj + q2];
-          } else if (a != b) {
-            double pi = options.unseen_colour_cost;
-            if (a != untextured && b != untextured && samples > 0) {
-              const ColorRows& ca = pool.entry(a).edge_colors;
-              const ColorRows& cb = pool.entry(b).edge_colors;
-              double sum = 0.0;
-              int n = 0;
-              for (int k = 0; k < samples; ++k) {
-                const Eigen::Index row = static_cast<Eigen::Index>(e) * samples + k;
-                if (!ca.row(row).allFinite() || !cb.row(row).allFinite()) continue;
-                sum += (ca.row(row) - cb.row(row)).norm();
-                ++n;
+  tbb::parallel_for(
+      tbb::blocked_range<int>(0, e_count, 1024), [&](const tbb::blocked_range<int>& range) {
+        for (int e = range.begin(); e < range.end(); ++e) {
+          const int u = mesh.edges(e, 0), v = mesh.edges(e, 1);
+          double distance = inf;
+          if (!input.seam_distance.empty())
+            distance = 0.5 * (input.seam_distance[u] + input.seam_distance[v]);
+          const double psi = TemporalSeamCost(distance, options.terms);
+          const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
+          const int* li = &cand_labels[static_cast<std::size_t>(fi) * width];
+          const int* lj = &cand_labels[static_cast<std::size_t>(fj) * width];
+          double* table = &tables[table_offset[e]];
+          const int ni = count[fi], nj = count[fj];
+          for (int p = 0; p < ni; ++p) {
+            for (int q = 0; q < nj; ++q) {
+              const int a = li[p], b = lj[q];
+              double cost = 0.0;
+              // V is symmetric in the two images: reuse (b, a) when already computed.
+              const int p2 = static_cast<int>(std::lower_bound(li, li + ni, b) - li);
+              const int q2 = static_cast<int>(std::lower_bound(lj, lj + nj, a) - lj);
+              if (a != b && p2 < ni && li[p2] == b && q2 < nj && lj[q2] == a &&
+                  p2 * nj + q2 < p * nj + q) {
+                cost = table[p2 * nj + q2];
+              } else if (a != b) {
+                double pi = options.unseen_colour_cost;
+                if (a != untextured && b != untextured && samples > 0) {
+                  const ColorRows& ca = pool.entry(a).edge_colors;
+                  const ColorRows& cb = pool.entry(b).edge_colors;
+                  double sum = 0.0;
+                  int n = 0;
+                  for (int k = 0; k < samples; ++k) {
+                    const Eigen::Index row = static_cast<Eigen::Index>(e) * samples + k;
+                    if (!ca.row(row).allFinite() || !cb.row(row).allFinite()) continue;
+                    sum += (ca.row(row) - cb.row(row)).norm();
+                    ++n;
+                  }
+                  if (n > 0) pi = sum / n;
+                }
+                cost = SeamPairCost(pi, psi, options.terms);
               }
-              if (n > 0) pi = sum / n;
+              table[p * nj + q] = cost;
             }
-            cost = SeamPairCost(pi, psi, options.terms);
           }
-          table[p * nj + q] = cost;
         }
-      }
-    }
-  });
+      });
 
   // Edges with one fixed side: lambda w c(l, untextured) joins the free side's unaries (in the
   // single precision the MRF stores pairwise costs in).

@@ -41,7 +41,7 @@ struct ViewSelectionInput {
 struct ViewSelectionResult {
   std::vector<int> frames;  // F: chosen pool frame index per triangle, -1 untextured
   MrfSummary mrf;
-  int num_candidates = 0;   // sum over triangles
+  int num_candidates = 0;  // sum over triangles
 };
 
 // Triangles seen by no pooled image (only "untextured" is possible) are not MRF nodes: their

@@ -1,12 +1,12 @@
 #include "texture/visibility.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <sstream>
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include "energies/texture_terms.h"
 #include "models/normals.h"
@@ -16,12 +16,14 @@ namespace artex {
 
 bool VisibilityOptions::IsValid(std::string* error) const {
   std::ostringstream msg;
-  if (!(depth_tolerance >= 0.0)) msg << "visibility.depth_tolerance: expected >= 0, found " << depth_tolerance;
+  if (!(depth_tolerance >= 0.0))
+    msg << "visibility.depth_tolerance: expected >= 0, found " << depth_tolerance;
   else if (!(corner_shrink >= 0.0 && corner_shrink < 1.0))
     msg << "visibility.corner_shrink: expected [0, 1), found " << corner_shrink;
   else if (!(min_visible_fraction > 0.0 && min_visible_fraction <= 1.0))
     msg << "visibility.min_visible_fraction: expected (0, 1], found " << min_visible_fraction;
-  else if (!(border_pixels >= 0.0)) msg << "visibility.border_pixels: expected >= 0, found " << border_pixels;
+  else if (!(border_pixels >= 0.0))
+    msg << "visibility.border_pixels: expected >= 0, found " << border_pixels;
   else if (!(raster_scale > 0.0 && raster_scale <= 1.0))
     msg << "visibility.raster_scale: expected (0, 1], found " << raster_scale;
   if (msg.str().empty()) return true;
@@ -30,10 +32,8 @@ bool VisibilityOptions::IsValid(std::string* error) const {
 }
 
 TriangleVisibility ComputeVisibility(const Eigen::MatrixX3d& vertices,
-                                     const Eigen::MatrixX3i& triangles,
-                                     const PinholeCamera& camera,
-                                     const VisibilityOptions& options,
-                                     SurfaceDepth* surface) {
+                                     const Eigen::MatrixX3i& triangles, const PinholeCamera& camera,
+                                     const VisibilityOptions& options, SurfaceDepth* surface) {
   const int num_vertices = static_cast<int>(vertices.rows());
   const int num_triangles = static_cast<int>(triangles.rows());
   const RasterOptions raster_options;
@@ -112,39 +112,39 @@ TriangleVisibility ComputeVisibility(const Eigen::MatrixX3d& vertices,
   const Eigen::Vector3d center = camera.Center();
   const double max_u = camera.width - 1 - options.border_pixels;
   const double max_v = camera.height - 1 - options.border_pixels;
-  tbb::parallel_for(tbb::blocked_range<int>(0, num_triangles, 2048),
-                    [&](const tbb::blocked_range<int>& range) {
-    for (int f = range.begin(); f < range.end(); ++f) {
-      const Eigen::Vector3d a = vertices.row(triangles(f, 0));
-      const Eigen::Vector3d b = vertices.row(triangles(f, 1));
-      const Eigen::Vector3d c = vertices.row(triangles(f, 2));
-      const Eigen::Vector3d centroid = (a + b + c) / 3.0;
-      const double w =
-          TriangleQuality(normals.row(f).transpose(), (centroid - center).normalized());
-      if (w <= 0.0) continue;
-      // Samples in camera coordinates (linear in the world points).
-      const Eigen::Vector3d ca = cam.col(triangles(f, 0)), cb = cam.col(triangles(f, 1)),
-                            cc = cam.col(triangles(f, 2));
-      const Eigen::Vector3d cm = (ca + cb + cc) / 3.0;
-      const Eigen::Vector3d samples[4] = {cm, ca + options.corner_shrink * (cm - ca),
-                                          cb + options.corner_shrink * (cm - cb),
-                                          cc + options.corner_shrink * (cm - cc)};
-      int good = 0;
-      for (const auto& p : samples) {
-        const double z = p.z();
-        const double u = camera.fx * p.x() / z + camera.cx;
-        const double v = camera.fy * p.y() / z + camera.cy;
-        if (!(z > 0.0) || u < options.border_pixels || v < options.border_pixels || u > max_u ||
-            v > max_v)
-          continue;
-        if (z <= zbuffer(u, v) + options.depth_tolerance) ++good;
-      }
-      if (good >= options.min_visible_fraction * 4.0 - 1e-9) {
-        out.visible[f] = 1;
-        out.quality[f] = static_cast<float>(w);
-      }
-    }
-  });
+  tbb::parallel_for(
+      tbb::blocked_range<int>(0, num_triangles, 2048), [&](const tbb::blocked_range<int>& range) {
+        for (int f = range.begin(); f < range.end(); ++f) {
+          const Eigen::Vector3d a = vertices.row(triangles(f, 0));
+          const Eigen::Vector3d b = vertices.row(triangles(f, 1));
+          const Eigen::Vector3d c = vertices.row(triangles(f, 2));
+          const Eigen::Vector3d centroid = (a + b + c) / 3.0;
+          const double w =
+              TriangleQuality(normals.row(f).transpose(), (centroid - center).normalized());
+          if (w <= 0.0) continue;
+          // Samples in camera coordinates (linear in the world points).
+          const Eigen::Vector3d ca = cam.col(triangles(f, 0)), cb = cam.col(triangles(f, 1)),
+                                cc = cam.col(triangles(f, 2));
+          const Eigen::Vector3d cm = (ca + cb + cc) / 3.0;
+          const Eigen::Vector3d samples[4] = {cm, ca + options.corner_shrink * (cm - ca),
+                                              cb + options.corner_shrink * (cm - cb),
+                                              cc + options.corner_shrink * (cm - cc)};
+          int good = 0;
+          for (const auto& p : samples) {
+            const double z = p.z();
+            const double u = camera.fx * p.x() / z + camera.cx;
+            const double v = camera.fy * p.y() / z + camera.cy;
+            if (!(z > 0.0) || u < options.border_pixels || v < options.border_pixels || u > max_u ||
+                v > max_v)
+              continue;
+            if (z <= zbuffer(u, v) + options.depth_tolerance) ++good;
+          }
+          if (good >= options.min_visible_fraction * 4.0 - 1e-9) {
+            out.visible[f] = 1;
+            out.quality[f] = static_cast<float>(w);
+          }
+        }
+      });
   return out;
 }
 

@@ -4,13 +4,12 @@
 // (z-buffer of the posed mesh from render/).
 #pragma once
 
+#include <Eigen/Core>
 #include <cmath>
 #include <cstdint>
 #include <limits>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "render/camera.h"
 
@@ -37,10 +36,10 @@ struct VisibilityOptions {
 // The z-buffer of the posed mesh as seen by the colour camera (at VisibilityOptions::raster_scale,
 // cut to the mesh's bounding box): camera depth (m) of the visible surface per raster pixel.
 struct SurfaceDepth {
-  std::vector<float> depth;      // width * height, row-major; +inf where no surface
+  std::vector<float> depth;  // width * height, row-major; +inf where no surface
   int width = 0, height = 0;
-  int x0 = 0, y0 = 0;            // raster pixel of depth[0] in the scaled full image
-  double scale = 1.0;            // raster_scale
+  int x0 = 0, y0 = 0;  // raster pixel of depth[0] in the scaled full image
+  double scale = 1.0;  // raster_scale
 
   // Depth of the surface seen at full-image pixel (u, v) (integer pixel centres; nearest raster
   // pixel); +inf outside the buffer.
@@ -62,8 +61,7 @@ struct TriangleVisibility {
 // the full image).
 // surface (optional): receives the z-buffer used for the occlusion test.
 TriangleVisibility ComputeVisibility(const Eigen::MatrixX3d& vertices,
-                                     const Eigen::MatrixX3i& triangles,
-                                     const PinholeCamera& camera,
+                                     const Eigen::MatrixX3i& triangles, const PinholeCamera& camera,
                                      const VisibilityOptions& options,
                                      SurfaceDepth* surface = nullptr);
 

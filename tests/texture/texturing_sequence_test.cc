@@ -2,21 +2,20 @@
 // subject turns in front of the colour camera; the texturer is fed the ground-truth posed
 // subject and the colour frames, and its texture is rendered from a held-out viewpoint against
 // the ground-truth render (subject + true texture).
+#include <gtest/gtest.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <map>
 #include <memory>
-#include <string>
-#include <vector>
-
-#include <unistd.h>
-
-#include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <string>
+#include <vector>
 
 #include "models/template_io.h"
 #include "render/rasterizer.h"
@@ -69,8 +68,8 @@ struct Sequence {
 class TexturingSequenceTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    const fs::path dir = fs::temp_directory_path() /
-                         ("artex_texturing_sequence_" + std::to_string(::getpid()));
+    const fs::path dir =
+        fs::temp_directory_path() / ("artex_texturing_sequence_" + std::to_string(::getpid()));
     fs::remove_all(dir);
     SynthesizeSequence(SequenceOptions(), dir.string());
     auto seq = std::make_unique<Sequence>();

@@ -2,20 +2,20 @@
 // per-frame exposure changes: the texture built on the fly is compared against ground truth.
 // Also: surface-aware sampling at a silhouette, the reduced-resolution z-buffer, the seam
 // leveller against a dense least-squares solve, and the switch cost.
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <map>
-#include <vector>
-
-#include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
+#include <vector>
 
 #include "energies/texture_terms.h"
+#include "models/error.h"
 #include "models/template.h"
 #include "solvers/seam_levelling.h"
-#include "models/error.h"
 #include "texture/texturer.h"
 #include "texture/visibility.h"
 
@@ -37,7 +37,8 @@ Template UvSphere(int rings, int segments, double r, const Eigen::Vector3d& c) {
       const double theta = 2.0 * M_PI * j / segments;
       t.vertices.row(ring_vertex(i, j)) =
           (c + r * Eigen::Vector3d(std::sin(phi) * std::sin(theta), std::cos(phi),
-                                   std::sin(phi) * std::cos(theta))).transpose();
+                                   std::sin(phi) * std::cos(theta)))
+              .transpose();
     }
   }
   std::vector<Eigen::Vector3i> tris, uvtris;
@@ -167,7 +168,8 @@ TEST(TexturingTest, HeldOutViewReachesHighPsnr) {
   // Held-out viewpoint between two input views, slightly above.
   PinholeCamera held_out = OrbitCamera(2.0 * M_PI * 2.5 / 8.0, scene.image_size);
   cv::Mat truth_image, truth_mask, image, mask;
-  RenderTextured(scene.sphere, scene.sphere.vertices, scene.truth, held_out, &truth_image, &truth_mask);
+  RenderTextured(scene.sphere, scene.sphere.vertices, scene.truth, held_out, &truth_image,
+                 &truth_mask);
   RenderTextured(scene.sphere, scene.sphere.vertices, atlas, held_out, &image, &mask);
   const double psnr = Psnr(image, truth_image, truth_mask);
   EXPECT_GE(psnr, 28.0) << "PSNR " << psnr;
@@ -279,7 +281,8 @@ TEST(TexturingTest, HalfResolutionVisibilityMostlyAgrees) {
   VisibilityOptions full, half;
   half.raster_scale = 0.5;
   SurfaceDepth depth;
-  const TriangleVisibility a = ComputeVisibility(sphere.vertices, sphere.triangles, camera, full, &depth);
+  const TriangleVisibility a =
+      ComputeVisibility(sphere.vertices, sphere.triangles, camera, full, &depth);
   const TriangleVisibility b = ComputeVisibility(sphere.vertices, sphere.triangles, camera, half);
   int visible = 0, agree = 0;
   for (int f = 0; f < sphere.num_triangles(); ++f) {
@@ -304,9 +307,10 @@ TEST(TexturingTest, SeamLevellerSolvesTheLeastSquaresProblem) {
   const int f_count = sphere.num_triangles(), v_count = sphere.num_vertices();
   std::vector<int> labels(f_count);
   for (int f = 0; f < f_count; ++f) {
-    const Eigen::Vector3d c = (sphere.vertices.row(sphere.triangles(f, 0)) +
-                               sphere.vertices.row(sphere.triangles(f, 1)) +
-                               sphere.vertices.row(sphere.triangles(f, 2))) / 3.0;
+    const Eigen::Vector3d c =
+        (sphere.vertices.row(sphere.triangles(f, 0)) + sphere.vertices.row(sphere.triangles(f, 1)) +
+         sphere.vertices.row(sphere.triangles(f, 2))) /
+        3.0;
     labels[f] = c.y() > 0.5 ? -1 : (c.x() > 0 ? 3 : (c.z() > 0 ? 7 : 9));
   }
   const auto colour = [](int v, int l, Eigen::Vector3f* c) {
@@ -323,7 +327,8 @@ TEST(TexturingTest, SeamLevellerSolvesTheLeastSquaresProblem) {
   std::map<std::pair<int, int>, int> index;
   for (int f = 0; f < f_count; ++f)
     for (int c = 0; c < 3; ++c)
-      if (labels[f] >= 0) index.emplace(std::make_pair(sphere.triangles(f, c), labels[f]), index.size());
+      if (labels[f] >= 0)
+        index.emplace(std::make_pair(sphere.triangles(f, c), labels[f]), index.size());
   const int n = static_cast<int>(index.size());
   EXPECT_EQ(n, summary.unknowns);
   Eigen::MatrixXd a = options.regularisation * Eigen::MatrixXd::Identity(n, n);
@@ -332,9 +337,14 @@ TEST(TexturingTest, SeamLevellerSolvesTheLeastSquaresProblem) {
     for (auto j = std::next(i); j != index.end(); ++j) {
       if (i->first.first != j->first.first) continue;  // same vertex, two labels
       Eigen::Vector3f ci, cj;
-      if (!colour(i->first.first, i->first.second, &ci) || !colour(j->first.first, j->first.second, &cj)) continue;
+      if (!colour(i->first.first, i->first.second, &ci) ||
+          !colour(j->first.first, j->first.second, &cj))
+        continue;
       const int p = i->second, q = j->second;
-      a(p, p) += 1; a(q, q) += 1; a(p, q) -= 1; a(q, p) -= 1;
+      a(p, p) += 1;
+      a(q, q) += 1;
+      a(p, q) -= 1;
+      a(q, p) -= 1;
       b.row(p) += (cj - ci).cast<double>().transpose();
       b.row(q) -= (cj - ci).cast<double>().transpose();
     }
@@ -345,7 +355,10 @@ TEST(TexturingTest, SeamLevellerSolvesTheLeastSquaresProblem) {
       const int p = index.at({sphere.triangles(f, c), labels[f]});
       const int q = index.at({sphere.triangles(f, (c + 1) % 3), labels[f]});
       const double w = options.smoothness;
-      a(p, p) += w; a(q, q) += w; a(p, q) -= w; a(q, p) -= w;
+      a(p, p) += w;
+      a(q, q) += w;
+      a(p, q) -= w;
+      a(q, p) -= w;
     }
   }
   const Eigen::MatrixXd g = a.ldlt().solve(b);
@@ -373,16 +386,18 @@ TEST(TexturingTest, SwitchCostKeepsSources) {
   for (int f = 0; f < 12; ++f) {
     const double angle = 0.03 * f;  // a slow orbit: consecutive views are nearly equal
     const cv::Mat image = scene.Image(f, angle, 1.0);
-    const auto sa = a.AddFrame(f, image, OrbitCamera(angle, scene.image_size), scene.sphere.vertices);
-    const auto sb = b.AddFrame(f, image, OrbitCamera(angle, scene.image_size), scene.sphere.vertices);
+    const auto sa =
+        a.AddFrame(f, image, OrbitCamera(angle, scene.image_size), scene.sphere.vertices);
+    const auto sb =
+        b.AddFrame(f, image, OrbitCamera(angle, scene.image_size), scene.sphere.vertices);
     if (f > 0) {
       changed_plain += sa.changed_triangles;
       changed_sticky += sb.changed_triangles;
     }
     EXPECT_NEAR(sa.textured_triangles, sb.textured_triangles, 0.01 * sa.textured_triangles);
   }
-  std::printf("changed triangles over 11 frames: %ld (switch cost 0), %ld (0.05)\n",
-              changed_plain, changed_sticky);
+  std::printf("changed triangles over 11 frames: %ld (switch cost 0), %ld (0.05)\n", changed_plain,
+              changed_sticky);
   EXPECT_LT(changed_sticky, changed_plain / 4);
   TexturingOptions bad = SmallOptions();
   bad.selection.terms.switch_cost = -1.0;
