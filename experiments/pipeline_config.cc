@@ -104,7 +104,9 @@ void BindTexture(const Config& c, TexturingOptions* o) {
                "untextured_cost", "max_candidates", "solver", "mrf_max_iterations",
                "trws_max_iterations", "warm_start", "max_images", "hard_max_images",
                "histogram_bins", "edge_samples", "atlas_size", "padding_texels",
-               "seam_levelling", "levelling_smoothness", "add_every", "depth_tolerance"});
+               "seam_levelling", "levelling_smoothness", "add_every", "depth_tolerance",
+               "switch_cost", "raster_scale", "surface_aware_sampling",
+               "vertex_colors_need_full_ring"});
   TextureTermOptions& t = o->selection.terms;
   c.Get("beta", &t.beta);
   c.Get("t_max", &t.t_max);
@@ -136,6 +138,10 @@ void BindTexture(const Config& c, TexturingOptions* o) {
   c.Get("levelling_smoothness", &o->levelling.smoothness);
   c.Get("add_every", &o->add_every);
   c.Get("depth_tolerance", &o->visibility.depth_tolerance);
+  c.Get("switch_cost", &t.switch_cost);
+  c.Get("raster_scale", &o->visibility.raster_scale);
+  c.Get("surface_aware_sampling", &o->pool.surface_aware_sampling);
+  c.Get("vertex_colors_need_full_ring", &o->pool.vertex_colors_need_full_ring);
 }
 
 void BindPipeline(const Config& c, PipelineOptions* o) {
