@@ -130,7 +130,7 @@ struct Totals {
     iterations += s.iterations;
     estep += s.estep_seconds;
     mstep += s.mstep_seconds;
-    queries += s.kdtree_queries;
+    queries += s.neighbor_queries;
     visited += s.candidates_visited;
     ++frames;
   }
@@ -154,7 +154,7 @@ void Report(benchmark::State& state, const Totals& totals, double cpu_seconds, d
   state.counters["em_iterations"] = totals.iterations / frames;
   state.counters["estep_ms"] = 1e3 * totals.estep / frames;
   state.counters["mstep_ms"] = 1e3 * totals.mstep / frames;
-  state.counters["kdtree_queries"] = totals.queries / frames;
+  state.counters["neighbor_queries"] = totals.queries / frames;
   state.counters["candidates"] = totals.visited / frames;
   state.counters["error_mm"] = 1e3 * totals.error / frames;
   if (totals.max_error > 0.0) state.counters["max_error_mm"] = 1e3 * totals.max_error;

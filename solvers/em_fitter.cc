@@ -87,6 +87,8 @@ bool EMFitterOptions::IsValid(std::string* error) const {
     msg << "solver." << inner;
   } else if (!tikhonov.IsValid(&inner)) {
     msg << "tikhonov." << inner;
+  } else if (!tracking_update.IsValid(&inner)) {
+    msg << "tracking_update." << inner;
   } else if (!smoothness.IsValid(&inner)) {
     msg << "smoothness." << inner;
   } else if (!icp.IsValid(&inner)) {
@@ -409,7 +411,9 @@ EMIterationInfo EMFitter::Iterate() {
   }
 
   // M-step problem.
-  TikhonovTerm tikhonov(options_.tikhonov, model.num_joints(),
+  TikhonovOptions tikhonov_options = options_.tikhonov;
+  if (!st.first_frame) tikhonov_options.update = options_.tracking_update;
+  TikhonovTerm tikhonov(tikhonov_options, model.num_joints(),
                         st.has_previous ? &st.previous : nullptr);
   JointLimitTerm joint_limits(options_.joint_limits, model.num_joints());
   const bool prior_scale = options_.scale_mode == ScaleMode::kEstimateThenPrior &&
@@ -484,7 +488,7 @@ FitSummary EMFitter::EndFrame() {
   FitSummary summary = std::move(st.summary);
   summary.scale = pose_.scale;
   if (st.estep) {
-    summary.kdtree_queries = st.estep->kdtree_queries();
+    summary.neighbor_queries = st.estep->neighbor_queries();
     summary.candidates_visited = st.estep->candidates_visited();
   }
   bool ok = !summary.too_few_points && !summary.non_finite;

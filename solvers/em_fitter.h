@@ -69,6 +69,11 @@ struct EMFitterOptions {
   // the literal unnormalised sum when false. Prior weights are relative to this choice.
   bool normalize_data_term = true;
   TikhonovOptions tikhonov;            // Gamma on the update, temporal prior to frame f-1
+  // Gamma on the update in tracking frames (tikhonov.update holds on the first frame, which
+  // has to move far from the rest pose). A stronger joint weight damps the updates along the
+  // weakly observable directions (twist about limb axes, small joints) that otherwise drift
+  // from iteration to iteration and frame to frame (the cost barely changes along them).
+  PoseGroupWeights tracking_update = {1e-3, 1e-5, 1e-5, 3e-3};
   JointLimitOptions joint_limits;      // soft joint boxes (weight 0: off)
   PoseGroupWeights smoothness;         // constant-velocity prior (all 0: off)
 
@@ -85,7 +90,7 @@ struct EMFitterOptions {
 
   // Fit on a uniform subset (index stride) of at most this many template vertices (0: all).
   // E-step, Jacobians and normal equations scale with it; normals use the full mesh.
-  int max_fit_vertices = 4000;
+  int max_fit_vertices = 2000;
   // Template normals (for n_s . n'_t of eq. 4) are recomputed on the whole posed mesh at the
   // first EM iteration of every stage and, when > 0, every this many iterations (1: every
   // iteration); in between only the fitted vertices are posed. Within a frame the template
@@ -132,8 +137,8 @@ struct FitSummary {
   int num_scan_points = 0;
   double scale = 1.0;
   double mean_motion = 0.0;    // mean vertex displacement from the initial guess (m)
-  // E-step work: kd-tree queries and candidate scan points visited (solvers/estep.h).
-  long long kdtree_queries = 0;
+  // E-step work: neighbour queries and candidate scan points visited (solvers/estep.h).
+  long long neighbor_queries = 0;
   long long candidates_visited = 0;
   // Timings (s).
   double icp_seconds = 0.0;

@@ -4,7 +4,6 @@
 #include <cmath>
 #include <cstdint>
 #include <sstream>
-#include <unordered_map>
 
 #include <nanoflann.hpp>
 #include <tbb/blocked_range.h>
@@ -117,6 +116,30 @@ void PointCloudIndex::Radius(const Eigen::Vector3d& query, double radius,
 // Shared accumulation
 
 namespace {
+
+// Values per point of the packed clouds of the pair loops: x y z nx ny nz count (unused).
+constexpr int kPackedStride = 8;
+
+// Integer grid coordinate of a scaled coordinate, offset to fit 21 bits (clamped).
+int64_t GridCoordinate(double scaled) {
+  constexpr int64_t kOffset = 1 << 20;
+  const int64_t i = static_cast<int64_t>(std::floor(scaled)) + kOffset;
+  return std::clamp<int64_t>(i, 0, (int64_t{1} << 21) - 1);
+}
+
+// Morton (Z-curve) code of three 21-bit grid coordinates (out of range: clamped).
+inline uint64_t MortonCode(int64_t x, int64_t y, int64_t z) {
+  const auto spread = [](int64_t value) {  // 21 bits -> every third bit
+    uint64_t v = static_cast<uint64_t>(std::clamp<int64_t>(value, 0, (int64_t{1} << 21) - 1));
+    v = (v | v << 32) & 0x1f00000000ffffULL;
+    v = (v | v << 16) & 0x1f0000ff0000ffULL;
+    v = (v | v << 8) & 0x100f00f00f00f00fULL;
+    v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+    v = (v | v << 2) & 0x1249249249249249ULL;
+    return v;
+  };
+  return spread(x) << 2 | spread(y) << 1 | spread(z);
+}
 
 // Sums relative to the template vertex x_t (numerically stable):
 //   a = sum p, b = sum p (v_s - x_t), c = sum p |v_s - x_t|^2
@@ -292,9 +315,50 @@ struct EStep::Cloud {
   std::unique_ptr<PointCloudIndex> index;
   // Row-major copies for the pair loops: kPacked values per point (x y z nx ny nz count -)
   // and 4 per point (r g b valid) when the cloud has colours.
-  static constexpr int kPacked = 8;
+  static constexpr int kPacked = kPackedStride;
   std::vector<double> packed;
   std::vector<double> packed_colors;
+  // Uniform grid for the candidate gathers (instead of the kd-tree): cubic cells of side
+  // grid_cell, the points ordered by cell; cell_keys (ascending Morton codes of the occupied
+  // cells) and cell_begin (+ 1) index them.
+  double grid_cell = 0.0;
+  std::vector<uint64_t> cell_keys;
+  std::vector<int> cell_begin;
+
+  // Appends the indices of the points with |p - x| < radius (radius <= grid_cell): those lie
+  // in the query's cell and its 26 neighbours; cells farther than the radius are skipped.
+  void GridRadius(const double* x, double radius, std::vector<int>* out) const {
+    const double inv = 1.0 / grid_cell;
+    int64_t c[3];
+    double below[3], above[3];  // distance from x to its cell's lower / upper faces
+    for (int d = 0; d < 3; ++d) {
+      const double scaled = x[d] * inv;
+      c[d] = GridCoordinate(scaled);
+      below[d] = (scaled - std::floor(scaled)) * grid_cell;
+      above[d] = grid_cell - below[d];
+    }
+    const double r2 = radius * radius;
+    const auto gap2 = [&](int d, int64_t offset) {
+      const double g = offset < 0 ? below[d] : (offset > 0 ? above[d] : 0.0);
+      return g * g;
+    };
+    for (int64_t dx = -1; dx <= 1; ++dx) {
+      for (int64_t dy = -1; dy <= 1; ++dy) {
+        for (int64_t dz = -1; dz <= 1; ++dz) {
+          if (gap2(0, dx) + gap2(1, dy) + gap2(2, dz) >= r2) continue;
+          const uint64_t key = MortonCode(c[0] + dx, c[1] + dy, c[2] + dz);
+          const auto it = std::lower_bound(cell_keys.begin(), cell_keys.end(), key);
+          if (it == cell_keys.end() || *it != key) continue;
+          const size_t cell = static_cast<size_t>(it - cell_keys.begin());
+          for (int s = cell_begin[cell]; s < cell_begin[cell + 1]; ++s) {
+            const double* p = packed.data() + kPacked * s;
+            const double e0 = p[0] - x[0], e1 = p[1] - x[1], e2 = p[2] - x[2];
+            if (e0 * e0 + e1 * e1 + e2 * e2 < r2) out->push_back(s);
+          }
+        }
+      }
+    }
+  }
 
   void Pack() {
     const Eigen::Index m = points.rows();
@@ -363,48 +427,22 @@ const EStep::Cloud& EStep::CloudForRadius(double radius) {
   if (options_.mode != EStepMode::kRadius || !(cell > 0.0)) return FullCloud();
   auto it = subsampled_.find(cell);
   if (it != subsampled_.end()) return *it->second;
-  // Voxel grid: mean position, summed then normalised normal, mean valid colour, count.
+  // Voxel grid: mean position, summed then normalised normal, mean valid colour, count. Cells
+  // are numbered in Morton (Z-curve) order of their grid coordinates, so that cells close in
+  // space are close in memory (the pair loops gather them per template vertex).
   const int n = scan_.size();
   const bool has_color = full_->colors.rows() == n;
-  std::unordered_map<int64_t, int> cells;
-  cells.reserve(static_cast<size_t>(n));
-  std::vector<int> cell_of(n);
-  const auto key_of = [cell](const Eigen::RowVector3d& p) {
-    const int64_t kOffset = 1 << 20;  // grid coordinates fit 21 bits around the origin
-    const int64_t ix = static_cast<int64_t>(std::floor(p[0] / cell)) + kOffset;
-    const int64_t iy = static_cast<int64_t>(std::floor(p[1] / cell)) + kOffset;
-    const int64_t iz = static_cast<int64_t>(std::floor(p[2] / cell)) + kOffset;
-    return (ix << 42) ^ (iy << 21) ^ iz;
-  };
+  std::vector<std::pair<uint64_t, int>> keyed(n);
+  const double inv = 1.0 / cell;
   for (int s = 0; s < n; ++s) {
-    auto ins = cells.emplace(key_of(scan_.points.row(s)), static_cast<int>(cells.size()));
-    cell_of[s] = ins.first->second;
+    keyed[s] = {MortonCode(GridCoordinate(scan_.points(s, 0) * inv),
+                           GridCoordinate(scan_.points(s, 1) * inv),
+                           GridCoordinate(scan_.points(s, 2) * inv)),
+                s};
   }
-  {
-    // Number the cells in Morton (Z-curve) order of their grid coordinates, so that cells
-    // close in space are close in memory (the pair loops gather them per template vertex).
-    const auto spread = [](uint64_t v) {  // 21 bits -> every third bit
-      v &= 0x1fffff;
-      v = (v | v << 32) & 0x1f00000000ffffULL;
-      v = (v | v << 16) & 0x1f0000ff0000ffULL;
-      v = (v | v << 8) & 0x100f00f00f00f00fULL;
-      v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
-      v = (v | v << 2) & 0x1249249249249249ULL;
-      return v;
-    };
-    std::vector<std::pair<uint64_t, int>> order;
-    order.reserve(cells.size());
-    for (const auto& [key, id] : cells) {
-      const uint64_t k = static_cast<uint64_t>(key);
-      const uint64_t morton = spread(k >> 42) << 2 | spread(k >> 21) << 1 | spread(k);
-      order.emplace_back(morton, id);
-    }
-    std::sort(order.begin(), order.end());
-    std::vector<int> rank(order.size());
-    for (size_t i = 0; i < order.size(); ++i) rank[order[i].second] = static_cast<int>(i);
-    for (int& c : cell_of) c = rank[c];
-  }
-  const int m = static_cast<int>(cells.size());
+  std::sort(keyed.begin(), keyed.end());
+  int m = 0;
+  for (int i = 0; i < n; ++i) m += (i == 0 || keyed[i].first != keyed[i - 1].first);
   auto cloud = std::make_unique<Cloud>();
   cloud->points.setZero(m, 3);
   cloud->normals.setZero(m, 3);
@@ -414,13 +452,16 @@ const EStep::Cloud& EStep::CloudForRadius(double radius) {
     cloud->colors.setZero(m, 3);
     color_count.setZero(m);
   }
-  for (int s = 0; s < n; ++s) {
-    const int c = cell_of[s];
-    cloud->points.row(c) += scan_.points.row(s);
-    cloud->normals.row(c) += scan_.normals.row(s);
+  for (int i = 0, c = -1; i < n; ++i) {
+    if (i == 0 || keyed[i].first != keyed[i - 1].first) ++c;
+    const int s = keyed[i].second;
+    for (int d = 0; d < 3; ++d) {
+      cloud->points(c, d) += scan_.points(s, d);
+      cloud->normals(c, d) += scan_.normals(s, d);
+    }
     cloud->count[c] += 1.0;
     if (has_color && full_->color_valid[s] > 0.0) {
-      cloud->colors.row(c) += full_->colors.row(s);
+      for (int d = 0; d < 3; ++d) cloud->colors(c, d) += full_->colors(s, d);
       color_count[c] += 1.0;
     }
   }
@@ -431,12 +472,129 @@ const EStep::Cloud& EStep::CloudForRadius(double radius) {
     if (norm > 0.0) cloud->normals.row(c) /= norm;
     if (has_color && color_count[c] > 0.0) cloud->colors.row(c) /= color_count[c];
   }
-  cloud->index = std::make_unique<PointCloudIndex>(cloud->points, options_.kdtree_leaf_size);
+  if (options_.candidate_margin > 0.0) {
+    // Candidate lists: gathers within radius + margin on a grid of that cell size. The cells
+    // are reordered by grid cell (stable: Morton order within a cell).
+    const double grid = radius + options_.candidate_margin;
+    const double inv_grid = 1.0 / grid;
+    std::vector<std::pair<uint64_t, int>> by_cell(m);
+    for (int c = 0; c < m; ++c) {
+      by_cell[c] = {MortonCode(GridCoordinate(cloud->points(c, 0) * inv_grid),
+                               GridCoordinate(cloud->points(c, 1) * inv_grid),
+                               GridCoordinate(cloud->points(c, 2) * inv_grid)),
+                    c};
+    }
+    std::sort(by_cell.begin(), by_cell.end());  // ties by original (Morton) index
+    Cloud sorted;
+    sorted.points.resize(m, 3);
+    sorted.normals.resize(m, 3);
+    sorted.count.resize(m);
+    if (has_color) {
+      sorted.colors.resize(m, 3);
+      sorted.color_valid.resize(m);
+    }
+    for (int i = 0; i < m; ++i) {
+      const int c = by_cell[i].second;
+      sorted.points.row(i) = cloud->points.row(c);
+      sorted.normals.row(i) = cloud->normals.row(c);
+      sorted.count[i] = cloud->count[c];
+      if (has_color) {
+        sorted.colors.row(i) = cloud->colors.row(c);
+        sorted.color_valid[i] = cloud->color_valid[c];
+      }
+      if (i == 0 || by_cell[i].first != by_cell[i - 1].first) {
+        sorted.cell_keys.push_back(by_cell[i].first);
+        sorted.cell_begin.push_back(i);
+      }
+    }
+    sorted.cell_begin.push_back(m);
+    sorted.grid_cell = grid;
+    *cloud = std::move(sorted);
+  } else {
+    cloud->index = std::make_unique<PointCloudIndex>(cloud->points, options_.kdtree_leaf_size);
+  }
   cloud->Pack();
   const Cloud& result = *cloud;
   subsampled_.emplace(cell, std::move(cloud));
   return result;
 }
+
+namespace {
+
+// The pairs of one template vertex: p_st of eq. 4 for candidates s (packed cloud rows,
+// multiplicity-weighted), truncated to d2 <= radius2 when kTruncate. Either accumulates the
+// sums or, when `store_s` is non-null, appends (s, p) (per-scan-point normalisation).
+struct VertexQuery {
+  double x[3], n[3], c[3];
+  double radius2;
+  double epsilon, lambda_color;
+};
+
+template <bool kColor, bool kTruncate>
+void WeighCandidates(const VertexQuery& q, const double* packed, const double* packed_colors,
+                     const int* index, int count, const double* known_d2, VertexSums* sums,
+                     std::vector<int>* store_s, std::vector<double>* store_p) {
+  constexpr int kP = kPackedStride;
+  double a = 0.0, b0 = 0.0, b1 = 0.0, b2 = 0.0, c = 0.0;
+  long long pairs = 0;
+  for (int i = 0; i < count; ++i) {
+    const int s = index[i];
+    const double* v = packed + kP * s;
+    const double d0 = v[0] - q.x[0], d1 = v[1] - q.x[1], d2c = v[2] - q.x[2];
+    const double d2 = known_d2 ? known_d2[i] : d0 * d0 + d1 * d1 + d2c * d2c;
+    if (kTruncate && !(d2 < q.radius2)) continue;  // as the kd-tree radius search
+    const double dot = v[3] * q.n[0] + v[4] * q.n[1] + v[5] * q.n[2];
+    if (!(dot > 0.0)) continue;
+    double denominator = d2 + q.epsilon;
+    if (kColor) {
+      const double* rgb = packed_colors + 4 * s;
+      if (rgb[3] > 0.0) {
+        const double e0 = rgb[0] - q.c[0], e1 = rgb[1] - q.c[1], e2 = rgb[2] - q.c[2];
+        denominator += q.lambda_color * (e0 * e0 + e1 * e1 + e2 * e2);
+      }
+    }
+    const double p = v[6] * dot / denominator;
+    if (!(p > 0.0)) continue;
+    if (store_s != nullptr) {
+      store_s->push_back(s);
+      store_p->push_back(p);
+      continue;
+    }
+    a += p;
+    b0 += p * d0;
+    b1 += p * d1;
+    b2 += p * d2c;
+    c += p * d2;
+    ++pairs;
+  }
+  sums->a += a;
+  sums->b += Eigen::Vector3d(b0, b1, b2);
+  sums->c += c;
+  sums->pairs += pairs;
+}
+
+void WeighVertex(bool color, bool truncate, const VertexQuery& q, const double* packed,
+                 const double* packed_colors, const int* index, int count,
+                 const double* known_d2, VertexSums* sums, std::vector<int>* store_s,
+                 std::vector<double>* store_p) {
+  if (color) {
+    if (truncate) {
+      WeighCandidates<true, true>(q, packed, packed_colors, index, count, known_d2, sums,
+                                  store_s, store_p);
+    } else {
+      WeighCandidates<true, false>(q, packed, packed_colors, index, count, known_d2, sums,
+                                   store_s, store_p);
+    }
+  } else if (truncate) {
+    WeighCandidates<false, true>(q, packed, packed_colors, index, count, known_d2, sums,
+                                 store_s, store_p);
+  } else {
+    WeighCandidates<false, false>(q, packed, packed_colors, index, count, known_d2, sums,
+                                  store_s, store_p);
+  }
+}
+
+}  // namespace
 
 void EStep::Compute(const PosedTemplateView& posed, double radius,
                     CorrespondenceTargets* targets) {
@@ -461,7 +619,6 @@ void EStep::Compute(const PosedTemplateView& posed, double radius,
   const int grain = options_.grain_size;
   const int num_chunks = (t_count + grain - 1) / grain;
   const bool knn = options_.mode == EStepMode::kKNearest;
-  const double radius2 = radius * radius;
 
   // Candidate lists (radius mode with a margin): one per radius, blocks of `grain` vertices.
   Candidates* candidates = nullptr;
@@ -492,8 +649,11 @@ void EStep::Compute(const PosedTemplateView& posed, double radius,
   constexpr int kP = Cloud::kPacked;
   ForRange(num_chunks, 1, options_.parallel, [&](int chunk_begin, int chunk_end) {
     std::vector<std::pair<int, double>> found;
+    std::vector<int> found_index;
+    std::vector<double> found_d2;
     std::vector<int> knn_index(knn ? options_.k : 0);
     std::vector<double> knn_d2(knn ? options_.k : 0);
+    Candidates::Block fresh;
     for (int chunk = chunk_begin; chunk < chunk_end; ++chunk) {
       const int t0 = chunk * grain, t1 = std::min(t_count, t0 + grain);
       ChunkPairs* out = normalize ? &chunks[chunk] : nullptr;
@@ -504,88 +664,91 @@ void EStep::Compute(const PosedTemplateView& posed, double radius,
       }
       Candidates::Block* block = candidates ? &candidates->blocks[chunk] : nullptr;
       if (block) {
-        // Gather again when a vertex of the block left its margin.
-        bool gather = !block->valid;
-        for (int t = t0; t < t1 && !gather; ++t) {
+        // Gather again the vertices that left their margin (all, the first time); the others
+        // keep their lists.
+        bool any = !block->valid;
+        std::vector<char> moved(t1 - t0, block->valid ? 0 : 1);
+        for (int t = t0; t < t1 && block->valid; ++t) {
           const double* a = block->anchor.data() + 3 * (t - t0);
           const double dx = (*posed.vertices)(t, 0) - a[0], dy = (*posed.vertices)(t, 1) - a[1],
                        dz = (*posed.vertices)(t, 2) - a[2];
-          gather = dx * dx + dy * dy + dz * dz > margin * margin;
+          moved[t - t0] = dx * dx + dy * dy + dz * dz > margin * margin;
+          any = any || moved[t - t0];
         }
-        if (gather) {
-          block->anchor.resize(3 * (t1 - t0));
-          block->offset.assign(1, 0);
-          block->index.clear();
+        if (any) {
+          fresh.anchor.resize(3 * (t1 - t0));
+          fresh.offset.assign(1, 0);
+          fresh.index.clear();
           for (int t = t0; t < t1; ++t) {
-            const Eigen::Vector3d x = posed.vertices->row(t).transpose();
-            for (int d = 0; d < 3; ++d) block->anchor[3 * (t - t0) + d] = x[d];
-            cloud.index->Radius(x, radius + margin, &found);
-            ++queries[chunk];
-            for (const auto& entry : found) block->index.push_back(entry.first);
-            block->offset.push_back(static_cast<int>(block->index.size()));
+            const int i = t - t0;
+            if (moved[i]) {
+              const Eigen::Vector3d x = posed.vertices->row(t).transpose();
+              for (int d = 0; d < 3; ++d) fresh.anchor[3 * i + d] = x[d];
+              if (cloud.grid_cell > 0.0) {
+                cloud.GridRadius(x.data(), radius + margin, &fresh.index);
+              } else {
+                cloud.index->Radius(x, radius + margin, &found);
+                for (const auto& entry : found) fresh.index.push_back(entry.first);
+              }
+              ++queries[chunk];
+            } else {
+              for (int d = 0; d < 3; ++d) fresh.anchor[3 * i + d] = block->anchor[3 * i + d];
+              fresh.index.insert(fresh.index.end(), block->index.begin() + block->offset[i],
+                                 block->index.begin() + block->offset[i + 1]);
+            }
+            fresh.offset.push_back(static_cast<int>(fresh.index.size()));
           }
-          block->valid = true;
+          fresh.valid = true;
+          std::swap(*block, fresh);
         }
       }
       for (int t = t0; t < t1; ++t) {
-        const double x0 = (*posed.vertices)(t, 0), x1 = (*posed.vertices)(t, 1),
-                     x2 = (*posed.vertices)(t, 2);
-        const double n0 = (*posed.normals)(t, 0), n1 = (*posed.normals)(t, 1),
-                     n2 = (*posed.normals)(t, 2);
-        double c0 = 0.0, c1 = 0.0, c2 = 0.0;
-        if (color) {
-          c0 = (*posed.colors)(t, 0);
-          c1 = (*posed.colors)(t, 1);
-          c2 = (*posed.colors)(t, 2);
+        VertexQuery q;
+        for (int d = 0; d < 3; ++d) {
+          q.x[d] = (*posed.vertices)(t, d);
+          q.n[d] = (*posed.normals)(t, d);
+          q.c[d] = color ? (*posed.colors)(t, d) : 0.0;
         }
+        q.radius2 = radius * radius;
+        q.epsilon = w.epsilon;
+        q.lambda_color = w.lambda_color;
         VertexSums sums;
-        // One candidate pair (s, d2 = |v_s - x_t|^2 within the truncation).
-        auto pair = [&](int s, double d2) {
-          const double* q = packed + kP * s;
-          const double dot = q[3] * n0 + q[4] * n1 + q[5] * n2;
-          if (!(dot > 0.0)) return;
-          double color2 = 0.0;
-          if (color) {
-            const double* qc = packed_colors + 4 * s;
-            if (qc[3] > 0.0) {
-              color2 = (qc[0] - c0) * (qc[0] - c0) + (qc[1] - c1) * (qc[1] - c1) +
-                       (qc[2] - c2) * (qc[2] - c2);
-            }
-          }
-          const double p = q[6] * CorrespondenceWeight(dot, d2, color2, w);
-          if (!(p > 0.0)) return;
-          if (out) {
-            out->s.push_back(s);
-            out->p.push_back(p);
-          } else {
-            sums.Add(p, Eigen::Vector3d(q[0] - x0, q[1] - x1, q[2] - x2), d2);
-          }
-        };
+        std::vector<int>* store_s = out ? &out->s : nullptr;
+        std::vector<double>* store_p = out ? &out->p : nullptr;
         if (block) {
-          const int* index = block->index.data();
-          visited[chunk] += block->offset[t - t0 + 1] - block->offset[t - t0];
-          for (int i = block->offset[t - t0]; i < block->offset[t - t0 + 1]; ++i) {
-            const int s = index[i];
-            const double* q = packed + kP * s;
-            const double dx = q[0] - x0, dy = q[1] - x1, dz = q[2] - x2;
-            const double d2 = dx * dx + dy * dy + dz * dz;
-            if (d2 <= radius2) pair(s, d2);
-          }
+          const int begin = block->offset[t - t0], end = block->offset[t - t0 + 1];
+          visited[chunk] += end - begin;
+          WeighVertex(color, true, q, packed, packed_colors, block->index.data() + begin,
+                      end - begin, nullptr, &sums, store_s, store_p);
         } else {
-          const Eigen::Vector3d x(x0, x1, x2);
+          const Eigen::Vector3d x(q.x[0], q.x[1], q.x[2]);
           ++queries[chunk];
+          int got = 0;
+          const int* index = nullptr;
+          const double* d2 = nullptr;
           if (knn) {
-            const int got = cloud.index->KNearest(x, options_.k, knn_index.data(), knn_d2.data());
-            for (int i = 0; i < got; ++i) pair(knn_index[i], knn_d2[i]);
+            got = cloud.index->KNearest(x, options_.k, knn_index.data(), knn_d2.data());
+            index = knn_index.data();
+            d2 = knn_d2.data();
           } else {
             cloud.index->Radius(x, radius, &found);
-            for (const auto& [s, d2] : found) pair(s, d2);
+            got = static_cast<int>(found.size());
+            found_index.resize(got);
+            found_d2.resize(got);
+            for (int i = 0; i < got; ++i) {
+              found_index[i] = found[i].first;
+              found_d2[i] = found[i].second;
+            }
+            index = found_index.data();
+            d2 = found_d2.data();
           }
+          WeighVertex(color, false, q, packed, packed_colors, index, got, d2, &sums, store_s,
+                      store_p);
         }
         if (out) {
           out->offset.push_back(static_cast<int>(out->s.size()));
         } else {
-          constants[chunk] += Finish(sums, Eigen::Vector3d(x0, x1, x2), t, targets);
+          constants[chunk] += Finish(sums, Eigen::Vector3d(q.x[0], q.x[1], q.x[2]), t, targets);
           pairs[chunk] += sums.pairs;
         }
       }
@@ -626,7 +789,7 @@ void EStep::Compute(const PosedTemplateView& posed, double radius,
   for (int chunk = 0; chunk < num_chunks; ++chunk) {
     targets->constant += constants[chunk];
     targets->num_pairs += pairs[chunk];
-    kdtree_queries_ += queries[chunk];
+    neighbor_queries_ += queries[chunk];
     candidates_visited_ += visited[chunk];
   }
 }

@@ -100,9 +100,9 @@ class EStep {
   void FindNearest(const PosedTemplateView& posed, const OneToOneOptions& options,
                    NearestTargets* targets) const;
 
-  // Work counters since construction: kd-tree queries (radius, k-nearest) and the scan
-  // candidates visited by the candidate-list E-steps.
-  long long kdtree_queries() const { return kdtree_queries_; }
+  // Work counters since construction: neighbour queries (kd-tree radius / k-nearest searches
+  // and candidate gathers) and the scan candidates visited by the candidate-list E-steps.
+  long long neighbor_queries() const { return neighbor_queries_; }
   long long candidates_visited() const { return candidates_visited_; }
 
  private:
@@ -117,7 +117,7 @@ class EStep {
   mutable std::once_flag full_index_once_;
   std::map<double, std::unique_ptr<Cloud>> subsampled_;  // keyed by voxel size
   std::map<double, std::unique_ptr<Candidates>> candidates_;  // keyed by radius
-  long long kdtree_queries_ = 0;
+  long long neighbor_queries_ = 0;
   long long candidates_visited_ = 0;
 };
 
