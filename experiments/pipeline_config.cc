@@ -51,7 +51,7 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
                "scale_max_radius", "scale_prior_weight", "icp_first_frame",
                "constant_velocity_prediction", "max_fit_vertices", "min_scan_points",
                "max_mean_motion", "max_scale_change", "ceres_max_iterations", "solver_threads",
-               "candidate_margin", "normal_refresh_iterations"});
+               "candidate_margin", "normal_refresh_iterations", "tracking_tikhonov"});
   c.GetEnum("correspondence", CorrespondenceModelNames(), &o->correspondence);
   c.GetEnum("solver", FitSolverTypeNames(), &o->solver.type);
   c.GetEnum("estep", std::map<std::string, EStepMode>{{"dense", EStepMode::kDense},
@@ -97,6 +97,7 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   c.Get("solver_threads", &o->solver.num_threads);
   c.Get("candidate_margin", &o->estep.candidate_margin);
   c.Get("normal_refresh_iterations", &o->normal_refresh_iterations);
+  BindWeights(c.Section("tracking_tikhonov"), &o->tracking_update);
 }
 
 void BindTexture(const Config& c, TexturingOptions* o) {
