@@ -3,6 +3,7 @@
 // the command line's exit status. Accuracy on full sequences: tracking_accuracy_test.cc.
 #include "experiments/pipeline.h"
 
+#include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -13,13 +14,11 @@
 #include <fstream>
 #include <functional>
 #include <mutex>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <sstream>
 #include <string>
 #include <vector>
-
-#include <gtest/gtest.h>
-#include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
 
 #include "experiments/config.h"
 #include "models/error.h"
@@ -131,7 +130,7 @@ Config SmallConfig() {
 }
 
 PipelineResult Track(const std::string& sequence, const std::string& out,
-                   const Config& config = SmallConfig()) {
+                     const Config& config = SmallConfig()) {
   const PipelineOptions options = LoadPipelineOptions(config);
   return RunPipeline(sequence, PipelineTestData::Get().template_path(), options, config, out);
 }

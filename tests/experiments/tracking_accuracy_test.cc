@@ -4,6 +4,7 @@
 // synthesised once per process and tracked by RunPipeline with configs/default.yaml (texturing
 // off): Gauss-Newton and Ceres LM must stay within 15 mm mean vertex error without a lost frame
 // (mean vertex error > 50 mm); the one-to-one (articulated ICP) baseline is run and reported.
+#include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -15,8 +16,6 @@
 #include <mutex>
 #include <string>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "experiments/config.h"
 #include "experiments/pipeline.h"
@@ -59,8 +58,9 @@ class TrackingEnvironment : public ::testing::Environment {
  public:
   void TearDown() override {
     if (!measurements_.empty()) {
-      std::printf("\n| motion | variant | mean vertex error (mm) | max (mm) | joint error (mm) | "
-                  "lost | EM iterations | fit ms/frame | run s |\n|---|---|---|---|---|---|---|---|---|\n");
+      std::printf(
+          "\n| motion | variant | mean vertex error (mm) | max (mm) | joint error (mm) | "
+          "lost | EM iterations | fit ms/frame | run s |\n|---|---|---|---|---|---|---|---|---|\n");
       for (const Measurement& m : measurements_) {
         std::printf("| %s | %s | %.2f | %.1f | %.1f | %.1f%% | %.1f | %.0f | %.1f |\n",
                     m.motion.c_str(), m.variant.c_str(), m.result.mean_vertex_error_mm,
@@ -77,8 +77,7 @@ class TrackingEnvironment : public ::testing::Environment {
   const fs::path& root() {
     std::lock_guard<std::mutex> lock(mutex_);
     if (root_.empty()) {
-      root_ = fs::temp_directory_path() /
-              ("artex_tracking_accuracy_" + std::to_string(::getpid()));
+      root_ = fs::temp_directory_path() / ("artex_tracking_accuracy_" + std::to_string(::getpid()));
       fs::remove_all(root_);
       fs::create_directories(root_);
     }
@@ -92,8 +91,8 @@ class TrackingEnvironment : public ::testing::Environment {
     auto it = sequences_.find(motion);
     if (it != sequences_.end()) return it->second;
     const SynthSummary summary = SynthesizeSequence(TestSynthOptions(motion), dir.string());
-    std::printf("[synth] %s: %d frames in %.1f s (%.0f ms/frame)\n", motion.c_str(),
-                summary.frames, summary.total_seconds, summary.ms_per_frame());
+    std::printf("[synth] %s: %d frames in %.1f s (%.0f ms/frame)\n", motion.c_str(), summary.frames,
+                summary.total_seconds, summary.ms_per_frame());
     sequences_[motion] = dir.string();
     return dir.string();
   }
@@ -110,8 +109,8 @@ class TrackingEnvironment : public ::testing::Environment {
   std::vector<Measurement> measurements_;
 };
 
-TrackingEnvironment* const g_env = static_cast<TrackingEnvironment*>(
-    ::testing::AddGlobalTestEnvironment(new TrackingEnvironment));
+TrackingEnvironment* const g_env =
+    static_cast<TrackingEnvironment*>(::testing::AddGlobalTestEnvironment(new TrackingEnvironment));
 
 // configs/default.yaml with texturing off and the given overrides ("key=value").
 Config DefaultConfig(const std::vector<std::pair<std::string, std::string>>& overrides) {
@@ -133,12 +132,12 @@ PipelineResult Track(const std::string& motion, const std::string& variant,
   m.variant = variant;
   m.result = RunPipeline(sequence, "", options, config, out.string());
   m.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  std::printf("[track] %-9s %-12s mean %.2f mm, max %.1f mm, joints %.1f mm, lost %.1f%%, "
-              "%.1f EM iterations, %.0f ms/frame fitting\n",
-              motion.c_str(), variant.c_str(), m.result.mean_vertex_error_mm,
-              m.result.max_vertex_error_mm, m.result.mean_joint_error_mm,
-              100.0 * m.result.lost_fraction, m.result.mean_em_iterations,
-              m.result.fit_ms_per_frame);
+  std::printf(
+      "[track] %-9s %-12s mean %.2f mm, max %.1f mm, joints %.1f mm, lost %.1f%%, "
+      "%.1f EM iterations, %.0f ms/frame fitting\n",
+      motion.c_str(), variant.c_str(), m.result.mean_vertex_error_mm, m.result.max_vertex_error_mm,
+      m.result.mean_joint_error_mm, 100.0 * m.result.lost_fraction, m.result.mean_em_iterations,
+      m.result.fit_ms_per_frame);
   std::fflush(stdout);
   g_env->Record(m);
   ::testing::Test::RecordProperty(variant + "_mean_vertex_error_mm",
@@ -201,7 +200,8 @@ TEST_P(TrackingAccuracyTest, GaussNewtonAndCeresTrackOneToOneIsReported) {
   {
     // The baseline is measured, not required to track (docs/results-tracking.md).
     SCOPED_TRACE(motion + ", fitting.correspondence: one_to_one");
-    const PipelineResult r = Track(motion, "one_to_one", {{"fitting.correspondence", "one_to_one"}});
+    const PipelineResult r =
+        Track(motion, "one_to_one", {{"fitting.correspondence", "one_to_one"}});
     ExpectComplete(r);
     EXPECT_TRUE(std::isfinite(r.mean_vertex_error_mm));
     EXPECT_GE(r.lost_fraction, 0.0);
@@ -209,7 +209,8 @@ TEST_P(TrackingAccuracyTest, GaussNewtonAndCeresTrackOneToOneIsReported) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Motions, TrackingAccuracyTest, ::testing::Values("walk", "arm_raise", "turn", "bend"),
+INSTANTIATE_TEST_SUITE_P(Motions, TrackingAccuracyTest,
+                         ::testing::Values("walk", "arm_raise", "turn", "bend"),
                          [](const ::testing::TestParamInfo<std::string>& info) {
                            return info.param;
                          });
