@@ -412,7 +412,12 @@ EMIterationInfo EMFitter::Iterate() {
 
   // M-step problem.
   TikhonovOptions tikhonov_options = options_.tikhonov;
-  if (!st.first_frame) tikhonov_options.update = options_.tracking_update;
+  if (!st.first_frame) {
+    tikhonov_options.update.scale += options_.tracking_update.scale;
+    tikhonov_options.update.translation += options_.tracking_update.translation;
+    tikhonov_options.update.rotation += options_.tracking_update.rotation;
+    tikhonov_options.update.joints += options_.tracking_update.joints;
+  }
   TikhonovTerm tikhonov(tikhonov_options, model.num_joints(),
                         st.has_previous ? &st.previous : nullptr);
   JointLimitTerm joint_limits(options_.joint_limits, model.num_joints());

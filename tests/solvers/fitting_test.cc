@@ -81,6 +81,35 @@ TEST_F(FittingTest, GaussNewtonRecoversGroundTruth) {
   EXPECT_EQ(static_cast<int>(summary.trace.size()), summary.iterations);
 }
 
+TEST_F(FittingTest, CandidateListsDoNotChangeTheFit) {
+  // The E-step's per-frame candidate lists are exact: the same EM trajectory as a kd-tree
+  // search per E-step, on a first frame and on a tracking frame.
+  EMFitterOptions cached = DefaultOptions(), fresh = DefaultOptions();
+  fresh.estep.candidate_margin = 0.0;
+  ASSERT_GT(cached.estep.candidate_margin, 0.0);
+  EMFitter a(model_, cached), b(model_, fresh);
+  a.SetInitialPose(start_);
+  b.SetInitialPose(start_);
+  for (int frame = 0; frame < 2; ++frame) {
+    const FitSummary sa = a.FitFrame(scan_), sb = b.FitFrame(scan_);
+    EXPECT_EQ(sa.iterations, sb.iterations);
+    EXPECT_LT(MeanVertexError(skinning_, a.pose(), b.pose()), 1e-9);
+    EXPECT_LT(sa.neighbor_queries, sb.neighbor_queries);  // gathers once, not per E-step
+    EXPECT_GT(sa.candidates_visited, 0);
+  }
+}
+
+TEST_F(FittingTest, NormalsRefreshedEveryIterationOrPerStage) {
+  for (int refresh : {1, 0}) {
+    EMFitterOptions options = DefaultOptions();
+    options.normal_refresh_iterations = refresh;
+    Pose result;
+    const FitSummary summary = Fit(options, start_, &result);
+    EXPECT_TRUE(summary.ok());
+    EXPECT_LT(MeanVertexError(skinning_, result, truth_), 0.003) << "refresh " << refresh;
+  }
+}
+
 TEST_F(FittingTest, CeresLevenbergMarquardtRecoversGroundTruth) {
   EMFitterOptions options = DefaultOptions();
   options.solver.type = FitSolverType::kCeresLevenbergMarquardt;
@@ -367,6 +396,15 @@ TEST(FitOptionsTest, InvalidOptionsThrow) {
   EXPECT_THROW(EMFitter(model, options), Error);
   options = EMFitterOptions();
   options.tikhonov.update.joints = -1.0;
+  EXPECT_THROW(EMFitter(model, options), Error);
+  options = EMFitterOptions();
+  options.tracking_update.joints = -1.0;
+  EXPECT_THROW(EMFitter(model, options), Error);
+  options = EMFitterOptions();
+  options.normal_refresh_iterations = -1;
+  EXPECT_THROW(EMFitter(model, options), Error);
+  options = EMFitterOptions();
+  options.estep.candidate_margin = std::nan("");
   EXPECT_THROW(EMFitter(model, options), Error);
   FitSolverOptions solver;
   solver.num_threads = 0;
