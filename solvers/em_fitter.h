@@ -44,6 +44,12 @@ const std::map<std::string, CorrespondenceModel>& CorrespondenceModelNames();
 enum class ScaleMode { kFree, kEstimateThenFix, kEstimateThenPrior, kFixed };
 const std::map<std::string, ScaleMode>& ScaleModeNames();
 
+// Which template vertices the fit uses when max_fit_vertices subsamples the template:
+// kStride: every n-th vertex index; kVoxel: one vertex per cell of a cubic grid over the rest
+// pose (even over the surface, whatever the vertex order), cells in Z-curve order.
+enum class FitVertexSelection { kStride, kVoxel };
+const std::map<std::string, FitVertexSelection>& FitVertexSelectionNames();  // "stride", "voxel"
+
 struct EMFitterOptions {
   CorrespondenceModel correspondence = CorrespondenceModel::kOneToMany;
   EStepOptions estep;              // one-to-many E-step (mode, weights, k, voxel subsampling)
@@ -93,7 +99,8 @@ struct EMFitterOptions {
 
   // Fit on a uniform subset (index stride) of at most this many template vertices (0: all).
   // E-step, Jacobians and normal equations scale with it; normals use the full mesh.
-  int max_fit_vertices = 2000;
+  int max_fit_vertices = 3000;
+  FitVertexSelection fit_vertex_selection = FitVertexSelection::kVoxel;
   // Template normals (for n_s . n'_t of eq. 4) are recomputed on the whole posed mesh at the
   // first EM iteration of every stage and, when > 0, every this many iterations (1: every
   // iteration); in between only the fitted vertices are posed. Within a frame the template

@@ -3,7 +3,9 @@
 // start; the EM fitter must recover the pose (Gauss-Newton and Ceres LM), both M-step backends
 // must reach the same cost, the ICP baseline and the dense E-step are reported, and the
 // literal energy with a free scale must show the scale collapse of DESIGN.md.
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <iostream>
 #include <random>
 
@@ -97,6 +99,41 @@ TEST_F(FittingTest, CandidateListsDoNotChangeTheFit) {
     EXPECT_LT(sa.neighbor_queries, sb.neighbor_queries);  // gathers once, not per E-step
     EXPECT_GT(sa.candidates_visited, 0);
   }
+}
+
+TEST_F(FittingTest, FitVertexSubsets) {
+  // Both selections give at most max_fit_vertices distinct template vertices and recover the
+  // pose (from 50 mm); the voxel subset covers the surface at least as evenly as the index stride (largest
+  // distance from a template vertex to the nearest fitted vertex).
+  const int count = 250;
+  double coverage[2] = {0.0, 0.0};
+  for (FitVertexSelection selection : {FitVertexSelection::kStride, FitVertexSelection::kVoxel}) {
+    EMFitterOptions options = DefaultOptions();
+    options.max_fit_vertices = count;
+    options.fit_vertex_selection = selection;
+    EMFitter fitter(model_, options);
+    std::vector<int> subset = fitter.fit_vertices();
+    EXPECT_LE(static_cast<int>(subset.size()), count);
+    EXPECT_GE(static_cast<int>(subset.size()), count * 6 / 10);
+    std::sort(subset.begin(), subset.end());
+    EXPECT_EQ(std::unique(subset.begin(), subset.end()), subset.end());
+    EXPECT_GE(subset.front(), 0);
+    EXPECT_LT(subset.back(), model_.num_vertices());
+    double worst = 0.0;
+    for (int v = 0; v < model_.num_vertices(); ++v) {
+      double best = std::numeric_limits<double>::infinity();
+      for (int t : subset) best = std::min(best, (model_.vertices.row(v) - model_.vertices.row(t)).norm());
+      worst = std::max(worst, best);
+    }
+    coverage[selection == FitVertexSelection::kVoxel] = worst;
+    fitter.SetInitialPose(start_);
+    const FitSummary summary = fitter.FitFrame(scan_);
+    EXPECT_TRUE(summary.ok());
+    // 250 of 588 vertices on thin tubes: coarser than the full fit (1.7 mm), still recovered.
+    EXPECT_LT(MeanVertexError(skinning_, fitter.pose(), truth_), 0.015);
+  }
+  EXPECT_LE(coverage[1], coverage[0] + 1e-12);
+  EXPECT_EQ(FitVertexSelectionNames().at("voxel"), FitVertexSelection::kVoxel);
 }
 
 TEST_F(FittingTest, NormalsRefreshedEveryIterationOrPerStage) {
