@@ -51,7 +51,8 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
                "scale_max_radius", "scale_prior_weight", "icp_first_frame",
                "constant_velocity_prediction", "max_fit_vertices", "min_scan_points",
                "max_mean_motion", "max_scale_change", "ceres_max_iterations", "solver_threads",
-               "candidate_margin", "normal_refresh_iterations", "tracking_tikhonov"});
+               "candidate_margin", "normal_refresh_iterations", "tracking_tikhonov",
+               "fit_vertex_selection"});
   c.GetEnum("correspondence", CorrespondenceModelNames(), &o->correspondence);
   c.GetEnum("solver", FitSolverTypeNames(), &o->solver.type);
   c.GetEnum("estep", std::map<std::string, EStepMode>{{"dense", EStepMode::kDense},
@@ -98,6 +99,7 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   c.Get("candidate_margin", &o->estep.candidate_margin);
   c.Get("normal_refresh_iterations", &o->normal_refresh_iterations);
   BindWeights(c.Section("tracking_tikhonov"), &o->tracking_update);
+  c.GetEnum("fit_vertex_selection", FitVertexSelectionNames(), &o->fit_vertex_selection);
 }
 
 void BindTexture(const Config& c, TexturingOptions* o) {
