@@ -103,9 +103,10 @@ struct EMFitterOptions {
   FitVertexSelection fit_vertex_selection = FitVertexSelection::kVoxel;
   // Template normals (for n_s . n'_t of eq. 4) are recomputed on the whole posed mesh at the
   // first EM iteration of every stage and, when > 0, every this many iterations (1: every
-  // iteration); in between only the fitted vertices are posed. Within a frame the template
-  // turns by a few degrees, which changes the weights by well under 1 %.
-  int normal_refresh_iterations = 0;
+  // iteration; 0: once per stage); in between only the fitted vertices are posed. Within a
+  // tracking frame the template turns by a few degrees, which changes the weights by well
+  // under 1 %; long single-stage fits (dense, k-nearest, first frame) still need refreshes.
+  int normal_refresh_iterations = 4;
 
   // Robustness.
   int min_scan_points = 100;           // fewer: frame flagged too_few_points, pose kept

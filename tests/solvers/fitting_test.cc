@@ -264,6 +264,7 @@ TEST_F(FittingTest, LiteralEnergyWithFreeScaleShrinksTheScale) {
   literal.parameter_tolerance = 0.0;
   literal.max_mean_motion = 1e3;  // keep the degenerate optimum instead of rejecting it
   literal.max_scale_change = 1e3;
+  literal.normal_refresh_iterations = 1;  // literal EM: normals of the current pose every time
   Pose shrunk;
   const FitSummary s = Fit(literal, start_, &shrunk);
   std::cout << "literal dense, free scale: scale " << shrunk.scale << " ("
