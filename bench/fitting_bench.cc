@@ -12,6 +12,7 @@
 // ms, kd-tree queries and scan candidates visited per frame, error_mm (mean per-vertex error
 // against the true pose, i.e. including tangential sliding), and for the dense variant the mean
 // per-vertex difference to the default fit (mm).
+#include <benchmark/benchmark.h>
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -20,8 +21,6 @@
 #include <memory>
 #include <random>
 #include <vector>
-
-#include <benchmark/benchmark.h>
 
 #include "models/error.h"
 #include "models/so3.h"
@@ -34,7 +33,7 @@ namespace {
 
 constexpr int kSequenceFrames = 12;  // 1 first frame + 11 tracking frames
 constexpr double kScanPoints = 20000.0;
-constexpr double kNoise = 0.004;     // m, along the viewing ray
+constexpr double kNoise = 0.004;  // m, along the viewing ray
 constexpr uint64_t kSeed = 2014;
 
 struct Fixture {
@@ -216,8 +215,8 @@ void RunSequence(benchmark::State& state, EMFitterOptions options, bool is_defau
     for (int frame = 1; frame < kSequenceFrames; ++frame) {
       const FitSummary s = TrackFrame(&fitter, f.sequence_scans[frame]);
       totals.Add(s);
-      const double error = testing_util::MeanVertexError(*f.skinning, fitter.pose(),
-                                                         f.sequence_truth[frame]);
+      const double error =
+          testing_util::MeanVertexError(*f.skinning, fitter.pose(), f.sequence_truth[frame]);
       totals.error += error;
       totals.max_error = std::max(totals.max_error, error);
     }
@@ -250,9 +249,7 @@ void BM_FitFrameTruncatedGaussNewton(benchmark::State& state) {
 }
 BENCHMARK(BM_FitFrameTruncatedGaussNewton)->Unit(benchmark::kMillisecond)->UseRealTime();
 
-void BM_FitFrameCeresLm(benchmark::State& state) {
-  RunFrame(state, CeresOptions(), false, false);
-}
+void BM_FitFrameCeresLm(benchmark::State& state) { RunFrame(state, CeresOptions(), false, false); }
 BENCHMARK(BM_FitFrameCeresLm)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 void BM_FitFrameDenseEStep(benchmark::State& state) {

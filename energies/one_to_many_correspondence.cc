@@ -1,11 +1,11 @@
 #include "energies/one_to_many_correspondence.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <cmath>
 #include <limits>
 #include <sstream>
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include "models/pose.h"
 

@@ -67,7 +67,7 @@ std::vector<int> VoxelVertexSubset(const Eigen::MatrixX3d& vertices, int count) 
     return static_cast<int>(std::unique(keys.begin(), keys.end()) - keys.begin());
   };
   double lo = extent * 1e-4, hi = extent;  // occupied(hi) = 1 <= count
-  for (int it = 0; it < 30; ++it) {  // cell size to ~1e-9 of the extent
+  for (int it = 0; it < 30; ++it) {        // cell size to ~1e-9 of the extent
     const double mid = 0.5 * (lo + hi);
     (occupied(mid) > count ? lo : hi) = mid;
   }
@@ -191,10 +191,10 @@ bool EMFitterOptions::IsValid(std::string* error) const {
 
 std::string FitSummary::BriefReport() const {
   std::ostringstream out;
-  out << "frame " << frame << ": " << FrameTerminationName(termination) << " after "
-      << iterations << " iterations, cost " << initial_cost << " -> " << final_cost
-      << ", scale " << scale << ", " << total_seconds * 1e3 << " ms (E " << estep_seconds * 1e3
-      << ", M " << mstep_seconds * 1e3 << ", skinning " << skinning_seconds * 1e3 << ")";
+  out << "frame " << frame << ": " << FrameTerminationName(termination) << " after " << iterations
+      << " iterations, cost " << initial_cost << " -> " << final_cost << ", scale " << scale << ", "
+      << total_seconds * 1e3 << " ms (E " << estep_seconds * 1e3 << ", M " << mstep_seconds * 1e3
+      << ", skinning " << skinning_seconds * 1e3 << ")";
   if (too_few_points) out << " [too few points]";
   if (non_finite) out << " [non-finite]";
   if (diverged) out << " [diverged]";
@@ -325,8 +325,8 @@ Pose EMFitter::PredictNextPose() const {
   const bool estimated = accepted_frames_ >= options_.scale_estimation_frames;
   if (options_.scale_mode == ScaleMode::kFixed ||
       (estimated && options_.scale_mode != ScaleMode::kFree)) {
-    guess.scale = options_.scale_mode == ScaleMode::kFixed ? history_.back().scale
-                                                          : scale_estimate_;
+    guess.scale =
+        options_.scale_mode == ScaleMode::kFixed ? history_.back().scale : scale_estimate_;
   }
   return guess;
 }
@@ -406,9 +406,9 @@ EMIterationInfo EMFitter::Iterate() {
   auto start = Clock::now();
   const bool subset = fit_skinning_ != skinning_.get();
   const bool colored = !st.first_frame && template_colors_.rows() == model.num_vertices();
-  const bool refresh_normals =
-      st.normals_pose_stage != st.stage || (options_.normal_refresh_iterations > 0 &&
-                                            st.normals_age + 1 >= options_.normal_refresh_iterations);
+  const bool refresh_normals = st.normals_pose_stage != st.stage ||
+                               (options_.normal_refresh_iterations > 0 &&
+                                st.normals_age + 1 >= options_.normal_refresh_iterations);
   const int n_fit = static_cast<int>(fit_vertices_.size());
   if (refresh_normals) {
     skinning_->Apply(pose_, &st.full_posed);
@@ -495,7 +495,8 @@ EMIterationInfo EMFitter::Iterate() {
   if (options_.joint_limits.weight > 0.0) problem.terms.push_back(&joint_limits);
   if (st.smoothness) problem.terms.push_back(st.smoothness.get());
   if (prior_scale) problem.terms.push_back(&scale_prior);
-  const bool scale_free = st.scale_free && (st.radii.empty() || radius <= options_.scale_max_radius);
+  const bool scale_free =
+      st.scale_free && (st.radii.empty() || radius <= options_.scale_max_radius);
   if (!scale_free) problem.constant_parameters.push_back(kScaleIndex);
 
   const FitSolverSummary m = solver_->Solve(problem, &pose_);
@@ -574,8 +575,8 @@ FitSummary EMFitter::EndFrame() {
     }
   }
   if (ok) {
-    summary.termination = st.converged ? FrameTermination::kConverged
-                                       : FrameTermination::kMaxIterations;
+    summary.termination =
+        st.converged ? FrameTermination::kConverged : FrameTermination::kMaxIterations;
     if (st.scale_free && options_.scale_mode != ScaleMode::kFree &&
         accepted_frames_ < options_.scale_estimation_frames) {
       // Running mean of the scale over the estimation frames.

@@ -11,13 +11,12 @@
 // non-finite values, divergence) are flagged and keep the previous pose.
 #pragma once
 
+#include <Eigen/Core>
 #include <functional>
 #include <map>
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "energies/joint_limit_term.h"
 #include "energies/one_to_many_correspondence.h"
@@ -52,9 +51,9 @@ const std::map<std::string, FitVertexSelection>& FitVertexSelectionNames();  // 
 
 struct EMFitterOptions {
   CorrespondenceModel correspondence = CorrespondenceModel::kOneToMany;
-  EStepOptions estep;              // one-to-many E-step (mode, weights, k, voxel subsampling)
-  OneToOneOptions one_to_one;      // ICP baseline pairing
-  FitSolverOptions solver;         // M-step backend
+  EStepOptions estep;          // one-to-many E-step (mode, weights, k, voxel subsampling)
+  OneToOneOptions one_to_one;  // ICP baseline pairing
+  FitSolverOptions solver;     // M-step backend
 
   // Radius schedule (m) of the kRadius E-step, one stage per entry, coarse to fine.
   std::vector<double> first_frame_radii = {0.15, 0.10, 0.05, 0.03};
@@ -77,23 +76,23 @@ struct EMFitterOptions {
   // Data term weight 1 / sum_t P_t (cost = weighted mean squared distance, m^2) when true;
   // the literal unnormalised sum when false. Prior weights are relative to this choice.
   bool normalize_data_term = true;
-  TikhonovOptions tikhonov;            // Gamma on the update, temporal prior to frame f-1
+  TikhonovOptions tikhonov;  // Gamma on the update, temporal prior to frame f-1
   // Added to tikhonov.update (Gamma) in tracking frames (the first frame has to move far from
   // the rest pose). A stronger joint weight damps the updates along the weakly observable
   // directions (twist about limb axes, small joints), which otherwise drift from iteration to
   // iteration and frame to frame since the cost barely changes along them.
   PoseGroupWeights tracking_update = {0.0, 0.0, 0.0, 3e-3};
-  JointLimitOptions joint_limits;      // soft joint boxes (weight 0: off)
-  PoseGroupWeights smoothness;         // constant-velocity prior (all 0: off)
+  JointLimitOptions joint_limits;  // soft joint boxes (weight 0: off)
+  PoseGroupWeights smoothness;     // constant-velocity prior (all 0: off)
 
   ScaleMode scale_mode = ScaleMode::kEstimateThenFix;
   int scale_estimation_frames = 1;
   // Radius E-step: the scale is held during stages with a radius above this (m); at wide radii
   // mu_t lies inside curved surfaces (chord means), which biases a free scale downwards.
   double scale_max_radius = 0.05;
-  double scale_prior_weight = 1.0;     // kEstimateThenPrior (cost units per unit^2)
+  double scale_prior_weight = 1.0;  // kEstimateThenPrior (cost units per unit^2)
 
-  bool icp_first_frame = true;         // pre-align the first frame's pose by similarity ICP
+  bool icp_first_frame = true;  // pre-align the first frame's pose by similarity ICP
   IcpInitOptions icp;
   bool constant_velocity_prediction = true;  // initial guess of frame f from f-1 and f-2
 
@@ -109,28 +108,28 @@ struct EMFitterOptions {
   int normal_refresh_iterations = 4;
 
   // Robustness.
-  int min_scan_points = 100;           // fewer: frame flagged too_few_points, pose kept
-                                       // (also when no correspondence is found)
-                                       // non-finite scan values flag non_finite
-  double max_mean_motion = 0.5;        // mean vertex displacement (m) from the frame's initial
-                                       // guess beyond which the frame is flagged diverged
-  double max_scale_change = 0.5;       // relative scale change within a frame: diverged
+  int min_scan_points = 100;      // fewer: frame flagged too_few_points, pose kept
+                                  // (also when no correspondence is found)
+                                  // non-finite scan values flag non_finite
+  double max_mean_motion = 0.5;   // mean vertex displacement (m) from the frame's initial
+                                  // guess beyond which the frame is flagged diverged
+  double max_scale_change = 0.5;  // relative scale change within a frame: diverged
 
   bool IsValid(std::string* error) const;
 };
 
 struct EMIterationInfo {
   int frame = 0;
-  int iteration = 0;      // 0-based within the frame
+  int iteration = 0;  // 0-based within the frame
   int stage = 0;
-  double radius = 0.0;    // E-step radius of the stage (kRadius), else 0
-  double cost = 0.0;      // after the M-step: data (incl. the E-step constant) + priors
+  double radius = 0.0;  // E-step radius of the stage (kRadius), else 0
+  double cost = 0.0;    // after the M-step: data (incl. the E-step constant) + priors
   double max_update = 0.0;
   double total_weight = 0.0;  // sum_t P_t (or matched vertices, one-to-one)
   long long num_pairs = 0;
   double scale = 1.0;
   bool stage_converged = false;
-  bool converged = false;     // last stage converged: the frame is done
+  bool converged = false;  // last stage converged: the frame is done
 };
 
 enum class FrameTermination { kConverged, kMaxIterations, kFailed };
@@ -139,7 +138,7 @@ const char* FrameTerminationName(FrameTermination termination);
 struct FitSummary {
   int frame = 0;
   int iterations = 0;
-  double initial_cost = 0.0;   // of the first EM iteration (before its M-step)
+  double initial_cost = 0.0;  // of the first EM iteration (before its M-step)
   double final_cost = 0.0;
   FrameTermination termination = FrameTermination::kFailed;
   bool too_few_points = false;
@@ -147,14 +146,14 @@ struct FitSummary {
   bool diverged = false;
   int num_scan_points = 0;
   double scale = 1.0;
-  double mean_motion = 0.0;    // mean vertex displacement from the initial guess (m)
+  double mean_motion = 0.0;  // mean vertex displacement from the initial guess (m)
   // E-step work: neighbour queries and candidate scan points visited (solvers/estep.h).
   long long neighbor_queries = 0;
   long long candidates_visited = 0;
   // Timings (s).
   double icp_seconds = 0.0;
   double estep_seconds = 0.0;
-  double mstep_seconds = 0.0;  // includes the skinning done inside the solver
+  double mstep_seconds = 0.0;     // includes the skinning done inside the solver
   double skinning_seconds = 0.0;  // all posing (E-step posing + inside the M-step)
   double total_seconds = 0.0;
   std::vector<EMIterationInfo> trace;
@@ -190,7 +189,7 @@ class EMFitter {
 
   const Pose& pose() const { return pose_; }
   int frames_fitted() const { return frame_; }
-  void SetInitialPose(const Pose& pose);   // pose for the first frame (before ICP)
+  void SetInitialPose(const Pose& pose);  // pose for the first frame (before ICP)
   const Pose& initial_pose() const { return initial_pose_; }
   // Per-vertex template colours (T x 3, [0,1]) for the colour term; empty disables it.
   void SetTemplateColors(const Eigen::MatrixX3d& colors);
@@ -219,7 +218,7 @@ class EMFitter {
   Pose pose_;
   std::vector<Pose> history_;  // accepted poses of previous frames (last two kept)
   int frame_ = 0;
-  int accepted_frames_ = 0;     // frames that passed the robustness checks
+  int accepted_frames_ = 0;  // frames that passed the robustness checks
   double scale_estimate_ = 1.0;
   std::unique_ptr<FrameState> state_;
   std::function<void(const EMIterationInfo&)> callback_;

@@ -1,14 +1,14 @@
 #include "solvers/estep.h"
 
-#include <algorithm>
-#include <cmath>
-#include <cstdint>
-#include <sstream>
-
-#include <nanoflann.hpp>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <nanoflann.hpp>
+#include <sstream>
 
 #include "models/error.h"
 
@@ -61,8 +61,9 @@ struct RowMajorCloud {
     return false;
   }
 };
-using KdTree = nanoflann::KDTreeSingleIndexAdaptor<
-    nanoflann::L2_Simple_Adaptor<double, RowMajorCloud>, RowMajorCloud, 3, int>;
+using KdTree =
+    nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, RowMajorCloud>,
+                                        RowMajorCloud, 3, int>;
 }  // namespace
 
 struct PointCloudIndex::Impl {
@@ -70,8 +71,7 @@ struct PointCloudIndex::Impl {
   std::unique_ptr<KdTree> tree;
 };
 
-PointCloudIndex::PointCloudIndex(const Eigen::MatrixX3d& points, int leaf_size)
-    : impl_(new Impl) {
+PointCloudIndex::PointCloudIndex(const Eigen::MatrixX3d& points, int leaf_size) : impl_(new Impl) {
   impl_->cloud.xyz.resize(3 * points.rows());
   for (Eigen::Index i = 0; i < points.rows(); ++i) {
     for (int d = 0; d < 3; ++d) impl_->cloud.xyz[3 * i + d] = points(i, d);
@@ -258,8 +258,8 @@ void DenseEStep(const Scan& scan, const PosedTemplateView& posed, const OneToMan
     Eigen::ArrayXd denom = *d2 + eps;
     if (color) {
       const Eigen::RowVector3d ct = posed.colors->row(t);
-      denom += lambda * cvalid *
-               ((cr - ct[0]).square() + (cg - ct[1]).square() + (cb - ct[2]).square());
+      denom +=
+          lambda * cvalid * ((cr - ct[0]).square() + (cg - ct[1]).square() + (cb - ct[2]).square());
     }
     *p = (nx * nt[0] + ny * nt[1] + nz * nt[2]).max(0.0) / denom;
   };
@@ -574,30 +574,28 @@ void WeighCandidates(const VertexQuery& q, const double* packed, const double* p
 }
 
 void WeighVertex(bool color, bool truncate, const VertexQuery& q, const double* packed,
-                 const double* packed_colors, const int* index, int count,
-                 const double* known_d2, VertexSums* sums, std::vector<int>* store_s,
-                 std::vector<double>* store_p) {
+                 const double* packed_colors, const int* index, int count, const double* known_d2,
+                 VertexSums* sums, std::vector<int>* store_s, std::vector<double>* store_p) {
   if (color) {
     if (truncate) {
-      WeighCandidates<true, true>(q, packed, packed_colors, index, count, known_d2, sums,
-                                  store_s, store_p);
+      WeighCandidates<true, true>(q, packed, packed_colors, index, count, known_d2, sums, store_s,
+                                  store_p);
     } else {
-      WeighCandidates<true, false>(q, packed, packed_colors, index, count, known_d2, sums,
-                                   store_s, store_p);
+      WeighCandidates<true, false>(q, packed, packed_colors, index, count, known_d2, sums, store_s,
+                                   store_p);
     }
   } else if (truncate) {
-    WeighCandidates<false, true>(q, packed, packed_colors, index, count, known_d2, sums,
-                                 store_s, store_p);
+    WeighCandidates<false, true>(q, packed, packed_colors, index, count, known_d2, sums, store_s,
+                                 store_p);
   } else {
-    WeighCandidates<false, false>(q, packed, packed_colors, index, count, known_d2, sums,
-                                  store_s, store_p);
+    WeighCandidates<false, false>(q, packed, packed_colors, index, count, known_d2, sums, store_s,
+                                  store_p);
   }
 }
 
 }  // namespace
 
-void EStep::Compute(const PosedTemplateView& posed, double radius,
-                    CorrespondenceTargets* targets) {
+void EStep::Compute(const PosedTemplateView& posed, double radius, CorrespondenceTargets* targets) {
   CheckPosed(posed, "E-step");
   const int t_count = static_cast<int>(posed.vertices->rows());
   if (options_.mode == EStepMode::kDense) {

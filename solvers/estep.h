@@ -9,14 +9,13 @@
 // Plus the one-to-one nearest-neighbour search of the articulated ICP baseline.
 #pragma once
 
+#include <Eigen/Core>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <string>
 #include <utility>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "energies/one_to_many_correspondence.h"
 #include "energies/one_to_one_correspondence.h"
@@ -29,8 +28,8 @@ const char* EStepModeName(EStepMode mode);
 
 struct EStepOptions {
   EStepMode mode = EStepMode::kRadius;
-  OneToManyOptions weights;      // eps, lambda_c, colour, per-scan-point normalisation
-  int k = 8;                     // neighbours per template vertex (kKNearest)
+  OneToManyOptions weights;  // eps, lambda_c, colour, per-scan-point normalisation
+  int k = 8;                 // neighbours per template vertex (kKNearest)
   // kRadius: scan subsampled on a voxel grid of cell radius * voxel_fraction (0: full scan).
   // The weights are smooth at the radius scale, so 0.25 keeps ~50 cells per template vertex.
   double voxel_fraction = 0.25;
@@ -41,9 +40,9 @@ struct EStepOptions {
   // (the template moves little within a frame, so that is rare). 0: a kd-tree radius search
   // per vertex and E-step.
   double candidate_margin = 0.01;
-  int kdtree_leaf_size = 10;     // nanoflann leaf size
-  bool parallel = true;          // TBB over template vertices
-  int grain_size = 256;          // template vertices per TBB task
+  int kdtree_leaf_size = 10;  // nanoflann leaf size
+  bool parallel = true;       // TBB over template vertices
+  int grain_size = 256;       // template vertices per TBB task
 
   bool IsValid(std::string* error) const;
 };
@@ -115,7 +114,7 @@ class EStep {
   EStepOptions options_;
   std::unique_ptr<Cloud> full_;
   mutable std::once_flag full_index_once_;
-  std::map<double, std::unique_ptr<Cloud>> subsampled_;  // keyed by voxel size
+  std::map<double, std::unique_ptr<Cloud>> subsampled_;       // keyed by voxel size
   std::map<double, std::unique_ptr<Candidates>> candidates_;  // keyed by radius
   long long neighbor_queries_ = 0;
   long long candidates_visited_ = 0;

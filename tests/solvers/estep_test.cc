@@ -1,13 +1,14 @@
 // E-step on point sets: the dense E-step against a straightforward double loop, the truncated
 // variants against the dense one (huge radius / k = all), truncation semantics, the key
 // identity Q = sum_t P_t |x_t - mu_t|^2 + constant, and the nearest-neighbour gating.
-#include <cmath>
-#include <random>
+#include "solvers/estep.h"
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <random>
+
 #include "models/error.h"
-#include "solvers/estep.h"
 
 namespace artex {
 namespace {
@@ -85,8 +86,7 @@ void BruteForce(const PointSets& sets, const OneToManyOptions& o, bool color, do
   if (p_matrix) *p_matrix = p;
 }
 
-void ExpectTargetsNear(const CorrespondenceTargets& a, const CorrespondenceTargets& b,
-                       double rel) {
+void ExpectTargetsNear(const CorrespondenceTargets& a, const CorrespondenceTargets& b, double rel) {
   ASSERT_EQ(a.size(), b.size());
   const double w_scale = b.weight.cwiseAbs().maxCoeff();
   EXPECT_LT((a.weight - b.weight).cwiseAbs().maxCoeff(), rel * w_scale);
@@ -302,14 +302,16 @@ TEST(EStepTest, PointCloudIndexMatchesBruteForce) {
   for (int t = 0; t < 50; ++t) {
     const Eigen::Vector3d q = sets.vertices.row(t).transpose();
     Eigen::Index best;
-    const double best_d2 = (sets.scan.points.rowwise() - q.transpose()).rowwise().squaredNorm().minCoeff(&best);
+    const double best_d2 =
+        (sets.scan.points.rowwise() - q.transpose()).rowwise().squaredNorm().minCoeff(&best);
     double d2 = 0.0;
     EXPECT_EQ(index.Nearest(q, &d2), best);
     EXPECT_NEAR(d2, best_d2, 1e-15);
     std::vector<std::pair<int, double>> found;
     index.Radius(q, 0.1, &found);
     int expected = 0;
-    for (int s = 0; s < sets.scan.size(); ++s) expected += (sets.scan.points.row(s) - q.transpose()).norm() < 0.1;
+    for (int s = 0; s < sets.scan.size(); ++s)
+      expected += (sets.scan.points.row(s) - q.transpose()).norm() < 0.1;
     EXPECT_EQ(static_cast<int>(found.size()), expected);
   }
 }

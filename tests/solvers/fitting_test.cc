@@ -3,13 +3,13 @@
 // start; the EM fitter must recover the pose (Gauss-Newton and Ceres LM), both M-step backends
 // must reach the same cost, the ICP baseline and the dense E-step are reported, and the
 // literal energy with a free scale must show the scale collapse of DESIGN.md.
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cmath>
-#include <limits>
 #include <iostream>
+#include <limits>
 #include <random>
-
-#include <gtest/gtest.h>
 
 #include "energies/one_to_many_correspondence.h"
 #include "energies/tikhonov_term.h"
@@ -73,8 +73,8 @@ TEST_F(FittingTest, GaussNewtonRecoversGroundTruth) {
   Pose result;
   const FitSummary summary = Fit(DefaultOptions(), start_, &result);
   const double error = MeanVertexError(skinning_, result, truth_);
-  std::cout << "GN-EM: start error " << start_error * 1e3 << " mm, final " << error * 1e3
-            << " mm, " << summary.BriefReport() << "\n";
+  std::cout << "GN-EM: start error " << start_error * 1e3 << " mm, final " << error * 1e3 << " mm, "
+            << summary.BriefReport() << "\n";
   RecordProperty("gn_mean_vertex_error_mm", std::to_string(error * 1e3));
   EXPECT_TRUE(summary.ok());
   EXPECT_LT(error, 0.003);
@@ -103,8 +103,8 @@ TEST_F(FittingTest, CandidateListsDoNotChangeTheFit) {
 
 TEST_F(FittingTest, FitVertexSubsets) {
   // Both selections give at most max_fit_vertices distinct template vertices and recover the
-  // pose (from 50 mm); the voxel subset covers the surface at least as evenly as the index stride (largest
-  // distance from a template vertex to the nearest fitted vertex).
+  // pose (from 50 mm); the voxel subset covers the surface at least as evenly as the index stride
+  // (largest distance from a template vertex to the nearest fitted vertex).
   const int count = 250;
   double coverage[2] = {0.0, 0.0};
   for (FitVertexSelection selection : {FitVertexSelection::kStride, FitVertexSelection::kVoxel}) {
@@ -122,7 +122,8 @@ TEST_F(FittingTest, FitVertexSubsets) {
     double worst = 0.0;
     for (int v = 0; v < model_.num_vertices(); ++v) {
       double best = std::numeric_limits<double>::infinity();
-      for (int t : subset) best = std::min(best, (model_.vertices.row(v) - model_.vertices.row(t)).norm());
+      for (int t : subset)
+        best = std::min(best, (model_.vertices.row(v) - model_.vertices.row(t)).norm());
       worst = std::max(worst, best);
     }
     coverage[selection == FitVertexSelection::kVoxel] = worst;
@@ -215,8 +216,7 @@ TEST_F(FittingTest, OneToOneBaselineRunsAndIsReported) {
     const FitSummary summary = Fit(options, start_, &result);
     const double error = MeanVertexError(skinning_, result, truth_);
     const char* name = metric == IcpMetric::kPointToPoint ? "point_to_point" : "point_to_plane";
-    std::cout << "ICP " << name << ": " << error * 1e3 << " mm, " << summary.BriefReport()
-              << "\n";
+    std::cout << "ICP " << name << ": " << error * 1e3 << " mm, " << summary.BriefReport() << "\n";
     RecordProperty(std::string("icp_") + name + "_mean_vertex_error_mm",
                    std::to_string(error * 1e3));
     EXPECT_TRUE(summary.ok());
@@ -267,8 +267,8 @@ TEST_F(FittingTest, LiteralEnergyWithFreeScaleShrinksTheScale) {
   literal.normal_refresh_iterations = 1;  // literal EM: normals of the current pose every time
   Pose shrunk;
   const FitSummary s = Fit(literal, start_, &shrunk);
-  std::cout << "literal dense, free scale: scale " << shrunk.scale << " ("
-            << s.BriefReport() << ")\n";
+  std::cout << "literal dense, free scale: scale " << shrunk.scale << " (" << s.BriefReport()
+            << ")\n";
   RecordProperty("literal_free_scale", std::to_string(shrunk.scale));
   EXPECT_LT(shrunk.scale, 0.8);
 
@@ -298,7 +298,8 @@ TEST_F(FittingTest, ScaleEstimatedOnFirstFrameThenFixed) {
   moved.translation += Eigen::Vector3d(0.02, 0.0, -0.01);
   Eigen::MatrixX3d posed;
   skinning_.Apply(moved, &posed);
-  const Scan scan2 = testing_util::SampleScan(posed, model_.triangles, camera_, 6000.0, 0.003, &rng_);
+  const Scan scan2 =
+      testing_util::SampleScan(posed, model_.triangles, camera_, 6000.0, 0.003, &rng_);
   const FitSummary second = fitter.FitFrame(scan2);
   EXPECT_TRUE(second.ok());
   EXPECT_EQ(fitter.pose().scale, estimate);
@@ -329,7 +330,8 @@ TEST_F(FittingTest, TracksASequenceWithConstantVelocity) {
     }
     Eigen::MatrixX3d posed;
     skinning_.Apply(pose, &posed);
-    const Scan scan = testing_util::SampleScan(posed, model_.triangles, camera_, 6000.0, 0.003, &rng_);
+    const Scan scan =
+        testing_util::SampleScan(posed, model_.triangles, camera_, 6000.0, 0.003, &rng_);
     const FitSummary s = fitter.FitFrame(scan);
     EXPECT_TRUE(s.ok()) << s.BriefReport();
     worst = std::max(worst, MeanVertexError(skinning_, fitter.pose(), pose));
@@ -386,7 +388,8 @@ TEST_F(FittingTest, IcpInitialisationRecoversTheSimilarity) {
   target.translation = Eigen::Vector3d(0.3, 0.05, -0.4);
   Eigen::MatrixX3d posed;
   skinning_.Apply(target, &posed);
-  const Scan scan = testing_util::SampleScan(posed, model_.triangles, camera_, 6000.0, 0.002, &rng_);
+  const Scan scan =
+      testing_util::SampleScan(posed, model_.triangles, camera_, 6000.0, 0.002, &rng_);
   const IcpInitResult r =
       AlignByIcp(skinning_, Pose::Identity(model_.num_joints()), scan, IcpInitOptions());
   const double error = MeanVertexError(skinning_, r.pose, target);
@@ -410,14 +413,14 @@ TEST_F(FittingTest, FirstFrameFromRestPoseWithIcp) {
   target.translation = Eigen::Vector3d(0.2, 0.0, -0.3);
   Eigen::MatrixX3d posed;
   skinning_.Apply(target, &posed);
-  const Scan scan = testing_util::SampleScan(posed, model_.triangles, camera_, 6000.0, 0.003, &rng_);
+  const Scan scan =
+      testing_util::SampleScan(posed, model_.triangles, camera_, 6000.0, 0.003, &rng_);
   EMFitterOptions options;
   options.scale_mode = ScaleMode::kEstimateThenFix;
   EMFitter fitter(model_, options);
   const FitSummary s = fitter.FitFrame(scan);
   const double error = MeanVertexError(skinning_, fitter.pose(), target);
-  std::cout << "first frame from rest pose: " << error * 1e3 << " mm, " << s.BriefReport()
-            << "\n";
+  std::cout << "first frame from rest pose: " << error * 1e3 << " mm, " << s.BriefReport() << "\n";
   EXPECT_TRUE(s.ok());
   EXPECT_GT(s.icp_seconds, 0.0);
   // Limited by the first-frame scale estimate (ICP, then the curvature-biased fine stages).
