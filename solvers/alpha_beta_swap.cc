@@ -18,9 +18,8 @@ MrfSummary AlphaBetaSwapSolver::Solve(const MrfProblem& problem, std::vector<int
 
   double energy = summary.initial_energy;
   std::vector<int> var_of(n, -1);
-  // Local indices of alpha (k[0]) and beta (k[1]) at each move variable.
-  std::vector<int> k_alpha, k_beta, vars;
-  std::vector<char> y, y_now;
+  mrf_internal::BinaryMove move;  // y = 0: alpha, y = 1: beta
+  std::vector<char> y;
   mrf_internal::BinaryMoveCut cut;
   const int num_pairs = num_labels * (num_labels - 1) / 2;
   int unchanged_streak = 0;
@@ -31,11 +30,8 @@ MrfSummary AlphaBetaSwapSolver::Solve(const MrfProblem& problem, std::vector<int
     bool converged = num_pairs == 0;
     for (int alpha = 0; alpha < num_labels && !converged; ++alpha) {
       for (int beta = alpha + 1; beta < num_labels && !converged; ++beta) {
-        for (int i : vars) var_of[i] = -1;
-        vars.clear();
-        k_alpha.clear();
-        k_beta.clear();
-        y_now.clear();
+        for (int i : move.vars) var_of[i] = -1;
+        move.Clear();
         // Every move variable has alpha as a candidate.
         for (int p = label_index.offsets[alpha]; p < label_index.offsets[alpha + 1]; ++p) {
           const int i = label_index.nodes[p];
@@ -43,69 +39,18 @@ MrfSummary AlphaBetaSwapSolver::Solve(const MrfProblem& problem, std::vector<int
           if (label != alpha && label != beta) continue;
           const int kb = problem.CandidateIndex(i, beta);
           if (kb < 0) continue;
-          var_of[i] = static_cast<int>(vars.size());
-          vars.push_back(i);
-          k_alpha.push_back(label_index.local[p]);
-          k_beta.push_back(kb);
-          y_now.push_back(label == beta);
+          var_of[i] = move.size();
+          move.Add(i, label_index.local[p], kb, label == beta);
         }
         bool accepted = false;
-        const int num_vars = static_cast<int>(vars.size());
-        if (num_vars > 0) {
-          cut.Reset(num_vars);
-          auto move_label = [&](int v, bool to_beta) { return to_beta ? k_beta[v] : k_alpha[v]; };
-          for (int v = 0; v < num_vars; ++v) {
-            const int i = vars[v];
-            const double* d = problem.candidate_unaries(i);
-            cut.AddUnary(v, d[k_alpha[v]], d[k_beta[v]]);
-            for (int p = adjacency.offsets[i]; p < adjacency.offsets[i + 1]; ++p) {
-              const int e = adjacency.edges[p];
-              const int s = problem.edge_first(e);
-              const int t = problem.edge_second(e);
-              const int other = s == i ? t : s;
-              const int w = var_of[other];
-              if (w >= 0) {
-                if (s != i) continue;  // added once, from the first node
-                summary.truncated_terms +=
-                    cut.AddPair(v, w, problem.PairwiseLocal(e, k_alpha[v], k_alpha[w]),
-                                problem.PairwiseLocal(e, k_alpha[v], k_beta[w]),
-                                problem.PairwiseLocal(e, k_beta[v], k_alpha[w]),
-                                problem.PairwiseLocal(e, k_beta[v], k_beta[w]), y_now[v], y_now[w]);
-              } else if (s == i) {
-                cut.AddUnary(v, problem.PairwiseLocal(e, k_alpha[v], x[t]),
-                             problem.PairwiseLocal(e, k_beta[v], x[t]));
-              } else {
-                cut.AddUnary(v, problem.PairwiseLocal(e, x[s], k_alpha[v]),
-                             problem.PairwiseLocal(e, x[s], k_beta[v]));
-              }
-            }
-          }
+        if (move.size() > 0) {
+          summary.truncated_terms +=
+              mrf_internal::BuildMoveCut(problem, adjacency, move, var_of, x, &cut);
           cut.Solve(&y);
           double delta = 0.0;
-          bool any = false;
-          for (int v = 0; v < num_vars; ++v) {
-            if (y[v] == y_now[v]) continue;
-            any = true;
-            const int i = vars[v];
-            const double* d = problem.candidate_unaries(i);
-            delta += d[move_label(v, y[v])] - d[x[i]];
-            for (int p = adjacency.offsets[i]; p < adjacency.offsets[i + 1]; ++p) {
-              const int e = adjacency.edges[p];
-              const int s = problem.edge_first(e);
-              const int t = problem.edge_second(e);
-              const int other = s == i ? t : s;
-              const int w = var_of[other];
-              const bool other_moves = w >= 0 && y[w] != y_now[w];
-              if (other_moves && s != i) continue;  // counted from the first node
-              const int new_i = move_label(v, y[v]);
-              const int new_other = other_moves ? move_label(w, y[w]) : x[other];
-              const double after = s == i ? problem.PairwiseLocal(e, new_i, new_other)
-                                          : problem.PairwiseLocal(e, new_other, new_i);
-              delta += after - problem.PairwiseLocal(e, x[s], x[t]);
-            }
-          }
-          if (any && delta < 0.0) {
-            for (int v = 0; v < num_vars; ++v) x[vars[v]] = move_label(v, y[v]);
+          if (mrf_internal::MoveEnergyChange(problem, adjacency, move, var_of, x, y, &delta) &&
+              delta < 0.0) {
+            for (int v = 0; v < move.size(); ++v) x[move.vars[v]] = move.Label(v, y[v]);
             energy += delta;
             accepted = true;
             ++summary.accepted_moves;

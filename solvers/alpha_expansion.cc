@@ -68,6 +68,68 @@ void BinaryMoveCut::Solve(std::vector<char>* y) {
   for (int v = 0; v < n; ++v) (*y)[v] = g.what_segment(v, Graph::SOURCE) == Graph::SINK;
 }
 
+long BuildMoveCut(const MrfProblem& problem, const MrfAdjacency& adjacency, const BinaryMove& move,
+                  const std::vector<int>& var_of, const std::vector<int>& x, BinaryMoveCut* cut) {
+  long truncated = 0;
+  cut->Reset(move.size());
+  for (int v = 0; v < move.size(); ++v) {
+    const int i = move.vars[v];
+    const double* d = problem.candidate_unaries(i);
+    cut->AddUnary(v, d[move.label0[v]], d[move.label1[v]]);
+    for (int p = adjacency.offsets[i]; p < adjacency.offsets[i + 1]; ++p) {
+      const int e = adjacency.edges[p];
+      const int s = problem.edge_first(e);
+      const int t = problem.edge_second(e);
+      const int other = s == i ? t : s;
+      const int w = var_of[other];
+      if (w >= 0) {
+        if (s != i) continue;  // a pair of variables is added once, from its first node
+        truncated += cut->AddPair(v, w, problem.PairwiseLocal(e, move.label0[v], move.label0[w]),
+                                  problem.PairwiseLocal(e, move.label0[v], move.label1[w]),
+                                  problem.PairwiseLocal(e, move.label1[v], move.label0[w]),
+                                  problem.PairwiseLocal(e, move.label1[v], move.label1[w]),
+                                  move.current[v], move.current[w]);
+      } else if (s == i) {
+        cut->AddUnary(v, problem.PairwiseLocal(e, move.label0[v], x[t]),
+                      problem.PairwiseLocal(e, move.label1[v], x[t]));
+      } else {
+        cut->AddUnary(v, problem.PairwiseLocal(e, x[s], move.label0[v]),
+                      problem.PairwiseLocal(e, x[s], move.label1[v]));
+      }
+    }
+  }
+  return truncated;
+}
+
+bool MoveEnergyChange(const MrfProblem& problem, const MrfAdjacency& adjacency,
+                      const BinaryMove& move, const std::vector<int>& var_of,
+                      const std::vector<int>& x, const std::vector<char>& y, double* delta) {
+  *delta = 0.0;
+  bool any = false;
+  for (int v = 0; v < move.size(); ++v) {
+    if (y[v] == move.current[v]) continue;
+    any = true;
+    const int i = move.vars[v];
+    const double* d = problem.candidate_unaries(i);
+    const int new_i = move.Label(v, y[v]);
+    *delta += d[new_i] - d[x[i]];
+    for (int p = adjacency.offsets[i]; p < adjacency.offsets[i + 1]; ++p) {
+      const int e = adjacency.edges[p];
+      const int s = problem.edge_first(e);
+      const int t = problem.edge_second(e);
+      const int other = s == i ? t : s;
+      const int w = var_of[other];
+      const bool other_moves = w >= 0 && y[w] != move.current[w];
+      if (other_moves && s != i) continue;  // counted from the first node
+      const int new_other = other_moves ? move.Label(w, y[w]) : x[other];
+      const double after = s == i ? problem.PairwiseLocal(e, new_i, new_other)
+                                  : problem.PairwiseLocal(e, new_other, new_i);
+      *delta += after - problem.PairwiseLocal(e, x[s], x[t]);
+    }
+  }
+  return any;
+}
+
 }  // namespace mrf_internal
 
 MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<int>* labels) {
@@ -80,9 +142,8 @@ MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<in
   const MrfLabelIndex label_index = BuildMrfLabelIndex(problem);
 
   double energy = summary.initial_energy;
-  std::vector<int> var_of(n, -1);   // move variable of node i, -1 when fixed
-  std::vector<int> alpha_k(n, -1);  // local index of alpha at the move variables
-  std::vector<int> vars;
+  std::vector<int> var_of(n, -1);  // move variable of node i, -1 when fixed
+  mrf_internal::BinaryMove move;   // y = 0 keeps the current label, y = 1 switches to alpha
   std::vector<char> y;
   mrf_internal::BinaryMoveCut cut;
   int unchanged_streak = 0;  // consecutive expansions that changed nothing
@@ -92,70 +153,25 @@ MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<in
     const double sweep_start = energy;
     bool converged = false;
     for (int alpha = 0; alpha < num_labels; ++alpha) {
-      for (int i : vars) var_of[i] = -1;
-      vars.clear();
+      for (int i : move.vars) var_of[i] = -1;
+      move.Clear();
       for (int p = label_index.offsets[alpha]; p < label_index.offsets[alpha + 1]; ++p) {
         const int i = label_index.nodes[p];
-        alpha_k[i] = label_index.local[p];
-        if (alpha_k[i] != x[i]) {
-          var_of[i] = static_cast<int>(vars.size());
-          vars.push_back(i);
+        const int alpha_k = label_index.local[p];
+        if (alpha_k != x[i]) {
+          var_of[i] = move.size();
+          move.Add(i, x[i], alpha_k, false);
         }
       }
       bool accepted = false;
-      if (!vars.empty()) {
-        cut.Reset(static_cast<int>(vars.size()));
-        for (int v = 0; v < static_cast<int>(vars.size()); ++v) {
-          const int i = vars[v];
-          const double* d = problem.candidate_unaries(i);
-          cut.AddUnary(v, d[x[i]], d[alpha_k[i]]);
-          for (int p = adjacency.offsets[i]; p < adjacency.offsets[i + 1]; ++p) {
-            const int e = adjacency.edges[p];
-            const int s = problem.edge_first(e);
-            const int t = problem.edge_second(e);
-            const int other = s == i ? t : s;
-            if (var_of[other] >= 0) {
-              if (s != i) continue;  // a pair of variables is added once, from its first node
-              summary.truncated_terms +=
-                  cut.AddPair(v, var_of[t], problem.PairwiseLocal(e, x[s], x[t]),
-                              problem.PairwiseLocal(e, x[s], alpha_k[t]),
-                              problem.PairwiseLocal(e, alpha_k[s], x[t]),
-                              problem.PairwiseLocal(e, alpha_k[s], alpha_k[t]), false, false);
-            } else if (s == i) {
-              cut.AddUnary(v, problem.PairwiseLocal(e, x[s], x[t]),
-                           problem.PairwiseLocal(e, alpha_k[s], x[t]));
-            } else {
-              cut.AddUnary(v, problem.PairwiseLocal(e, x[s], x[t]),
-                           problem.PairwiseLocal(e, x[s], alpha_k[t]));
-            }
-          }
-        }
+      if (move.size() > 0) {
+        summary.truncated_terms +=
+            mrf_internal::BuildMoveCut(problem, adjacency, move, var_of, x, &cut);
         cut.Solve(&y);
-        // True energy change of the move (the cut minimised a majoriser of it).
         double delta = 0.0;
-        bool any = false;
-        for (int v = 0; v < static_cast<int>(vars.size()); ++v) {
-          if (!y[v]) continue;
-          any = true;
-          const int i = vars[v];
-          const double* d = problem.candidate_unaries(i);
-          delta += d[alpha_k[i]] - d[x[i]];
-          for (int p = adjacency.offsets[i]; p < adjacency.offsets[i + 1]; ++p) {
-            const int e = adjacency.edges[p];
-            const int s = problem.edge_first(e);
-            const int t = problem.edge_second(e);
-            const int other = s == i ? t : s;
-            const bool other_moves = var_of[other] >= 0 && y[var_of[other]];
-            if (other_moves && s != i) continue;  // counted from the first node
-            const int new_s = (s == i || other_moves) ? alpha_k[s] : x[s];
-            const int new_t = (t == i || other_moves) ? alpha_k[t] : x[t];
-            delta += problem.PairwiseLocal(e, new_s, new_t) - problem.PairwiseLocal(e, x[s], x[t]);
-          }
-        }
-        if (any && delta < 0.0) {
-          for (int v = 0; v < static_cast<int>(vars.size()); ++v) {
-            if (y[v]) x[vars[v]] = alpha_k[vars[v]];
-          }
+        if (mrf_internal::MoveEnergyChange(problem, adjacency, move, var_of, x, y, &delta) &&
+            delta < 0.0) {
+          for (int v = 0; v < move.size(); ++v) x[move.vars[v]] = move.Label(v, y[v]);
           energy += delta;
           accepted = true;
           ++summary.accepted_moves;

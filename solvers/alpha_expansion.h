@@ -46,6 +46,41 @@ class BinaryMoveCut {
   std::unique_ptr<Impl> impl_;
 };
 
+// A two-label move shared by expansion and swap: move variable v is node vars[v], which takes
+// local label label0[v] for y_v = 0 and label1[v] for y_v = 1 and is now at y_v = current[v]
+// (its current local label x[vars[v]] is the one of that state). Other nodes keep x.
+struct BinaryMove {
+  std::vector<int> vars, label0, label1;
+  std::vector<char> current;
+
+  void Clear() {
+    vars.clear();
+    label0.clear();
+    label1.clear();
+    current.clear();
+  }
+  void Add(int node, int l0, int l1, bool now) {
+    vars.push_back(node);
+    label0.push_back(l0);
+    label1.push_back(l1);
+    current.push_back(now);
+  }
+  int size() const { return static_cast<int>(vars.size()); }
+  int Label(int v, bool y) const { return y ? label1[v] : label0[v]; }
+};
+
+// Fills `cut` with the move's energy (unaries, pair terms between move variables, pair terms to
+// fixed neighbours as unaries); var_of[i] is node i's move variable or -1. Returns the number of
+// pair terms that had to be majorised.
+long BuildMoveCut(const MrfProblem& problem, const MrfAdjacency& adjacency, const BinaryMove& move,
+                  const std::vector<int>& var_of, const std::vector<int>& x, BinaryMoveCut* cut);
+
+// True energy change of moving to y (the cut minimised a majoriser of it); false when no
+// variable changes state.
+bool MoveEnergyChange(const MrfProblem& problem, const MrfAdjacency& adjacency,
+                      const BinaryMove& move, const std::vector<int>& var_of,
+                      const std::vector<int>& x, const std::vector<char>& y, double* delta);
+
 }  // namespace mrf_internal
 
 }  // namespace artex
