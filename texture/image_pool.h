@@ -89,17 +89,34 @@ struct PoolEntry {
   // at quality W (see ImagePoolOptions::surface_aware_sampling).
   void SurfaceTolerance(double quality, double* tolerance_offset, double* tolerance_slope) const;
   std::size_t MemoryBytes() const;
+
+  // The crop's bilinear cell (taps x0..x1, y0..y1 and fractions) around the full-image position
+  // (u, v); false outside the crop. Shared by both samplers.
+  struct BilinearCell {
+    int x0, y0, x1, y1;
+    float fx, fy;
+  };
+  bool Cell(double u, double v, BilinearCell* cell) const;
 };
 
-inline bool PoolEntry::Sample(const Eigen::Vector2d& pixel, Eigen::Vector3f* color) const {
-  const double x = pixel.x() - offset.x();
-  const double y = pixel.y() - offset.y();
+inline bool PoolEntry::Cell(double u, double v, BilinearCell* cell) const {
+  const double x = u - offset.x();
+  const double y = v - offset.y();
   if (!(x >= 0.0 && y >= 0.0 && x <= image.cols - 1 && y <= image.rows - 1)) return false;
-  const int x0 = std::min(static_cast<int>(x), image.cols - 2 < 0 ? 0 : image.cols - 2);
-  const int y0 = std::min(static_cast<int>(y), image.rows - 2 < 0 ? 0 : image.rows - 2);
-  const int x1 = std::min(x0 + 1, image.cols - 1);
-  const int y1 = std::min(y0 + 1, image.rows - 1);
-  const float fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
+  cell->x0 = std::min(static_cast<int>(x), image.cols - 2 < 0 ? 0 : image.cols - 2);
+  cell->y0 = std::min(static_cast<int>(y), image.rows - 2 < 0 ? 0 : image.rows - 2);
+  cell->x1 = std::min(cell->x0 + 1, image.cols - 1);
+  cell->y1 = std::min(cell->y0 + 1, image.rows - 1);
+  cell->fx = static_cast<float>(x - cell->x0);
+  cell->fy = static_cast<float>(y - cell->y0);
+  return true;
+}
+
+inline bool PoolEntry::Sample(const Eigen::Vector2d& pixel, Eigen::Vector3f* color) const {
+  BilinearCell cell;
+  if (!Cell(pixel.x(), pixel.y(), &cell)) return false;
+  const int x0 = cell.x0, y0 = cell.y0, x1 = cell.x1, y1 = cell.y1;
+  const float fx = cell.fx, fy = cell.fy;
   const auto* r0 = image.ptr<cv::Vec3b>(y0);
   const auto* r1 = image.ptr<cv::Vec3b>(y1);
   for (int c = 0; c < 3; ++c) {
@@ -113,14 +130,10 @@ inline bool PoolEntry::Sample(const Eigen::Vector2d& pixel, Eigen::Vector3f* col
 inline bool PoolEntry::SampleSurfaceAt(double u, double v, double z, double tolerance,
                                        bool fallback, Eigen::Vector3f* color) const {
   if (surface.depth.empty()) return Sample(Eigen::Vector2d(u, v), color);
-  const double x = u - offset.x();
-  const double y = v - offset.y();
-  if (!(x >= 0.0 && y >= 0.0 && x <= image.cols - 1 && y <= image.rows - 1)) return false;
-  const int x0 = std::min(static_cast<int>(x), image.cols - 2 < 0 ? 0 : image.cols - 2);
-  const int y0 = std::min(static_cast<int>(y), image.rows - 2 < 0 ? 0 : image.rows - 2);
-  const int x1 = std::min(x0 + 1, image.cols - 1);
-  const int y1 = std::min(y0 + 1, image.rows - 1);
-  const float fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
+  BilinearCell cell;
+  if (!Cell(u, v, &cell)) return false;
+  const int x0 = cell.x0, y0 = cell.y0, x1 = cell.x1, y1 = cell.y1;
+  const float fx = cell.fx, fy = cell.fy;
   const int xs[4] = {x0, x1, x0, x1}, ys[4] = {y0, y0, y1, y1};
   const float weights[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy};
   float total = 0.0f;
