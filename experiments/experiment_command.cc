@@ -19,6 +19,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "experiments/commands.h"
+#include "experiments/pose_csv.h"
 #include "experiments/runner.h"
 #include "models/error.h"
 #include "models/normals.h"
@@ -208,26 +209,7 @@ std::string ReadAll(const std::string& path) {
 // Rows of RUN/poses.csv by frame index.
 std::map<int, Pose> ReadPoses(const std::string& path, int num_joints) {
   std::map<int, Pose> poses;
-  std::stringstream in(ReadAll(path));
-  std::string line;
-  int number = 0;
-  while (std::getline(in, line)) {
-    if (++number == 1 || line.empty()) continue;
-    std::stringstream ss(line);
-    std::string cell;
-    std::vector<double> values;
-    while (std::getline(ss, cell, ',')) {
-      try {
-        values.push_back(std::stod(cell));
-      } catch (const std::exception&) {
-        throw Error(path + ":" + std::to_string(number) + ": expected a number, found '" + cell + "'");
-      }
-    }
-    if (values.empty()) continue;
-    const int frame = static_cast<int>(values[0]);
-    const Eigen::VectorXd v = Eigen::Map<Eigen::VectorXd>(values.data() + 1, values.size() - 1);
-    poses[frame] = Pose::FromVector(v, num_joints, path + ":" + std::to_string(number));
-  }
+  for (auto& [frame, pose] : ReadPoseCsv(path, num_joints)) poses[frame] = pose;
   return poses;
 }
 

@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "experiments/pose_csv.h"
 #include "models/error.h"
 #include "models/mesh_export.h"
 #include "models/normals.h"
@@ -261,19 +262,7 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
         result.lost_fraction = std::numeric_limits<double>::quiet_NaN();
   }
 
-  // poses.csv: frame index and the pose vector (models/pose.h ToVector layout).
-  std::ostringstream pose_csv;
-  pose_csv << "frame";
-  pose_csv << ",scale,tx,ty,tz,rx,ry,rz";
-  for (const auto& joint : tmpl.joints) pose_csv << "," << joint.name << "_x," << joint.name << "_y," << joint.name << "_z";
-  pose_csv << "\n";
-  for (int k = 0; k < fitted; ++k) {
-    pose_csv << pose_frames[k];
-    const Eigen::VectorXd v = poses[k].ToVector();
-    for (int p = 0; p < v.size(); ++p) pose_csv << "," << std::setprecision(9) << v[p];
-    pose_csv << "\n";
-  }
-  WriteFileAtomically(out_dir + "/poses.csv", pose_csv.str());
+  WritePoseCsv(out_dir + "/poses.csv", tmpl, pose_frames, poses);
 
   // frames.csv: per-frame metrics and per-stage timings.
   std::ostringstream frames_csv;

@@ -14,6 +14,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "experiments/commands.h"
+#include "experiments/pose_csv.h"
 #include "models/error.h"
 #include "models/mesh_export.h"
 #include "models/skinning.h"
@@ -28,30 +29,7 @@ namespace fs = std::filesystem;
 
 // Last pose of RUN/poses.csv.
 Pose LastPose(const std::string& path, int num_joints) {
-  std::ifstream in(path);
-  if (!in) throw Error(path + ": cannot open the pose file");
-  std::string line, last;
-  int number = 0, last_number = 0;
-  while (std::getline(in, line)) {
-    ++number;
-    if (number == 1 || line.empty()) continue;  // header
-    last = line;
-    last_number = number;
-  }
-  if (last.empty()) throw Error(path + ": no pose rows");
-  std::stringstream ss(last);
-  std::string cell;
-  std::vector<double> values;
-  std::getline(ss, cell, ',');  // frame index
-  while (std::getline(ss, cell, ',')) {
-    try {
-      values.push_back(std::stod(cell));
-    } catch (const std::exception&) {
-      throw Error(path + ":" + std::to_string(last_number) + ": expected a number, found '" + cell + "'");
-    }
-  }
-  return Pose::FromVector(Eigen::Map<Eigen::VectorXd>(values.data(), values.size()), num_joints,
-                          path + ":" + std::to_string(last_number));
+  return ReadPoseCsv(path, num_joints).back().second;
 }
 
 PinholeCamera OrbitCamera(const Eigen::Vector3d& center, double radius, double angle, int width,

@@ -14,6 +14,7 @@
 #include <CLI/CLI.hpp>
 
 #include "experiments/commands.h"
+#include "experiments/pose_csv.h"
 #include "models/error.h"
 #include "models/makehuman_import.h"
 #include "models/mesh_export.h"
@@ -76,72 +77,6 @@ void RequireOutput(const std::string& output, const std::vector<std::string>& ex
     for (const std::string& e : extensions) valid += (valid.empty() ? "" : ", ") + e;
     throw Error(output + ": unsupported output format '" + ext + "' (expected " + valid + ")");
   }
-}
-
-// Splits on commas and whitespace.
-std::vector<std::string> SplitFields(const std::string& text) {
-  std::vector<std::string> fields;
-  std::string current;
-  for (char c : text) {
-    if (c == ',' || std::isspace(static_cast<unsigned char>(c))) {
-      if (!current.empty()) fields.push_back(current);
-      current.clear();
-    } else {
-      current.push_back(c);
-    }
-  }
-  if (!current.empty()) fields.push_back(current);
-  return fields;
-}
-
-bool ParseNumber(const std::string& text, double* value) {
-  char* end = nullptr;
-  *value = std::strtod(text.c_str(), &end);
-  return end != text.c_str() && *end == '\0';
-}
-
-Eigen::VectorXd ParseNumbers(const std::string& text, const std::string& what) {
-  const std::vector<std::string> fields = SplitFields(text);
-  Eigen::VectorXd v(static_cast<Eigen::Index>(fields.size()));
-  for (size_t i = 0; i < fields.size(); ++i) {
-    if (!ParseNumber(fields[i], &v[static_cast<Eigen::Index>(i)])) {
-      throw Error(what + ": field " + std::to_string(i + 1) + ": expected a number, found '" +
-                  fields[i] + "'");
-    }
-  }
-  return v;
-}
-
-// Pose rows of a CSV file: bare pose vectors, or (with a header starting "frame,") a frame
-// column followed by the pose (groundtruth/poses.csv of artex sequences).
-std::vector<std::pair<int, Pose>> ReadPoseCsv(const std::string& path, int num_joints) {
-  std::ifstream in(path);
-  if (!in) throw Error(path + ": cannot open (no such file or not readable)");
-  std::vector<std::pair<int, Pose>> rows;
-  bool frame_column = false, first = true;
-  std::string line;
-  for (int line_number = 1; std::getline(in, line); ++line_number) {
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    const std::vector<std::string> fields = SplitFields(line);
-    if (fields.empty() || fields[0][0] == '#') continue;
-    double unused;
-    if (first && !ParseNumber(fields[0], &unused)) {  // header
-      frame_column = fields[0] == "frame";
-      first = false;
-      continue;
-    }
-    first = false;
-    const std::string where = path + ":" + std::to_string(line_number);
-    Eigen::VectorXd v = ParseNumbers(line, where);
-    int frame = static_cast<int>(rows.size());
-    if (frame_column) {
-      frame = static_cast<int>(v[0]);
-      v = v.tail(v.size() - 1).eval();
-    }
-    rows.emplace_back(frame, Pose::FromVector(v, num_joints, where));
-  }
-  if (rows.empty()) throw Error(path + ": no pose rows");
-  return rows;
 }
 
 // Rotation axis of joint frames after posing: R0 R_root ... R_j.
@@ -241,7 +176,7 @@ void RunPose(const PoseCli& cli) {
   }
   Pose pose = Pose::Identity(num_joints);
   if (!cli.pose.empty()) {
-    pose = Pose::FromVector(ParseNumbers(cli.pose, "--pose"), num_joints, "--pose");
+    pose = Pose::FromVector(ParseNumberList(cli.pose, "--pose"), num_joints, "--pose");
   } else if (!cli.pose_file.empty()) {
     const auto rows = ReadPoseCsv(cli.pose_file, num_joints);
     auto it = std::find_if(rows.begin(), rows.end(),
@@ -260,7 +195,7 @@ void RunPose(const PoseCli& cli) {
       for (const Joint& joint : tmpl.joints) names += (names.empty() ? "" : ", ") + joint.name;
       throw Error("--joint " + spec + ": expected NAME=rx,ry,rz with NAME one of " + names);
     }
-    const Eigen::VectorXd r = ParseNumbers(spec.substr(eq + 1), "--joint " + spec);
+    const Eigen::VectorXd r = ParseNumberList(spec.substr(eq + 1), "--joint " + spec);
     if (r.size() != 3 || !r.allFinite()) {
       throw Error("--joint " + spec + ": expected three finite angles rx,ry,rz (degrees)");
     }
