@@ -78,10 +78,12 @@ void WriteJson(const std::string& path, const nlohmann::json& j) {
   WriteFileAtomically(path, j.dump(2) + "\n");
 }
 
-void WritePng(const std::string& path, const cv::Mat& image) {
+// Writes `image` as a PNG and returns the encoded bytes.
+std::vector<unsigned char> WritePng(const std::string& path, const cv::Mat& image) {
   std::vector<unsigned char> bytes;
   if (!cv::imencode(".png", image, bytes)) throw Error(path + ": PNG encoding failed");
   WriteFileAtomically(path, std::string(bytes.begin(), bytes.end()));
+  return bytes;
 }
 
 // Bytes to send the texels that changed in the last frame: their bounding box of the atlas
@@ -152,7 +154,10 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   double fit_seconds = 0.0, texture_seconds = 0.0, iterations = 0.0;
   int lost = 0, evaluated = 0;
   double error_sum = 0.0, joint_sum = 0.0;
-  fs::create_directories(out_dir + "/meshes", ec);
+  if (options.export_meshes) {
+    fs::create_directories(out_dir + "/meshes", ec);
+    if (ec) throw Error(out_dir + "/meshes: cannot create the folder: " + ec.message());
+  }
   for (int i = begin; i < end; ++i) {
     FrameRecord record;
     record.frame = i;
@@ -338,20 +343,15 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
              {"texture_ms_per_frame", result.texture_ms_per_frame},
              {"stream_kbit_per_s", result.stream_kbit_per_s}});
   if (texturer) {
-    const cv::Mat atlas = texturer->Atlas();
-    WritePng(out_dir + "/texture.png", atlas);
+    GlbTexture texture;
+    texture.png = WritePng(out_dir + "/texture.png", texturer->Atlas());
     WritePng(out_dir + "/labels.png", texturer->LabelMap());
     if (options.export_glb) {
-      GlbTexture texture;
-      std::vector<unsigned char> png;
-      cv::imencode(".png", atlas, png);
-      texture.png = png;
       WriteAnimatedGlb(out_dir + "/tracked.glb", tmpl, poses, calibration.frame_rate, &texture);
     }
   } else if (options.export_glb) {
     WriteAnimatedGlb(out_dir + "/tracked.glb", tmpl, poses, calibration.frame_rate);
   }
-  if (!options.export_meshes) fs::remove(out_dir + "/meshes", ec);
   return result;
 }
 
