@@ -13,6 +13,7 @@
 
 #include "models/error.h"
 #include "render/rasterizer.h"
+#include "sensors/subject_texture.h"
 
 namespace artex {
 namespace {
@@ -252,18 +253,10 @@ void RenderTextured(const Template& tmpl, const Eigen::MatrixX3d& posed_vertices
       const Eigen::Vector2d uv = (1.0 - b.x() - b.y()) * tmpl.uvs.row(tmpl.uv_triangles(f, 0)) +
                                  b.x() * tmpl.uvs.row(tmpl.uv_triangles(f, 1)) +
                                  b.y() * tmpl.uvs.row(tmpl.uv_triangles(f, 2));
-      const double x = std::clamp(uv.x() * atlas.cols - 0.5, 0.0, atlas.cols - 1.0);
-      const double y = std::clamp(uv.y() * atlas.rows - 0.5, 0.0, atlas.rows - 1.0);
-      const int x0 = std::min(static_cast<int>(x), atlas.cols - 2);
-      const int y0 = std::min(static_cast<int>(y), atlas.rows - 2);
-      const double fx = x - x0, fy = y - y0;
-      cv::Vec3d c = (1 - fy) * ((1 - fx) * cv::Vec3d(atlas.at<cv::Vec3b>(y0, x0)) +
-                                fx * cv::Vec3d(atlas.at<cv::Vec3b>(y0, x0 + 1))) +
-                    fy * ((1 - fx) * cv::Vec3d(atlas.at<cv::Vec3b>(y0 + 1, x0)) +
-                          fx * cv::Vec3d(atlas.at<cv::Vec3b>(y0 + 1, x0 + 1)));
+      const Eigen::Vector3d rgb = 255.0 * SampleTextureBilinear(atlas, uv);
       image->at<cv::Vec3b>(v, u) =
-          cv::Vec3b(cv::saturate_cast<uchar>(c[0]), cv::saturate_cast<uchar>(c[1]),
-                    cv::saturate_cast<uchar>(c[2]));
+          cv::Vec3b(cv::saturate_cast<uchar>(rgb[2]), cv::saturate_cast<uchar>(rgb[1]),
+                    cv::saturate_cast<uchar>(rgb[0]));
       mask->at<uint8_t>(v, u) = 255;
     }
   }
