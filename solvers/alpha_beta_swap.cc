@@ -42,20 +42,9 @@ MrfSummary AlphaBetaSwapSolver::Solve(const MrfProblem& problem, std::vector<int
           var_of[i] = move.size();
           move.Add(i, label_index.local[p], kb, label == beta);
         }
-        bool accepted = false;
-        if (move.size() > 0) {
-          summary.truncated_terms +=
-              mrf_internal::BuildMoveCut(problem, adjacency, move, var_of, x, &cut);
-          cut.Solve(&y);
-          double delta = 0.0;
-          if (mrf_internal::MoveEnergyChange(problem, adjacency, move, var_of, x, y, &delta) &&
-              delta < 0.0) {
-            for (int v = 0; v < move.size(); ++v) x[move.vars[v]] = move.Label(v, y[v]);
-            energy += delta;
-            accepted = true;
-            ++summary.accepted_moves;
-          }
-        }
+        const bool accepted =
+            move.size() > 0 && mrf_internal::ApplyBinaryMove(problem, adjacency, move, var_of, &cut,
+                                                             &y, &x, &energy, &summary);
         unchanged_streak = accepted ? 0 : unchanged_streak + 1;
         if (unchanged_streak >= num_pairs) converged = true;
       }

@@ -68,6 +68,8 @@ void BinaryMoveCut::Solve(std::vector<char>* y) {
   for (int v = 0; v < n; ++v) (*y)[v] = g.what_segment(v, Graph::SOURCE) == Graph::SINK;
 }
 
+namespace {
+
 long BuildMoveCut(const MrfProblem& problem, const MrfAdjacency& adjacency, const BinaryMove& move,
                   const std::vector<int>& var_of, const std::vector<int>& x, BinaryMoveCut* cut) {
   long truncated = 0;
@@ -130,6 +132,23 @@ bool MoveEnergyChange(const MrfProblem& problem, const MrfAdjacency& adjacency,
   return any;
 }
 
+}  // namespace
+
+bool ApplyBinaryMove(const MrfProblem& problem, const MrfAdjacency& adjacency,
+                     const BinaryMove& move, const std::vector<int>& var_of, BinaryMoveCut* cut,
+                     std::vector<char>* y, std::vector<int>* x, double* energy,
+                     MrfSummary* summary) {
+  summary->truncated_terms += BuildMoveCut(problem, adjacency, move, var_of, *x, cut);
+  cut->Solve(y);
+  double delta = 0.0;
+  if (!MoveEnergyChange(problem, adjacency, move, var_of, *x, *y, &delta) || !(delta < 0.0))
+    return false;
+  for (int v = 0; v < move.size(); ++v) (*x)[move.vars[v]] = move.Label(v, (*y)[v]);
+  *energy += delta;
+  ++summary->accepted_moves;
+  return true;
+}
+
 }  // namespace mrf_internal
 
 MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<int>* labels) {
@@ -163,20 +182,9 @@ MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<in
           move.Add(i, x[i], alpha_k, false);
         }
       }
-      bool accepted = false;
-      if (move.size() > 0) {
-        summary.truncated_terms +=
-            mrf_internal::BuildMoveCut(problem, adjacency, move, var_of, x, &cut);
-        cut.Solve(&y);
-        double delta = 0.0;
-        if (mrf_internal::MoveEnergyChange(problem, adjacency, move, var_of, x, y, &delta) &&
-            delta < 0.0) {
-          for (int v = 0; v < move.size(); ++v) x[move.vars[v]] = move.Label(v, y[v]);
-          energy += delta;
-          accepted = true;
-          ++summary.accepted_moves;
-        }
-      }
+      const bool accepted =
+          move.size() > 0 && mrf_internal::ApplyBinaryMove(problem, adjacency, move, var_of, &cut,
+                                                           &y, &x, &energy, &summary);
       unchanged_streak = accepted ? 0 : unchanged_streak + 1;
       if (unchanged_streak >= num_labels) {
         converged = true;  // every label's expansion in a row left the labelling unchanged

@@ -69,17 +69,14 @@ struct BinaryMove {
   int Label(int v, bool y) const { return y ? label1[v] : label0[v]; }
 };
 
-// Fills `cut` with the move's energy (unaries, pair terms between move variables, pair terms to
-// fixed neighbours as unaries); var_of[i] is node i's move variable or -1. Returns the number of
-// pair terms that had to be majorised.
-long BuildMoveCut(const MrfProblem& problem, const MrfAdjacency& adjacency, const BinaryMove& move,
-                  const std::vector<int>& var_of, const std::vector<int>& x, BinaryMoveCut* cut);
-
-// True energy change of moving to y (the cut minimised a majoriser of it); false when no
-// variable changes state.
-bool MoveEnergyChange(const MrfProblem& problem, const MrfAdjacency& adjacency,
-                      const BinaryMove& move, const std::vector<int>& var_of,
-                      const std::vector<int>& x, const std::vector<char>& y, double* delta);
+// Builds the move's cut (var_of[i]: node i's move variable or -1), solves it, and applies the
+// result to x when its true energy change is negative (the cut minimised a majoriser of it):
+// then adds the change to *energy and counts the move in summary->accepted_moves. Majorised pair
+// terms are counted in summary->truncated_terms. Returns whether the move was applied.
+bool ApplyBinaryMove(const MrfProblem& problem, const MrfAdjacency& adjacency,
+                     const BinaryMove& move, const std::vector<int>& var_of, BinaryMoveCut* cut,
+                     std::vector<char>* y, std::vector<int>* x, double* energy,
+                     MrfSummary* summary);
 
 }  // namespace mrf_internal
 
