@@ -8,21 +8,13 @@
 #include <gtest/gtest.h>
 
 #include "models/error.h"
+#include "tests/error_of.h"
 
 namespace artex {
 namespace {
 
 enum class Color { kRed, kGreen };
 const std::map<std::string, Color> kColors = {{"red", Color::kRed}, {"green", Color::kGreen}};
-
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
 
 TEST(ConfigTest, ReadsTypedValuesAndLeavesAbsentKeysUntouched) {
   Config c = Config::FromString("fitting:\n  eps: 0.5\n  iterations: 12\n  dense: true\n"

@@ -25,6 +25,7 @@
 #include "models/template_generator.h"
 #include "models/template_io.h"
 #include "sensors/virtual_kinect.h"
+#include "tests/error_of.h"
 
 namespace artex {
 namespace {
@@ -57,15 +58,6 @@ std::vector<std::string> Fields(const std::string& line) {
   std::string f;
   while (std::getline(s, f, ',')) fields.push_back(f);
   return fields;
-}
-
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
 }
 
 // Per-process fixture data: a 6-frame walk from the virtual Kinect (default noise, half-size

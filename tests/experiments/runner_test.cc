@@ -18,19 +18,11 @@
 #include <gtest/gtest.h>
 
 #include "models/error.h"
+#include "tests/error_of.h"
 
 namespace artex {
 namespace {
 namespace fs = std::filesystem;
-
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
 
 fs::path FreshDir(const std::string& name) {
   const fs::path dir = fs::temp_directory_path() / ("artex_runner_test_" + name + "_" + std::to_string(getpid()));
