@@ -165,13 +165,28 @@ MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<in
   mrf_internal::BinaryMove move;   // y = 0 keeps the current label, y = 1 switches to alpha
   std::vector<char> y;
   mrf_internal::BinaryMoveCut cut;
-  int unchanged_streak = 0;  // consecutive expansions that changed nothing
+  // A label is dirty while its expansion might still lower the energy. Its move depends only on
+  // the labels of its variables (nodes having it as a candidate) and of their neighbours, so it
+  // is clean after an expansion that changed nothing, or after an accepted exact move (no
+  // majorised pair term: the labelling is then optimal over the move space, and the next
+  // expansion's move space is a subset of it), until a node in that neighbourhood changes.
+  std::vector<char> dirty(num_labels, 1);
+  const auto mark_dirty_around = [&](int i) {
+    for (int k = 0; k < problem.num_candidates(i); ++k) dirty[problem.candidate_labels(i)[k]] = 1;
+    for (int p = adjacency.offsets[i]; p < adjacency.offsets[i + 1]; ++p) {
+      const int e = adjacency.edges[p];
+      const int j = problem.edge_first(e) == i ? problem.edge_second(e) : problem.edge_first(e);
+      for (int k = 0; k < problem.num_candidates(j); ++k)
+        dirty[problem.candidate_labels(j)[k]] = 1;
+    }
+  };
   summary.termination = "max_iterations";
 
   for (int iteration = 0; iteration < options_.max_iterations; ++iteration) {
     const double sweep_start = energy;
-    bool converged = false;
     for (int alpha = 0; alpha < num_labels; ++alpha) {
+      if (!dirty[alpha]) continue;
+      dirty[alpha] = 0;
       for (int i : move.vars) var_of[i] = -1;
       move.Clear();
       for (int p = label_index.offsets[alpha]; p < label_index.offsets[alpha + 1]; ++p) {
@@ -182,17 +197,18 @@ MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<in
           move.Add(i, x[i], alpha_k, false);
         }
       }
-      const bool accepted =
-          move.size() > 0 && mrf_internal::ApplyBinaryMove(problem, adjacency, move, var_of, &cut,
-                                                           &y, &x, &energy, &summary);
-      unchanged_streak = accepted ? 0 : unchanged_streak + 1;
-      if (unchanged_streak >= num_labels) {
-        converged = true;  // every label's expansion in a row left the labelling unchanged
-        break;
-      }
+      if (move.size() == 0) continue;
+      const long truncated_before = summary.truncated_terms;
+      if (!mrf_internal::ApplyBinaryMove(problem, adjacency, move, var_of, &cut, &y, &x, &energy,
+                                         &summary))
+        continue;
+      for (int v = 0; v < move.size(); ++v)
+        if (y[v] != move.current[v]) mark_dirty_around(move.vars[v]);
+      dirty[alpha] = summary.truncated_terms > truncated_before;
     }
     energy = problem.EnergyLocal(x);  // drop the rounding of the accumulated deltas
     if (!run.EndIteration(energy, -std::numeric_limits<double>::infinity())) break;
+    const bool converged = std::find(dirty.begin(), dirty.end(), 1) == dirty.end();
     if (converged || sweep_start - energy <= options_.energy_tolerance * std::abs(sweep_start)) {
       summary.termination = "converged";
       break;

@@ -51,45 +51,74 @@ MrfProblem MrfProblem::FromDenseUnaries(int num_nodes, int num_labels,
 }
 
 int MrfProblem::AddNode(const std::vector<int>& labels, const std::vector<double>& costs) {
-  const int node = num_nodes();
-  const std::string where = "MrfProblem::AddNode (node " + std::to_string(node) + "): ";
   if (labels.size() != costs.size()) {
-    throw Error(where + "costs: expected one per label (" + std::to_string(labels.size()) +
+    throw Error("MrfProblem::AddNode (node " + std::to_string(num_nodes()) +
+                "): costs: expected one per label (" + std::to_string(labels.size()) +
                 "), found " + std::to_string(costs.size()));
   }
-  std::vector<std::pair<int, double>> entries;
-  entries.reserve(labels.size());
-  for (std::size_t k = 0; k < labels.size(); ++k) {
+  return AddNode(labels.data(), costs.data(), static_cast<int>(labels.size()));
+}
+
+int MrfProblem::AddNode(const int* labels, const double* costs, int count) {
+  const int node = num_nodes();
+  // Messages are built only on failure (AddNode runs once per node of large problems).
+  const auto fail = [node](const std::string& what) {
+    throw Error("MrfProblem::AddNode (node " + std::to_string(node) + "): " + what);
+  };
+  const std::size_t begin = labels_.size();
+  bool ascending = true;
+  for (int k = 0; k < count; ++k) {
     if (labels[k] < 0 || labels[k] >= num_labels_) {
-      throw Error(where + "labels[" + std::to_string(k) + "]: expected in [0, " +
-                  std::to_string(num_labels_) + "), found " + std::to_string(labels[k]));
+      fail("labels[" + std::to_string(k) + "]: expected in [0, " + std::to_string(num_labels_) +
+           "), found " + std::to_string(labels[k]));
     }
     if (std::isnan(costs[k]) || costs[k] == -kInf) {
-      throw Error(where + "costs[" + std::to_string(k) + "]: expected finite or +inf, found " +
-                  std::to_string(costs[k]));
+      fail("costs[" + std::to_string(k) + "]: expected finite or +inf, found " +
+           std::to_string(costs[k]));
     }
-    if (costs[k] < kInf) entries.emplace_back(labels[k], costs[k]);
+    if (k > 0 && labels[k] <= labels[k - 1]) ascending = false;
   }
-  std::vector<int> sorted_labels(labels);
-  std::sort(sorted_labels.begin(), sorted_labels.end());
-  const auto dup = std::adjacent_find(sorted_labels.begin(), sorted_labels.end());
-  if (dup != sorted_labels.end()) {
-    throw Error(where + "labels: expected distinct labels, found " + std::to_string(*dup) +
-                " twice");
+  if (!ascending) {
+    std::vector<int> sorted_labels(labels, labels + count);
+    std::sort(sorted_labels.begin(), sorted_labels.end());
+    const auto dup = std::adjacent_find(sorted_labels.begin(), sorted_labels.end());
+    if (dup != sorted_labels.end())
+      fail("labels: expected distinct labels, found " + std::to_string(*dup) + " twice");
+    std::vector<std::pair<int, double>> entries;
+    for (int k = 0; k < count; ++k)
+      if (costs[k] < kInf) entries.emplace_back(labels[k], costs[k]);
+    std::sort(entries.begin(), entries.end());
+    for (const auto& [label, cost] : entries) {
+      labels_.push_back(label);
+      unaries_.push_back(cost);
+    }
+  } else {
+    for (int k = 0; k < count; ++k) {
+      if (!(costs[k] < kInf)) continue;
+      labels_.push_back(labels[k]);
+      unaries_.push_back(costs[k]);
+    }
   }
-  if (entries.empty()) {
-    throw Error(where +
-                "costs: expected at least one finite unary (a node must have a "
-                "feasible label), found none");
-  }
-  std::sort(entries.begin(), entries.end());
-  for (const auto& [label, cost] : entries) {
-    labels_.push_back(label);
-    unaries_.push_back(cost);
+  const int kept = static_cast<int>(labels_.size() - begin);
+  if (kept == 0) {
+    fail(
+        "costs: expected at least one finite unary (a node must have a feasible label), found "
+        "none");
   }
   node_offsets_.push_back(static_cast<int>(labels_.size()));
-  max_candidates_ = std::max(max_candidates_, static_cast<int>(entries.size()));
+  max_candidates_ = std::max(max_candidates_, kept);
   return node;
+}
+
+void MrfProblem::Reserve(int nodes, std::int64_t candidates, int edges,
+                         std::int64_t table_entries) {
+  node_offsets_.reserve(node_offsets_.size() + nodes);
+  labels_.reserve(labels_.size() + candidates);
+  unaries_.reserve(unaries_.size() + candidates);
+  edge_nodes_.reserve(edge_nodes_.size() + 2 * static_cast<std::size_t>(edges));
+  edge_weights_.reserve(edge_weights_.size() + edges);
+  table_offsets_.reserve(table_offsets_.size() + edges);
+  tables_.reserve(tables_.size() + table_entries);
 }
 
 int MrfProblem::AddNodeDense(const std::vector<double>& costs) {
@@ -106,20 +135,19 @@ int MrfProblem::AddNodeDense(const std::vector<double>& costs) {
 namespace {
 
 void CheckEdge(const MrfProblem& p, int i, int j, double weight, const char* function) {
-  const std::string where =
-      std::string("MrfProblem::") + function + " (edge " + std::to_string(p.num_edges()) + "): ";
+  const auto fail = [&](const std::string& what) {
+    throw Error(std::string("MrfProblem::") + function + " (edge " +
+                std::to_string(p.num_edges()) + "): " + what);
+  };
   for (int node : {i, j}) {
     if (node < 0 || node >= p.num_nodes()) {
-      throw Error(where + "node: expected in [0, " + std::to_string(p.num_nodes()) + "), found " +
-                  std::to_string(node));
+      fail("node: expected in [0, " + std::to_string(p.num_nodes()) + "), found " +
+           std::to_string(node));
     }
   }
-  if (i == j)
-    throw Error(where + "nodes: expected two distinct nodes, found " + std::to_string(i) +
-                " twice");
-  if (!std::isfinite(weight) || weight < 0.0) {
-    throw Error(where + "weight: expected finite and >= 0, found " + std::to_string(weight));
-  }
+  if (i == j) fail("nodes: expected two distinct nodes, found " + std::to_string(i) + " twice");
+  if (!std::isfinite(weight) || weight < 0.0)
+    fail("weight: expected finite and >= 0, found " + std::to_string(weight));
 }
 
 }  // namespace
@@ -154,6 +182,24 @@ int MrfProblem::AddEdge(int i, int j, double weight, const std::function<double(
       tables_[offset + a * kj + b] = static_cast<float>(c);
     }
   }
+  edge_nodes_.push_back(i);
+  edge_nodes_.push_back(j);
+  edge_weights_.push_back(weight);
+  table_offsets_.push_back(offset);
+  return num_edges() - 1;
+}
+
+int MrfProblem::AddEdgeTable(int i, int j, double weight, const float* table) {
+  CheckEdge(*this, i, j, weight, "AddEdgeTable");
+  const std::int64_t size = static_cast<std::int64_t>(num_candidates(i)) * num_candidates(j);
+  for (std::int64_t k = 0; k < size; ++k) {
+    if (!std::isfinite(table[k])) {
+      throw Error("MrfProblem::AddEdgeTable (edge " + std::to_string(num_edges()) + "): table[" +
+                  std::to_string(k) + "]: expected finite, found " + std::to_string(table[k]));
+    }
+  }
+  const std::int64_t offset = static_cast<std::int64_t>(tables_.size());
+  tables_.insert(tables_.end(), table, table + size);
   edge_nodes_.push_back(i);
   edge_nodes_.push_back(j);
   edge_weights_.push_back(weight);

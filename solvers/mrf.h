@@ -33,6 +33,8 @@ class MrfProblem {
   // +inf (+inf drops that label). Throws artex::Error naming the node and the offending entry,
   // including when no finite cost remains.
   int AddNode(const std::vector<int>& labels, const std::vector<double>& costs);
+  // Same with `count` labels and costs from arrays.
+  int AddNode(const int* labels, const double* costs, int count);
   // Same with a dense row of L costs (+inf = forbidden).
   int AddNodeDense(const std::vector<double>& costs);
 
@@ -44,6 +46,12 @@ class MrfProblem {
   // cost non-zero (the texturing terms have c_e(l, l) = 0). Throws artex::Error on bad input.
   int AddEdge(int i, int j, double weight, const std::function<double(int, int)>& cost);
 
+  // Same with the table given directly: K_i x K_j row-major over the candidates of i and j in
+  // ascending label order (num_candidates / candidate_labels); must be finite.
+  int AddEdgeTable(int i, int j, double weight, const float* table);
+  // Reserves room for this many more nodes, candidates (sum of K_i), edges and table entries
+  // (sum of K_i K_j over table edges); optional.
+  void Reserve(int nodes, std::int64_t candidates, int edges, std::int64_t table_entries);
   // Global smoothness weight lambda (finite, >= 0; default 1).
   void set_smoothness(double lambda);
   double smoothness() const { return lambda_; }

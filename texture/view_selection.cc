@@ -67,23 +67,28 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
   tbb::parallel_for(
       tbb::blocked_range<int>(0, f_count, 1024), [&](const tbb::blocked_range<int>& range) {
         std::vector<double> d(slots);
-        std::vector<int> order(slots);
+        std::vector<int> best;  // the best `keep` slots by (D, slot), ascending
         std::vector<uint8_t> chosen(width);
+        const int keep = options.max_candidates > 0 ? options.max_candidates : slots;
         for (int f = range.begin(); f < range.end(); ++f) {
+          best.clear();
           for (int s = 0; s < slots; ++s) {
             const PoolEntry& e = pool.entry(s);
             d[s] = ViewDataCost(e.visibility.visible[f] != 0, e.visibility.quality[f],
                                 input.current_frame - e.frame_index, options.terms);
+            if (!std::isfinite(d[s])) continue;
+            // Slots come in ascending order, so on equal D the earlier (older) one stays first.
+            if (static_cast<int>(best.size()) == keep) {
+              if (!(d[s] < d[best.back()])) continue;
+              best.pop_back();
+            }
+            auto it = best.end();
+            while (it != best.begin() && d[*(it - 1)] > d[s]) --it;
+            best.insert(it, s);
           }
-          std::iota(order.begin(), order.end(), 0);
-          std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return d[a] < d[b]; });
           std::fill(chosen.begin(), chosen.end(), 0);
-          const int keep = options.max_candidates > 0 ? options.max_candidates : slots;
-          for (int k = 0; k < slots; ++k) {
-            const int s = order[k];
-            if (!std::isfinite(d[s])) break;
-            if (k < keep || s == warm[f]) chosen[s] = 1;
-          }
+          for (int s : best) chosen[s] = 1;
+          if (warm[f] >= 0 && warm[f] < slots && std::isfinite(d[warm[f]])) chosen[warm[f]] = 1;
           chosen[untextured] = 1;
           int* labels = &cand_labels[static_cast<std::size_t>(f) * width];
           double* costs = &cand_costs[static_cast<std::size_t>(f) * width];
@@ -126,9 +131,10 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
     table_offset[e + 1] =
         table_offset[e] +
         static_cast<std::int64_t>(count[mesh.edge_faces(e, 0)]) * count[mesh.edge_faces(e, 1)];
-  std::vector<double> tables(table_offset[e_count]);
+  std::vector<float> tables(table_offset[e_count]);
   tbb::parallel_for(
       tbb::blocked_range<int>(0, e_count, 1024), [&](const tbb::blocked_range<int>& range) {
+        std::vector<int> pos_in_j(width), pos_in_i(width);
         for (int e = range.begin(); e < range.end(); ++e) {
           const int u = mesh.edges(e, 0), v = mesh.edges(e, 1);
           double distance = inf;
@@ -138,34 +144,45 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
           const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
           const int* li = &cand_labels[static_cast<std::size_t>(fi) * width];
           const int* lj = &cand_labels[static_cast<std::size_t>(fj) * width];
-          double* table = &tables[table_offset[e]];
+          float* table = &tables[table_offset[e]];
           const int ni = count[fi], nj = count[fj];
+          // Where each side's labels sit among the other side's (-1: absent), for reusing the
+          // symmetric V(b, a) = V(a, b).
+          for (int p = 0; p < ni; ++p) {
+            const int q = static_cast<int>(std::lower_bound(lj, lj + nj, li[p]) - lj);
+            pos_in_j[p] = q < nj && lj[q] == li[p] ? q : -1;
+          }
+          for (int q = 0; q < nj; ++q) {
+            const int p = static_cast<int>(std::lower_bound(li, li + ni, lj[q]) - li);
+            pos_in_i[q] = p < ni && li[p] == lj[q] ? p : -1;
+          }
           for (int p = 0; p < ni; ++p) {
             for (int q = 0; q < nj; ++q) {
               const int a = li[p], b = lj[q];
-              double cost = 0.0;
-              // V is symmetric in the two images: reuse (b, a) when already computed.
-              const int p2 = static_cast<int>(std::lower_bound(li, li + ni, b) - li);
-              const int q2 = static_cast<int>(std::lower_bound(lj, lj + nj, a) - lj);
-              if (a != b && p2 < ni && li[p2] == b && q2 < nj && lj[q2] == a &&
-                  p2 * nj + q2 < p * nj + q) {
+              float cost = 0.0f;
+              const int p2 = pos_in_i[q], q2 = pos_in_j[p];
+              if (a != b && p2 >= 0 && q2 >= 0 && p2 * nj + q2 < p * nj + q) {
                 cost = table[p2 * nj + q2];
               } else if (a != b) {
                 double pi = options.unseen_colour_cost;
                 if (a != untextured && b != untextured && samples > 0) {
-                  const ColorRows& ca = pool.entry(a).edge_colors;
-                  const ColorRows& cb = pool.entry(b).edge_colors;
+                  const float* ca = pool.entry(a).edge_colors.data() +
+                                    static_cast<std::size_t>(e) * samples * 3;
+                  const float* cb = pool.entry(b).edge_colors.data() +
+                                    static_cast<std::size_t>(e) * samples * 3;
                   double sum = 0.0;
                   int n = 0;
-                  for (int k = 0; k < samples; ++k) {
-                    const Eigen::Index row = static_cast<Eigen::Index>(e) * samples + k;
-                    if (!ca.row(row).allFinite() || !cb.row(row).allFinite()) continue;
-                    sum += (ca.row(row) - cb.row(row)).norm();
+                  for (int k = 0; k < 3 * samples; k += 3) {
+                    const float d0 = ca[k] - cb[k], d1 = ca[k + 1] - cb[k + 1],
+                                d2 = ca[k + 2] - cb[k + 2];
+                    const float squared = d0 * d0 + d1 * d1 + d2 * d2;
+                    if (std::isnan(squared)) continue;  // a colour not seen in a or b
+                    sum += std::sqrt(squared);
                     ++n;
                   }
                   if (n > 0) pi = sum / n;
                 }
-                cost = SeamPairCost(pi, psi, options.terms);
+                cost = static_cast<float>(SeamPairCost(pi, psi, options.terms));
               }
               table[p * nj + q] = cost;
             }
@@ -181,42 +198,63 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
     const bool first_free = node_of[fi] >= 0;
     const int free = first_free ? fi : fj;
     const double weight = input.edge_weight.empty() ? 1.0 : input.edge_weight[e];
-    const double* table = &tables[table_offset[e]];
+    const float* table = &tables[table_offset[e]];
     double* costs = &cand_costs[static_cast<std::size_t>(free) * width];
     // The fixed side has one candidate, so the table is a row or a column of count[free].
-    for (int p = 0; p < count[free]; ++p)
-      costs[p] += lambda * weight * static_cast<double>(static_cast<float>(table[p]));
+    for (int p = 0; p < count[free]; ++p) costs[p] += lambda * weight * table[p];
   }
 
   const int num_free = static_cast<int>(triangle_of.size());
   MrfProblem problem(slots + 1);
+  for (int f = 0; f < f_count; ++f) result.num_candidates += count[f];
+  problem.Reserve(num_free + 1, result.num_candidates, e_count, table_offset[e_count]);
+  // Candidate labels are ascending with finite costs, so the problem's local candidate order is
+  // the order of cand_labels and the tables go in as they are.
+  for (int f : triangle_of) {
+    const std::size_t base = static_cast<std::size_t>(f) * width;
+    problem.AddNode(&cand_labels[base], &cand_costs[base], count[f]);
+  }
   // One extra isolated node carries the fixed triangles' constant, so that every energy the
   // solver sees (its relative stopping tests, the callback) is that of the whole labelling.
+  if (num_free < f_count) problem.AddNode({untextured}, {constant});
+  // Edges go in ordered by their lower node (first) and then the higher: the solvers walk nodes
+  // in ascending order, and reading the tables in storage order is what keeps them fast (the
+  // tables do not fit in cache). V is symmetric, so a swapped edge takes the transposed table.
+  std::vector<int> edge_start(num_free + 1, 0);
+  for (int e = 0; e < e_count; ++e) {
+    const int i = node_of[mesh.edge_faces(e, 0)], j = node_of[mesh.edge_faces(e, 1)];
+    if (i >= 0 && j >= 0) ++edge_start[std::min(i, j) + 1];
+  }
+  for (int i = 0; i < num_free; ++i) edge_start[i + 1] += edge_start[i];
+  std::vector<int> sorted_edges(edge_start[num_free]);
   {
-    std::vector<int> labels;
-    std::vector<double> costs;
-    for (int f = 0; f < f_count; ++f) result.num_candidates += count[f];
-    for (int f : triangle_of) {
-      const std::size_t base = static_cast<std::size_t>(f) * width;
-      labels.assign(cand_labels.begin() + base, cand_labels.begin() + base + count[f]);
-      costs.assign(cand_costs.begin() + base, cand_costs.begin() + base + count[f]);
-      problem.AddNode(labels, costs);
+    std::vector<int> fill(edge_start.begin(), edge_start.end() - 1);
+    for (int e = 0; e < e_count; ++e) {
+      const int i = node_of[mesh.edge_faces(e, 0)], j = node_of[mesh.edge_faces(e, 1)];
+      if (i >= 0 && j >= 0) sorted_edges[fill[std::min(i, j)]++] = e;
     }
   }
-  if (num_free < f_count) problem.AddNode({untextured}, {constant});
-  for (int e = 0; e < e_count; ++e) {
+  std::vector<float> transposed(static_cast<std::size_t>(width) * width);
+  for (int i = 0; i < num_free; ++i) {
+    // Edges of node i by their other node.
+    std::sort(sorted_edges.begin() + edge_start[i], sorted_edges.begin() + edge_start[i + 1],
+              [&](int a, int b) {
+                return node_of[mesh.edge_faces(a, 0)] + node_of[mesh.edge_faces(a, 1)] <
+                       node_of[mesh.edge_faces(b, 0)] + node_of[mesh.edge_faces(b, 1)];
+              });
+  }
+  for (int e : sorted_edges) {
     const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
-    if (node_of[fi] < 0 || node_of[fj] < 0) continue;
-    const int* li = &cand_labels[static_cast<std::size_t>(fi) * width];
-    const int* lj = &cand_labels[static_cast<std::size_t>(fj) * width];
-    const int ni = count[fi], nj = count[fj];
-    const double* table = &tables[table_offset[e]];
     const double weight = input.edge_weight.empty() ? 1.0 : input.edge_weight[e];
-    problem.AddEdge(node_of[fi], node_of[fj], weight, [&](int a, int b) {
-      const int p = static_cast<int>(std::lower_bound(li, li + ni, a) - li);
-      const int q = static_cast<int>(std::lower_bound(lj, lj + nj, b) - lj);
-      return table[p * nj + q];
-    });
+    const float* table = &tables[table_offset[e]];
+    if (node_of[fi] < node_of[fj]) {
+      problem.AddEdgeTable(node_of[fi], node_of[fj], weight, table);
+    } else {
+      const int ni = count[fi], nj = count[fj];
+      for (int p = 0; p < ni; ++p)
+        for (int q = 0; q < nj; ++q) transposed[q * ni + p] = table[p * nj + q];
+      problem.AddEdgeTable(node_of[fj], node_of[fi], weight, transposed.data());
+    }
   }
   problem.set_smoothness(lambda);
 
