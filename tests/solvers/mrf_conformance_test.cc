@@ -487,6 +487,43 @@ TEST(MrfProblemTest, SparseCandidatesMatchDenseConstruction) {
   EXPECT_EQ(dense.UnaryArgmin(), (std::vector<int>{0, 1, 3}));
 }
 
+TEST(MrfProblemTest, EdgeTablesMatchCostCallbacks) {
+  // The same problem built with AddEdge callbacks and with AddEdgeTable / array AddNode.
+  const auto cost = [](int a, int b) { return a == b ? 0.0 : 0.1 * (3 * a + b + 1); };
+  MrfProblem with_callbacks(4), with_tables(4);
+  const std::vector<std::vector<int>> labels = {{0, 2, 3}, {1, 2}, {0, 1, 3}};
+  const std::vector<std::vector<double>> costs = {{0.5, 0.0, 1.0}, {0.2, 0.4}, {1.0, 0.3, 0.6}};
+  for (std::size_t i = 0; i < labels.size(); ++i) {
+    with_callbacks.AddNode(labels[i], costs[i]);
+    with_tables.AddNode(labels[i].data(), costs[i].data(), static_cast<int>(labels[i].size()));
+  }
+  const std::vector<std::pair<int, int>> edges = {{0, 1}, {1, 2}, {2, 0}};
+  for (const auto& [i, j] : edges) {
+    with_callbacks.AddEdge(i, j, 1.5, cost);
+    std::vector<float> table;
+    for (int a : labels[i])
+      for (int b : labels[j]) table.push_back(static_cast<float>(cost(a, b)));
+    with_tables.AddEdgeTable(i, j, 1.5, table.data());
+  }
+  for (int a : labels[0])
+    for (int b : labels[1])
+      for (int c : labels[2])
+        EXPECT_EQ(with_callbacks.Energy({a, b, c}), with_tables.Energy({a, b, c}));
+  EXPECT_EQ(with_callbacks.MemoryBytes(), with_tables.MemoryBytes());
+  // Unsorted arrays are sorted like the vector overload; +inf drops a label.
+  const int unsorted[] = {3, 0, 1};
+  const double unsorted_costs[] = {0.3, kInf, 0.1};
+  const int node = with_tables.AddNode(unsorted, unsorted_costs, 3);
+  EXPECT_EQ(with_tables.num_candidates(node), 2);
+  EXPECT_EQ(with_tables.candidate_labels(node)[0], 1);
+  EXPECT_EQ(with_tables.candidate_unaries(node)[1], 0.3);
+  const float bad[] = {0.0f, std::numeric_limits<float>::quiet_NaN(), 0.0f, 0.0f, 0.0f, 0.0f};
+  EXPECT_THROW(with_tables.AddEdgeTable(0, 1, 1.0, bad), Error);
+  EXPECT_THROW(with_tables.AddEdgeTable(0, 0, 1.0, bad), Error);
+  const int duplicate[] = {2, 2};
+  EXPECT_THROW(with_tables.AddNode(duplicate, unsorted_costs, 2), Error);
+}
+
 TEST(MrfProblemTest, RejectsBadInput) {
   MrfProblem p(3);
   EXPECT_THROW(MrfProblem(0), Error);
