@@ -64,6 +64,12 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
   std::vector<int> count(f_count, 0);
   std::vector<int> cand_labels(static_cast<std::size_t>(f_count) * width);
   std::vector<double> cand_costs(static_cast<std::size_t>(f_count) * width);
+  std::vector<const uint8_t*> slot_visible(slots);
+  std::vector<const float*> slot_quality(slots);
+  for (int s = 0; s < slots; ++s) {
+    slot_visible[s] = pool.entry(s).visibility.visible.data();
+    slot_quality[s] = pool.entry(s).visibility.quality.data();
+  }
   tbb::parallel_for(
       tbb::blocked_range<int>(0, f_count, 1024), [&](const tbb::blocked_range<int>& range) {
         std::vector<double> d(slots);
@@ -73,9 +79,12 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
         for (int f = range.begin(); f < range.end(); ++f) {
           best.clear();
           for (int s = 0; s < slots; ++s) {
-            const PoolEntry& e = pool.entry(s);
-            d[s] = ViewDataCost(e.visibility.visible[f] != 0, e.visibility.quality[f],
-                                input.current_frame - e.frame_index, options.terms);
+            if (!slot_visible[s][f]) {
+              d[s] = inf;
+              continue;
+            }
+            d[s] = ViewDataCost(true, slot_quality[s][f],
+                                input.current_frame - pool.entry(s).frame_index, options.terms);
             if (!std::isfinite(d[s])) continue;
             // Slots come in ascending order, so on equal D the earlier (older) one stays first.
             if (static_cast<int>(best.size()) == keep) {
