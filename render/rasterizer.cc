@@ -13,10 +13,14 @@
 namespace artex {
 namespace {
 
-// Screen tiles processed in parallel: every tile owns its pixels, so no synchronisation is
-// needed and the result does not depend on the thread schedule (triangles are visited in
-// index order inside a tile). The size only affects speed.
-constexpr int kTileSize = 32;
+// Bands of image rows rasterised in parallel: every band owns its pixels and visits the
+// triangles overlapping it in index order, so no synchronisation is needed and the result does
+// not depend on the thread schedule. The height only affects speed.
+constexpr int kBandRows = 32;
+// The depth computed at a pixel inside a triangle is at least its nearest corner's depth times
+// (1 - 8 u) (u = 2^-53: the roundings of 1/z, of the three products and sums and of the
+// quotient); this factor is far below that.
+constexpr double kDepthBoundFactor = 1.0 - 1e-12;
 
 struct ScreenPoint {
   double x = 0, y = 0;  // pixel coordinates
@@ -59,40 +63,42 @@ struct Edge {
   bool Inside(double value) const { return value > 0 || (value == 0 && owns_zero); }
 };
 
-struct TriangleSetup {
-  int id = -1;
-  int corner[3];  // original corner index (0..2) of the positively oriented vertex order
-  double inv_z[3];
-  Edge edge[3];        // edge i: vertex i -> vertex i+1 (positively oriented order)
-  int x0, x1, y0, y1;  // inclusive pixel bounding box, clipped to the image
+// What binning needs of a triangle (computed once): drawn or not, orientation, pixel box.
+struct TriangleBox {
+  bool drawn = false;
+  bool flipped = false;  // corners 1 and 2 swapped for the positive orientation
+  int x0, x1, y0, y1;    // inclusive pixel bounding box, clipped to the image
 };
 
-}  // namespace
+// What rasterisation needs of a triangle (set up per band from the screen points: cheaper
+// than keeping it in memory for every triangle).
+struct TriangleSetup {
+  int corner[3];  // original corner index (0..2) of the positively oriented vertex order
+  double inv_z[3];
+  Edge edge[3];  // edge i: vertex i -> vertex i+1 (positively oriented order)
 
-void Rasterize(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& triangles,
-               const PinholeCamera& camera, const RasterOptions& options, RasterBuffers* out) {
+  void Set(const ScreenPoint* const p[3], bool flipped) {
+    corner[0] = 0;
+    corner[1] = flipped ? 2 : 1;
+    corner[2] = flipped ? 1 : 2;
+    const ScreenPoint* q[3] = {p[corner[0]], p[corner[1]], p[corner[2]]};
+    for (int k = 0; k < 3; ++k) {
+      inv_z[k] = 1.0 / q[k]->z;
+      edge[k].Set(*q[k], *q[(k + 1) % 3]);
+    }
+  }
+};
+
+// Fills `depth` and, when kSurface, `ids` and `bary` (all width * height, pre-filled with "no
+// hit").
+template <bool kSurface>
+void RasterizeInto(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& triangles,
+                   const PinholeCamera& camera, const RasterOptions& options, float* depth,
+                   int32_t* ids, Eigen::Vector2f* bary) {
   const int width = camera.width;
   const int height = camera.height;
-  if (width <= 0 || height <= 0) {
-    std::ostringstream msg;
-    msg << "Rasterize: camera size must be positive, found " << width << " x " << height;
-    throw Error(msg.str());
-  }
   const int num_vertices = static_cast<int>(vertices.rows());
   const int num_triangles = static_cast<int>(triangles.rows());
-  if (num_triangles > 0 && (triangles.minCoeff() < 0 || triangles.maxCoeff() >= num_vertices)) {
-    std::ostringstream msg;
-    msg << "Rasterize: triangle indices must lie in [0, " << num_vertices << "), found range ["
-        << triangles.minCoeff() << ", " << triangles.maxCoeff() << "]";
-    throw Error(msg.str());
-  }
-
-  out->width = width;
-  out->height = height;
-  const size_t num_pixels = static_cast<size_t>(width) * height;
-  out->depth.assign(num_pixels, std::numeric_limits<float>::infinity());
-  out->triangle_id.assign(num_pixels, -1);
-  out->barycentric.assign(num_pixels, Eigen::Vector2f::Zero());
 
   // Project every vertex once (shared vertices get bitwise-identical screen positions).
   std::vector<ScreenPoint> screen(num_vertices);
@@ -108,17 +114,19 @@ void Rasterize(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& triangl
           s.y = camera.fy * c.y() / c.z() + camera.cy;
         }
       });
+  const auto corners = [&](int f, const ScreenPoint* p[3]) {
+    for (int k = 0; k < 3; ++k) p[k] = &screen[triangles(f, k)];
+  };
 
-  // Triangle setup (parallel), then binning into tiles (serial, in triangle order).
-  std::vector<TriangleSetup> setups(num_triangles);
-  std::vector<uint8_t> keep(num_triangles, 0);
+  // Which triangles are drawn and where (parallel).
+  std::vector<TriangleBox> boxes(num_triangles);
   tbb::parallel_for(tbb::blocked_range<int>(0, num_triangles, 1024),
                     [&](const tbb::blocked_range<int>& range) {
                       for (int f = range.begin(); f < range.end(); ++f) {
                         const ScreenPoint* p[3];
+                        corners(f, p);
                         bool ok = true;
                         for (int k = 0; k < 3; ++k) {
-                          p[k] = &screen[triangles(f, k)];
                           // Near-plane rejection (also removes points behind the camera) and
                           // non-finite input.
                           if (!(p[k]->z >= options.near_plane) || !std::isfinite(p[k]->x) ||
@@ -136,75 +144,84 @@ void Rasterize(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& triangl
                         // With image y downwards, a triangle counter-clockwise from outside that
                         // faces the camera has a negative area in this convention.
                         if (options.cull_backfaces && area > 0) continue;
-                        TriangleSetup& t = setups[f];
-                        t.id = f;
-                        if (area > 0) {
-                          t.corner[0] = 0, t.corner[1] = 1, t.corner[2] = 2;
-                        } else {
-                          t.corner[0] = 0, t.corner[1] = 2, t.corner[2] = 1;
-                        }
-                        const ScreenPoint* q[3] = {p[t.corner[0]], p[t.corner[1]], p[t.corner[2]]};
-                        for (int k = 0; k < 3; ++k) {
-                          t.inv_z[k] = 1.0 / q[k]->z;
-                          t.edge[k].Set(*q[k], *q[(k + 1) % 3]);
-                        }
-                        const double min_x = std::min({q[0]->x, q[1]->x, q[2]->x});
-                        const double max_x = std::max({q[0]->x, q[1]->x, q[2]->x});
-                        const double min_y = std::min({q[0]->y, q[1]->y, q[2]->y});
-                        const double max_y = std::max({q[0]->y, q[1]->y, q[2]->y});
+                        const double min_x = std::min({p[0]->x, p[1]->x, p[2]->x});
+                        const double max_x = std::max({p[0]->x, p[1]->x, p[2]->x});
+                        const double min_y = std::min({p[0]->y, p[1]->y, p[2]->y});
+                        const double max_y = std::max({p[0]->y, p[1]->y, p[2]->y});
                         if (max_x < 0 || max_y < 0 || min_x > width - 1 || min_y > height - 1)
                           continue;
-                        t.x0 = std::max(0, static_cast<int>(std::ceil(min_x)));
-                        t.x1 = std::min(width - 1, static_cast<int>(std::floor(max_x)));
-                        t.y0 = std::max(0, static_cast<int>(std::ceil(min_y)));
-                        t.y1 = std::min(height - 1, static_cast<int>(std::floor(max_y)));
-                        if (t.x0 > t.x1 || t.y0 > t.y1) continue;
-                        keep[f] = 1;
+                        TriangleBox& b = boxes[f];
+                        b.x0 = std::max(0, static_cast<int>(std::ceil(min_x)));
+                        b.x1 = std::min(width - 1, static_cast<int>(std::floor(max_x)));
+                        b.y0 = std::max(0, static_cast<int>(std::ceil(min_y)));
+                        b.y1 = std::min(height - 1, static_cast<int>(std::floor(max_y)));
+                        b.flipped = !(area > 0);
+                        b.drawn = b.x0 <= b.x1 && b.y0 <= b.y1;
                       }
                     });
 
-  const int tiles_x = (width + kTileSize - 1) / kTileSize;
-  const int tiles_y = (height + kTileSize - 1) / kTileSize;
-  std::vector<std::vector<int>> bins(static_cast<size_t>(tiles_x) * tiles_y);
-  for (int f = 0; f < num_triangles; ++f) {
-    if (!keep[f]) continue;
-    const TriangleSetup& t = setups[f];
-    for (int ty = t.y0 / kTileSize; ty <= t.y1 / kTileSize; ++ty) {
-      for (int tx = t.x0 / kTileSize; tx <= t.x1 / kTileSize; ++tx) {
-        bins[ty * tiles_x + tx].push_back(f);
-      }
+  // Binning into bands (serial). With ids and barycentrics triangles keep their index order
+  // (the first of equal depths wins). The depth alone is the minimum over the triangles, whatever
+  // the order: triangles facing the camera go first, so that the occlusion test below skips
+  // most of the others.
+  const int num_bands = (height + kBandRows - 1) / kBandRows;
+  std::vector<std::vector<int>> bins(num_bands);
+  const auto bin = [&](bool facing_only, bool facing) {
+    for (int f = 0; f < num_triangles; ++f) {
+      const TriangleBox& box = boxes[f];
+      if (!box.drawn || (facing_only && box.flipped != facing)) continue;
+      for (int band = box.y0 / kBandRows; band <= box.y1 / kBandRows; ++band)
+        bins[band].push_back(f);
     }
+  };
+  if constexpr (kSurface) {
+    bin(false, false);
+  } else {
+    bin(true, true);  // flipped: negative area, facing the camera (counter-clockwise meshes)
+    bin(true, false);
   }
 
-  float* depth = out->depth.data();
-  int32_t* ids = out->triangle_id.data();
-  Eigen::Vector2f* bary = out->barycentric.data();
   tbb::parallel_for(
-      tbb::blocked_range<int>(0, tiles_x * tiles_y, 1), [&](const tbb::blocked_range<int>& range) {
-        for (int tile = range.begin(); tile < range.end(); ++tile) {
-          const int tx = tile % tiles_x;
-          const int ty = tile / tiles_x;
-          const int tile_x0 = tx * kTileSize;
-          const int tile_y0 = ty * kTileSize;
-          const int tile_x1 = std::min(width - 1, tile_x0 + kTileSize - 1);
-          const int tile_y1 = std::min(height - 1, tile_y0 + kTileSize - 1);
-          for (int f : bins[tile]) {
-            const TriangleSetup& t = setups[f];
-            const int x0 = std::max(t.x0, tile_x0), x1 = std::min(t.x1, tile_x1);
-            const int y0 = std::max(t.y0, tile_y0), y1 = std::min(t.y1, tile_y1);
+      tbb::blocked_range<int>(0, num_bands, 1), [&](const tbb::blocked_range<int>& range) {
+        for (int band = range.begin(); band < range.end(); ++band) {
+          const int band_y0 = band * kBandRows;
+          const int band_y1 = std::min(height - 1, band_y0 + kBandRows - 1);
+          for (int f : bins[band]) {
+            const TriangleBox& box = boxes[f];
+            const ScreenPoint* p[3];
+            corners(f, p);
+            const int y0 = std::max(box.y0, band_y0), y1 = std::min(box.y1, band_y1);
+            // Occlusion test: every depth computed inside the triangle is at least its nearest
+            // corner's depth up to a few rounding errors, so where the buffer is already at most
+            // z_bound across the box, no pixel can change.
+            const float z_bound =
+                static_cast<float>(std::min({p[0]->z, p[1]->z, p[2]->z}) * kDepthBoundFactor);
+            bool occluded = true;
+            for (int y = y0; y <= y1 && occluded; ++y) {
+              const float* row = depth + static_cast<size_t>(y) * width;
+              for (int x = box.x0; x <= box.x1 && occluded; ++x) occluded = row[x] <= z_bound;
+            }
+            if (occluded) continue;
+            TriangleSetup t;
+            t.Set(p, box.flipped);
             for (int y = y0; y <= y1; ++y) {
               const double py = y;
               const double r0 = t.edge[0].Row(py);
               const double r1 = t.edge[1].Row(py);
               const double r2 = t.edge[2].Row(py);
-              for (int x = x0; x <= x1; ++x) {
+              // Each edge value is monotone along the row (every rounding step is), so the
+              // covered pixels of a row are contiguous: stop at the first pixel after them.
+              bool entered = false;
+              for (int x = box.x0; x <= box.x1; ++x) {
                 const double px = x;
                 const double e0 = t.edge[0].Value(r0, px);
-                if (!t.edge[0].Inside(e0)) continue;
                 const double e1 = t.edge[1].Value(r1, px);
-                if (!t.edge[1].Inside(e1)) continue;
                 const double e2 = t.edge[2].Value(r2, px);
-                if (!t.edge[2].Inside(e2)) continue;
+                if (!(t.edge[0].Inside(e0) && t.edge[1].Inside(e1) && t.edge[2].Inside(e2))) {
+                  if (entered) break;
+                  continue;
+                }
+                entered = true;
                 // Screen-space barycentrics of vertices 0, 1, 2 are e1, e2, e0 (the edge
                 // opposite each vertex), then perspective correction with 1/z.
                 const double w0 = e1 * t.inv_z[0];
@@ -216,17 +233,61 @@ void Rasterize(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& triangl
                 const float zf = static_cast<float>(z);
                 if (!(zf < depth[index])) continue;
                 depth[index] = zf;
-                ids[index] = t.id;
-                double b[3];
-                b[t.corner[0]] = w0 / w;
-                b[t.corner[1]] = w1 / w;
-                b[t.corner[2]] = w2 / w;
-                bary[index] = Eigen::Vector2f(static_cast<float>(b[1]), static_cast<float>(b[2]));
+                if constexpr (kSurface) {
+                  ids[index] = f;
+                  double b[3];
+                  b[t.corner[0]] = w0 / w;
+                  b[t.corner[1]] = w1 / w;
+                  b[t.corner[2]] = w2 / w;
+                  bary[index] = Eigen::Vector2f(static_cast<float>(b[1]), static_cast<float>(b[2]));
+                }
               }
             }
           }
         }
       });
+}
+
+// Throws unless the camera has pixels and every triangle index names a vertex.
+void CheckInput(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& triangles,
+                const PinholeCamera& camera, const char* function) {
+  if (camera.width <= 0 || camera.height <= 0) {
+    std::ostringstream msg;
+    msg << function << ": camera size must be positive, found " << camera.width << " x "
+        << camera.height;
+    throw Error(msg.str());
+  }
+  const int num_vertices = static_cast<int>(vertices.rows());
+  if (triangles.rows() > 0 && (triangles.minCoeff() < 0 || triangles.maxCoeff() >= num_vertices)) {
+    std::ostringstream msg;
+    msg << function << ": triangle indices must lie in [0, " << num_vertices << "), found range ["
+        << triangles.minCoeff() << ", " << triangles.maxCoeff() << "]";
+    throw Error(msg.str());
+  }
+}
+
+}  // namespace
+
+void Rasterize(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& triangles,
+               const PinholeCamera& camera, const RasterOptions& options, RasterBuffers* out) {
+  CheckInput(vertices, triangles, camera, "Rasterize");
+  out->width = camera.width;
+  out->height = camera.height;
+  const size_t num_pixels = static_cast<size_t>(camera.width) * camera.height;
+  out->depth.assign(num_pixels, std::numeric_limits<float>::infinity());
+  out->triangle_id.assign(num_pixels, -1);
+  out->barycentric.assign(num_pixels, Eigen::Vector2f::Zero());
+  RasterizeInto<true>(vertices, triangles, camera, options, out->depth.data(),
+                      out->triangle_id.data(), out->barycentric.data());
+}
+
+void RasterizeDepth(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& triangles,
+                    const PinholeCamera& camera, const RasterOptions& options,
+                    std::vector<float>* depth) {
+  CheckInput(vertices, triangles, camera, "RasterizeDepth");
+  depth->assign(static_cast<size_t>(camera.width) * camera.height,
+                std::numeric_limits<float>::infinity());
+  RasterizeInto<false>(vertices, triangles, camera, options, depth->data(), nullptr, nullptr);
 }
 
 }  // namespace artex

@@ -31,5 +31,10 @@ struct RasterBuffers {
 // vertices: V x 3 world (m); triangles: F x 3. Resizes and fills `out`.
 void Rasterize(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& triangles,
                const PinholeCamera& camera, const RasterOptions& options, RasterBuffers* out);
+// Rasterize's depth buffer alone (bitwise identical to RasterBuffers::depth, width * height
+// row-major, +inf where nothing is hit), without triangle ids and barycentrics: z-buffer tests.
+void RasterizeDepth(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& triangles,
+                    const PinholeCamera& camera, const RasterOptions& options,
+                    std::vector<float>* depth);
 
 }  // namespace artex

@@ -17,6 +17,53 @@ namespace artex {
 namespace {
 // Surface-aware sampling: qualities below this are clamped (bounds the slope tolerance).
 constexpr double kMinSurfaceQuality = 0.05;
+// Pruning keeps one byte per triangle and image: 1 + the histogram bin.
+constexpr int kMaxHistogramBins = 255;
+// Vertices and edges per parallel task when sampling an entry's colours.
+constexpr int kVertexGrain = 2048;
+constexpr int kEdgeGrain = 1024;
+
+// PoolEntry::SampleSurface without fallback at many points of one entry (vertex and edge
+// colours), with the tolerance's slope and offset computed once by the caller: the same colours
+// bit for bit. Reads the z-buffer directly where a bilinear cell lies inside it at full raster
+// scale.
+class SurfaceSampler {
+ public:
+  explicit SurfaceSampler(const PoolEntry& entry)
+      : entry_(entry),
+        direct_(!entry.surface.depth.empty() && entry.surface.scale == 1.0),
+        dx_(entry.offset.x() - entry.surface.x0),
+        dy_(entry.offset.y() - entry.surface.y0) {}
+
+  // Colour of the point at camera coordinates (x, y, z) (m), accepting z-buffer depths within
+  // `tolerance` of z; false when the point is outside the crop or no tap is on the surface.
+  bool operator()(double x, double y, double z, double tolerance, Eigen::Vector3f* color) const {
+    const PinholeCamera& camera = entry_.camera;
+    const double u = camera.fx * x / z + camera.cx;
+    const double v = camera.fy * y / z + camera.cy;
+    if (entry_.surface.depth.empty()) return entry_.Sample(Eigen::Vector2d(u, v), color);
+    PoolEntry::BilinearCell cell;
+    if (!entry_.Cell(u, v, &cell)) return false;
+    const SurfaceDepth& surface = entry_.surface;
+    if (direct_ && cell.x0 + dx_ >= 0 && cell.y0 + dy_ >= 0 && cell.x1 + dx_ < surface.width &&
+        cell.y1 + dy_ < surface.height) {
+      const auto depth_at = [this, &surface](int cx, int cy) {
+        return surface.depth[static_cast<std::size_t>(cy + dy_) * surface.width + cx + dx_];
+      };
+      return entry_.BlendSurface(cell, z, tolerance, depth_at, color);
+    }
+    const auto depth_at = [this, &surface](int cx, int cy) {
+      return surface.At(cx + entry_.offset.x(), cy + entry_.offset.y());
+    };
+    return entry_.BlendSurface(cell, z, tolerance, depth_at, color);
+  }
+
+ private:
+  const PoolEntry& entry_;
+  const bool
+      direct_;  // full-scale z-buffer: crop pixel (x, y) is z-buffer pixel (x + dx_, y + dy_)
+  const int dx_, dy_;
+};
 }  // namespace
 
 TextureMesh TextureMesh::Build(const Eigen::MatrixX3i& triangles) {
@@ -50,8 +97,9 @@ bool ImagePoolOptions::IsValid(std::string* error) const {
   else if (hard_max_images < max_images)
     msg << "pool.hard_max_images: expected >= pool.max_images (" << max_images << "), found "
         << hard_max_images;
-  else if (histogram_bins < 1)
-    msg << "pool.histogram_bins: expected >= 1, found " << histogram_bins;
+  else if (histogram_bins < 1 || histogram_bins > kMaxHistogramBins)
+    msg << "pool.histogram_bins: expected [1, " << kMaxHistogramBins << "], found "
+        << histogram_bins;
   else if (crop_margin < 0)
     msg << "pool.crop_margin: expected >= 0, found " << crop_margin;
   else if (edge_samples < 2)
@@ -168,37 +216,72 @@ int ImagePool::Add(int frame_index, const cv::Mat& color_bgr, const PinholeCamer
       for (int c = 0; c < 3; ++c) vertex_quality[mesh_->triangles(f, c)] = 2.0f;
     }
   }
-  entry->vertex_colors.setConstant(v_count, 3, nan);
-  for (int v = 0; v < v_count; ++v) {
-    Eigen::Vector3f color;
-    if (vertex_quality[v] <= 1.0f && pixels[v].allFinite() &&
-        entry->SampleSurface(cam.col(v), vertex_quality[v], false, &color))
-      entry->vertex_colors.row(v) = color.transpose();
-  }
-  // Colours along edges with a visible side (edges are independent: parallel).
-  const int samples = options_.edge_samples;
-  const int e_count = static_cast<int>(mesh_->edges.rows());
-  entry->edge_colors.setConstant(static_cast<Eigen::Index>(e_count) * samples, 3, nan);
+  const SurfaceSampler sample(*entry);
   const PoolEntry& e_ref = *entry;
-  ColorRows& edge_colors = entry->edge_colors;
+  ColorRows& vertex_colors = entry->vertex_colors;
+  vertex_colors.resize(v_count, 3);
   tbb::parallel_for(
-      tbb::blocked_range<int>(0, e_count, 4096), [&](const tbb::blocked_range<int>& range) {
-        for (int e = range.begin(); e < range.end(); ++e) {
-          const int f0 = mesh_->edge_faces(e, 0), f1 = mesh_->edge_faces(e, 1);
-          if (!vis.visible[f0] && !vis.visible[f1]) continue;
-          const float quality = std::min(vis.visible[f0] ? vis.quality[f0] : 1.0f,
-                                         vis.visible[f1] ? vis.quality[f1] : 1.0f);
-          const Eigen::Vector3d a = cam.col(mesh_->edges(e, 0));
-          const Eigen::Vector3d b = cam.col(mesh_->edges(e, 1));
-          for (int k = 0; k < samples; ++k) {
-            const double t = (k + 0.5) / samples;
-            Eigen::Vector3f color;
-            if (e_ref.SampleSurface((1 - t) * a + t * b, quality, false, &color))
-              edge_colors.row(static_cast<Eigen::Index>(e) * samples + k) = color.transpose();
+      tbb::blocked_range<int>(0, v_count, kVertexGrain), [&](const tbb::blocked_range<int>& range) {
+        for (int v = range.begin(); v < range.end(); ++v) {
+          Eigen::Vector3f color;
+          bool seen = false;
+          if (vertex_quality[v] <= 1.0f && pixels[v].allFinite()) {
+            double tolerance_offset = 0.0, tolerance_slope = 0.0;
+            e_ref.SurfaceTolerance(vertex_quality[v], &tolerance_offset, &tolerance_slope);
+            const double z = cam(2, v);
+            seen = sample(cam(0, v), cam(1, v), z, tolerance_offset + tolerance_slope * z, &color);
           }
+          if (seen)
+            vertex_colors.row(v) = color.transpose();
+          else
+            vertex_colors.row(v).setConstant(nan);
         }
       });
+  // Colours along edges with a visible side (edges are independent: parallel). The samples
+  // (1 - t) a + t b lie on the edge, seen at the edge's quality.
+  const int samples = options_.edge_samples;
+  const int e_count = static_cast<int>(mesh_->edges.rows());
+  ColorRows& edge_colors = entry->edge_colors;
+  edge_colors.resize(static_cast<Eigen::Index>(e_count) * samples, 3);
+  tbb::parallel_for(tbb::blocked_range<int>(0, e_count, kEdgeGrain),
+                    [&](const tbb::blocked_range<int>& range) {
+                      for (int e = range.begin(); e < range.end(); ++e) {
+                        const Eigen::Index first_row = static_cast<Eigen::Index>(e) * samples;
+                        const int f0 = mesh_->edge_faces(e, 0), f1 = mesh_->edge_faces(e, 1);
+                        if (!vis.visible[f0] && !vis.visible[f1]) {
+                          edge_colors.middleRows(first_row, samples).setConstant(nan);
+                          continue;
+                        }
+                        const float quality = std::min(vis.visible[f0] ? vis.quality[f0] : 1.0f,
+                                                       vis.visible[f1] ? vis.quality[f1] : 1.0f);
+                        double tolerance_offset = 0.0, tolerance_slope = 0.0;
+                        e_ref.SurfaceTolerance(quality, &tolerance_offset, &tolerance_slope);
+                        const double* a = cam.col(mesh_->edges(e, 0)).data();
+                        const double* b = cam.col(mesh_->edges(e, 1)).data();
+                        for (int k = 0; k < samples; ++k) {
+                          const double t = (k + 0.5) / samples;
+                          const double x = (1 - t) * a[0] + t * b[0];
+                          const double y = (1 - t) * a[1] + t * b[1];
+                          const double z = (1 - t) * a[2] + t * b[2];
+                          Eigen::Vector3f color;
+                          if (sample(x, y, z, tolerance_offset + tolerance_slope * z, &color))
+                            edge_colors.row(first_row + k) = color.transpose();
+                          else
+                            edge_colors.row(first_row + k).setConstant(nan);
+                        }
+                      }
+                    });
+  // The entry's histogram level per triangle for pruning: 0 where not visible, else 1 + the bin
+  // of W (the last bin includes W = 1).
+  const int bins = options_.histogram_bins;
+  std::vector<uint8_t> level(vis.visible.size(), 0);
+  for (std::size_t f = 0; f < level.size(); ++f) {
+    if (vis.visible[f])
+      level[f] =
+          static_cast<uint8_t>(1 + std::min(bins - 1, static_cast<int>(vis.quality[f] * bins)));
+  }
   entries_.push_back(std::move(entry));
+  levels_.push_back(std::move(level));
   return size() - 1;
 }
 
@@ -227,25 +310,28 @@ bool ImagePool::IsUniquelyBest(int slot) const {
 }
 
 std::vector<uint8_t> ImagePool::UniquelyBestSlots() const {
-  const int bins = options_.histogram_bins;
-  const int f_count = static_cast<int>(mesh_->triangles.rows());
   const int slots = size();
-  const auto bin_of = [bins](float w) { return std::min(bins - 1, static_cast<int>(w * bins)); };
+  const std::size_t f_count = static_cast<std::size_t>(mesh_->triangles.rows());
+  // Per triangle: the best level over the slots, how many slots reach it (counted up to 2), and
+  // the level that makes a slot uniquely best there (0: none).
+  std::vector<uint8_t> best(f_count, 0), count(f_count, 0);
+  for (int s = 0; s < slots; ++s) {
+    const uint8_t* level = levels_[s].data();
+    for (std::size_t f = 0; f < f_count; ++f) best[f] = std::max(best[f], level[f]);
+  }
+  for (int s = 0; s < slots; ++s) {
+    const uint8_t* level = levels_[s].data();
+    for (std::size_t f = 0; f < f_count; ++f)
+      count[f] = std::min<uint8_t>(2, count[f] + (level[f] == best[f]));
+  }
+  std::vector<uint8_t>& unique = best;
+  for (std::size_t f = 0; f < f_count; ++f) unique[f] = count[f] == 1 ? best[f] : 0;
   std::vector<uint8_t> keep(slots, 0);
-  for (int f = 0; f < f_count; ++f) {
-    // The best bin over the slots that see f, and the only slot in it (-1: none or several).
-    int best_bin = -1, best_slot = -1;
-    for (int s = 0; s < slots; ++s) {
-      if (!entries_[s]->visibility.visible[f]) continue;
-      const int bin = bin_of(entries_[s]->visibility.quality[f]);
-      if (bin > best_bin) {
-        best_bin = bin;
-        best_slot = s;
-      } else if (bin == best_bin) {
-        best_slot = -1;
-      }
-    }
-    if (best_slot >= 0) keep[best_slot] = 1;
+  for (int s = 0; s < slots; ++s) {
+    const uint8_t* level = levels_[s].data();
+    uint8_t found = 0;
+    for (std::size_t f = 0; f < f_count; ++f) found |= (level[f] == unique[f]) & (unique[f] != 0);
+    keep[s] = found;
   }
   return keep;
 }
@@ -260,11 +346,13 @@ std::vector<int> ImagePool::Prune() {
     const int s = static_cast<int>(it - keep.begin());
     dropped.push_back(entries_[s]->frame_index);
     entries_.erase(entries_.begin() + s);
+    levels_.erase(levels_.begin() + s);
   }
   // Memory bound: beyond the hard cap the oldest go regardless.
   while (size() > options_.hard_max_images) {
     dropped.push_back(entries_.front()->frame_index);
     entries_.erase(entries_.begin());
+    levels_.erase(levels_.begin());
   }
   return dropped;
 }
@@ -272,6 +360,7 @@ std::vector<int> ImagePool::Prune() {
 std::size_t ImagePool::MemoryBytes() const {
   std::size_t bytes = 0;
   for (const auto& e : entries_) bytes += e->MemoryBytes();
+  for (const auto& l : levels_) bytes += l.size();
   return bytes;
 }
 

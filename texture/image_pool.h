@@ -30,7 +30,7 @@ struct TextureMesh {
 struct ImagePoolOptions {
   int max_images = 12;       // pruning starts above this many images; >= 1
   int hard_max_images = 24;  // oldest images are dropped regardless above this; >= max_images
-  int histogram_bins = 4;    // coarse histogram of W over the pool (pruning rule); >= 1
+  int histogram_bins = 4;    // coarse histogram of W over the pool (pruning rule); 1..255
   int crop_margin = 8;       // pixels kept around the subject's projection; >= 0
   int edge_samples = 5;      // colour samples along each edge for the seam cost; >= 2
   // Sample colours only from pixels showing the sampled surface: a pixel of the bilinear
@@ -97,6 +97,12 @@ struct PoolEntry {
     float fx, fy;
   };
   bool Cell(double u, double v, BilinearCell* cell) const;
+  // The surface-aware blend of SampleSurfaceAt over `cell` for a point at camera depth z (m):
+  // depth_at(x, y) is the z-buffer depth at crop pixel (x, y), asked only for taps of positive
+  // weight. false when no such tap is within `tolerance` of z.
+  template <class DepthAt>
+  bool BlendSurface(const BilinearCell& cell, double z, double tolerance, const DepthAt& depth_at,
+                    Eigen::Vector3f* color) const;
 };
 
 inline bool PoolEntry::Cell(double u, double v, BilinearCell* cell) const {
@@ -127,29 +133,40 @@ inline bool PoolEntry::Sample(const Eigen::Vector2d& pixel, Eigen::Vector3f* col
   return true;
 }
 
+template <class DepthAt>
+inline bool PoolEntry::BlendSurface(const BilinearCell& cell, double z, double tolerance,
+                                    const DepthAt& depth_at, Eigen::Vector3f* color) const {
+  const float fx = cell.fx, fy = cell.fy;
+  float total = 0.0f;
+  float sum[3] = {0.0f, 0.0f, 0.0f};
+  const auto tap = [&](int x, int y, const cv::Vec3b* row, float weight) {
+    if (weight <= 0.0f) return;
+    const float d = depth_at(x, y);
+    if (!(std::abs(d - z) <= tolerance)) return;
+    const cv::Vec3b& c = row[x];
+    for (int ch = 0; ch < 3; ++ch) sum[ch] += weight * c[ch];
+    total += weight;
+  };
+  const cv::Vec3b* row0 = image.ptr<cv::Vec3b>(cell.y0);
+  const cv::Vec3b* row1 = image.ptr<cv::Vec3b>(cell.y1);
+  tap(cell.x0, cell.y0, row0, (1 - fx) * (1 - fy));
+  tap(cell.x1, cell.y0, row0, fx * (1 - fy));
+  tap(cell.x0, cell.y1, row1, (1 - fx) * fy);
+  tap(cell.x1, cell.y1, row1, fx * fy);
+  if (total <= 0.0f) return false;
+  const float scale = 1.0f / (255.0f * total);
+  *color = Eigen::Vector3f(sum[0] * scale, sum[1] * scale, sum[2] * scale);
+  return true;
+}
+
 inline bool PoolEntry::SampleSurfaceAt(double u, double v, double z, double tolerance,
                                        bool fallback, Eigen::Vector3f* color) const {
   if (surface.depth.empty()) return Sample(Eigen::Vector2d(u, v), color);
   BilinearCell cell;
   if (!Cell(u, v, &cell)) return false;
-  const int x0 = cell.x0, y0 = cell.y0, x1 = cell.x1, y1 = cell.y1;
-  const float fx = cell.fx, fy = cell.fy;
-  const int xs[4] = {x0, x1, x0, x1}, ys[4] = {y0, y0, y1, y1};
-  const float weights[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy};
-  float total = 0.0f;
-  float sum[3] = {0.0f, 0.0f, 0.0f};
-  for (int k = 0; k < 4; ++k) {
-    if (weights[k] <= 0.0f) continue;
-    const float d = surface.At(xs[k] + offset.x(), ys[k] + offset.y());
-    if (!(std::abs(d - z) <= tolerance)) continue;
-    const cv::Vec3b& c = image.ptr<cv::Vec3b>(ys[k])[xs[k]];
-    for (int ch = 0; ch < 3; ++ch) sum[ch] += weights[k] * c[ch];
-    total += weights[k];
-  }
-  if (total <= 0.0f) return fallback && Sample(Eigen::Vector2d(u, v), color);
-  const float scale = 1.0f / (255.0f * total);
-  *color = Eigen::Vector3f(sum[0] * scale, sum[1] * scale, sum[2] * scale);
-  return true;
+  const auto depth_at = [this](int x, int y) { return surface.At(x + offset.x(), y + offset.y()); };
+  if (BlendSurface(cell, z, tolerance, depth_at, color)) return true;
+  return fallback && Sample(Eigen::Vector2d(u, v), color);
 }
 
 class ImagePool {
@@ -179,6 +196,8 @@ class ImagePool {
   ImagePoolOptions options_;
   VisibilityOptions visibility_options_;
   std::vector<std::unique_ptr<PoolEntry>> entries_;  // oldest first
+  // Per slot, per triangle: 0 where not visible, else 1 + the histogram bin of W.
+  std::vector<std::vector<uint8_t>> levels_;
 };
 
 }  // namespace artex

@@ -3,16 +3,37 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <sstream>
 
 #include "energies/texture_terms.h"
-#include "models/normals.h"
+#include "models/error.h"
 #include "render/rasterizer.h"
 
 namespace artex {
+namespace {
+
+// std::lround for |x| < 2^31 without the library call (halfway cases away from zero).
+inline int RoundHalfAwayFromZero(double x) {
+  const int t = static_cast<int>(x);  // towards zero
+  const double fraction = x - t;      // exact
+  return t + (fraction >= 0.5) - (fraction <= -0.5);
+}
+
+// Unit normal of the triangle (a, b, c) as ComputeTriangleNormals (models/normals.h) computes
+// it: zero when degenerate.
+inline Eigen::Vector3d UnitNormal(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                  const Eigen::Vector3d& c) {
+  const Eigen::Vector3d n = (b - a).cross(c - a);
+  const double norm = n.norm();
+  if (!(norm > 0.0) || !std::isfinite(norm)) return Eigen::Vector3d::Zero();
+  return n / norm;
+}
+
+}  // namespace
 
 bool VisibilityOptions::IsValid(std::string* error) const {
   std::ostringstream msg;
@@ -36,6 +57,12 @@ TriangleVisibility ComputeVisibility(const Eigen::MatrixX3d& vertices,
                                      const VisibilityOptions& options, SurfaceDepth* surface) {
   const int num_vertices = static_cast<int>(vertices.rows());
   const int num_triangles = static_cast<int>(triangles.rows());
+  if (num_triangles > 0 && (triangles.minCoeff() < 0 || triangles.maxCoeff() >= num_vertices)) {
+    std::ostringstream msg;
+    msg << "ComputeVisibility: triangles: expected vertex indices in [0, " << num_vertices
+        << "), found " << triangles.minCoeff() << ".." << triangles.maxCoeff();
+    throw Error(msg.str());
+  }
   const RasterOptions raster_options;
   // Camera coordinates of every vertex once.
   const Eigen::Matrix3d rotation = camera.world_to_camera.linear();
@@ -75,37 +102,37 @@ TriangleVisibility ComputeVisibility(const Eigen::MatrixX3d& vertices,
     x1 = std::min(full_w - 1, static_cast<int>(std::ceil(max_x)) + 1);
     y1 = std::min(full_h - 1, static_cast<int>(std::ceil(max_y)) + 1);
   }
-  RasterBuffers buffers;
+  std::vector<float> depth;  // zcam.width * zcam.height when any_pixels
   const bool any_pixels = x1 >= x0 && y1 >= y0;
   if (any_pixels) {
     zcam.width = x1 - x0 + 1;
     zcam.height = y1 - y0 + 1;
     zcam.cx -= x0;
     zcam.cy -= y0;
-    Rasterize(vertices, triangles, zcam, raster_options, &buffers);
+    RasterizeDepth(vertices, triangles, zcam, raster_options, &depth);
   }
   const float kNoSurface = std::numeric_limits<float>::infinity();
-  const float* depth = buffers.depth.data();  // stays valid when moved into *surface
+  const int depth_width = any_pixels ? zcam.width : 0;
+  const int depth_height = any_pixels ? zcam.height : 0;
+  const float* depth_data = depth.data();  // stays valid when moved into *surface
+  // The z-buffer at full-image position (u, v), |u|, |v| < 2^31 (nearest raster pixel).
   const auto zbuffer = [&](double u, double v) {
-    if (!any_pixels) return kNoSurface;
     const double su = s == 1.0 ? u : (u + 0.5) * s - 0.5;
     const double sv = s == 1.0 ? v : (v + 0.5) * s - 0.5;
-    const int x = static_cast<int>(std::lround(su)) - x0;
-    const int y = static_cast<int>(std::lround(sv)) - y0;
-    if (x < 0 || y < 0 || x >= buffers.width || y >= buffers.height) return kNoSurface;
-    return depth[static_cast<std::size_t>(y) * buffers.width + x];
+    const int x = RoundHalfAwayFromZero(su) - x0;
+    const int y = RoundHalfAwayFromZero(sv) - y0;
+    if (x < 0 || y < 0 || x >= depth_width || y >= depth_height) return kNoSurface;
+    return depth_data[static_cast<std::size_t>(y) * depth_width + x];
   };
   if (surface != nullptr) {
     surface->scale = s;
     surface->x0 = x0;
     surface->y0 = y0;
-    surface->width = any_pixels ? buffers.width : 0;
-    surface->height = any_pixels ? buffers.height : 0;
-    surface->depth = any_pixels ? std::move(buffers.depth) : std::vector<float>();
+    surface->width = depth_width;
+    surface->height = depth_height;
+    surface->depth = std::move(depth);
   }
 
-  Eigen::MatrixX3d normals;
-  ComputeTriangleNormals(vertices, triangles, &normals);
   TriangleVisibility out;
   out.visible.assign(num_triangles, 0);
   out.quality.assign(num_triangles, 0.0f);
@@ -119,8 +146,7 @@ TriangleVisibility ComputeVisibility(const Eigen::MatrixX3d& vertices,
           const Eigen::Vector3d b = vertices.row(triangles(f, 1));
           const Eigen::Vector3d c = vertices.row(triangles(f, 2));
           const Eigen::Vector3d centroid = (a + b + c) / 3.0;
-          const double w =
-              TriangleQuality(normals.row(f).transpose(), (centroid - center).normalized());
+          const double w = TriangleQuality(UnitNormal(a, b, c), (centroid - center).normalized());
           if (w <= 0.0) continue;
           // Samples in camera coordinates (linear in the world points).
           const Eigen::Vector3d ca = cam.col(triangles(f, 0)), cb = cam.col(triangles(f, 1)),
