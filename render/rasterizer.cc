@@ -63,6 +63,17 @@ struct Edge {
   bool Inside(double value) const { return value > 0 || (value == 0 && owns_zero); }
 };
 
+// std::max(0, static_cast<int>(std::ceil(x))) and std::min(hi, static_cast<int>(std::floor(x)))
+// for finite x with x <= hi (ceil) or x >= 0 (floor), hi >= 0, without library calls (and well
+// defined beyond the int range).
+inline int CeilAtLeastZero(double x, int hi) {
+  if (!(x > 0.0)) return 0;
+  if (x >= hi) return hi;
+  const int t = static_cast<int>(x);  // floor for positive x
+  return t + (t < x);
+}
+inline int FloorAtMost(double x, int hi) { return x >= hi ? hi : static_cast<int>(x); }
+
 // What binning needs of a triangle (computed once): drawn or not, orientation, pixel box.
 struct TriangleBox {
   bool drawn = false;
@@ -151,10 +162,10 @@ void RasterizeInto(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& tri
                         if (max_x < 0 || max_y < 0 || min_x > width - 1 || min_y > height - 1)
                           continue;
                         TriangleBox& b = boxes[f];
-                        b.x0 = std::max(0, static_cast<int>(std::ceil(min_x)));
-                        b.x1 = std::min(width - 1, static_cast<int>(std::floor(max_x)));
-                        b.y0 = std::max(0, static_cast<int>(std::ceil(min_y)));
-                        b.y1 = std::min(height - 1, static_cast<int>(std::floor(max_y)));
+                        b.x0 = CeilAtLeastZero(min_x, width - 1);
+                        b.x1 = FloorAtMost(max_x, width - 1);
+                        b.y0 = CeilAtLeastZero(min_y, height - 1);
+                        b.y1 = FloorAtMost(max_y, height - 1);
                         b.flipped = !(area > 0);
                         b.drawn = b.x0 <= b.x1 && b.y0 <= b.y1;
                       }
@@ -162,24 +173,18 @@ void RasterizeInto(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& tri
 
   // Binning into bands (serial). With ids and barycentrics triangles keep their index order
   // (the first of equal depths wins). The depth alone is the minimum over the triangles, whatever
-  // the order: triangles facing the camera go first, so that the occlusion test below skips
-  // most of the others.
+  // the order: triangles facing the camera (negative area for counter-clockwise meshes) go
+  // first, so that the occlusion test below skips most of the others.
   const int num_bands = (height + kBandRows - 1) / kBandRows;
-  std::vector<std::vector<int>> bins(num_bands);
-  const auto bin = [&](bool facing_only, bool facing) {
-    for (int f = 0; f < num_triangles; ++f) {
-      const TriangleBox& box = boxes[f];
-      if (!box.drawn || (facing_only && box.flipped != facing)) continue;
-      for (int band = box.y0 / kBandRows; band <= box.y1 / kBandRows; ++band)
-        bins[band].push_back(f);
-    }
-  };
-  if constexpr (kSurface) {
-    bin(false, false);
-  } else {
-    bin(true, true);  // flipped: negative area, facing the camera (counter-clockwise meshes)
-    bin(true, false);
+  std::vector<std::vector<int>> bins(num_bands), later_bins(num_bands);
+  for (int f = 0; f < num_triangles; ++f) {
+    const TriangleBox& box = boxes[f];
+    if (!box.drawn) continue;
+    std::vector<std::vector<int>>& to = kSurface || box.flipped ? bins : later_bins;
+    for (int band = box.y0 / kBandRows; band <= box.y1 / kBandRows; ++band) to[band].push_back(f);
   }
+  for (int band = 0; band < num_bands; ++band)
+    bins[band].insert(bins[band].end(), later_bins[band].begin(), later_bins[band].end());
 
   tbb::parallel_for(
       tbb::blocked_range<int>(0, num_bands, 1), [&](const tbb::blocked_range<int>& range) {

@@ -2,6 +2,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 
 #include <algorithm>
 #include <array>
@@ -64,6 +65,73 @@ class SurfaceSampler {
       direct_;  // full-scale z-buffer: crop pixel (x, y) is z-buffer pixel (x + dx_, y + dy_)
   const int dx_, dy_;
 };
+
+// PoolEntry::vertex_colors: the colour of every vertex v with quality[v] <= 1 and a finite
+// projection pixels[v], seen at that quality; cam: 3 x V camera coordinates (m).
+void SampleVertexColors(const PoolEntry& entry, const Eigen::Matrix3Xd& cam,
+                        const std::vector<Eigen::Vector2d>& pixels,
+                        const std::vector<float>& quality, ColorRows* colors) {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const SurfaceSampler sample(entry);
+  const int v_count = static_cast<int>(cam.cols());
+  colors->resize(v_count, 3);
+  const auto sample_range = [&](const tbb::blocked_range<int>& range) {
+    for (int v = range.begin(); v < range.end(); ++v) {
+      const double x = cam(0, v), y = cam(1, v), z = cam(2, v);
+      Eigen::Vector3f color;
+      bool seen = false;
+      if (quality[v] <= 1.0f && pixels[v].allFinite()) {
+        double tolerance_offset = 0.0, tolerance_slope = 0.0;
+        entry.SurfaceTolerance(quality[v], &tolerance_offset, &tolerance_slope);
+        seen = sample(x, y, z, tolerance_offset + tolerance_slope * z, &color);
+      }
+      if (seen)
+        colors->row(v) = color.transpose();
+      else
+        colors->row(v).setConstant(nan);
+    }
+  };
+  tbb::parallel_for(tbb::blocked_range<int>(0, v_count, kVertexGrain), sample_range);
+}
+
+// PoolEntry::edge_colors: `samples` colours along every edge with a visible side, at the points
+// (1 - t) a + t b, t = (k + 0.5) / samples, seen at the lower quality of its visible sides.
+void SampleEdgeColors(const PoolEntry& entry, const TextureMesh& mesh, const Eigen::Matrix3Xd& cam,
+                      int samples, ColorRows* colors) {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const SurfaceSampler sample(entry);
+  const TriangleVisibility& vis = entry.visibility;
+  const int e_count = static_cast<int>(mesh.edges.rows());
+  colors->resize(static_cast<Eigen::Index>(e_count) * samples, 3);
+  const auto sample_range = [&](const tbb::blocked_range<int>& range) {
+    for (int e = range.begin(); e < range.end(); ++e) {
+      const Eigen::Index first_row = static_cast<Eigen::Index>(e) * samples;
+      const int f0 = mesh.edge_faces(e, 0), f1 = mesh.edge_faces(e, 1);
+      if (!vis.visible[f0] && !vis.visible[f1]) {
+        colors->middleRows(first_row, samples).setConstant(nan);
+        continue;
+      }
+      const float quality = std::min(vis.visible[f0] ? vis.quality[f0] : 1.0f,
+                                     vis.visible[f1] ? vis.quality[f1] : 1.0f);
+      double tolerance_offset = 0.0, tolerance_slope = 0.0;
+      entry.SurfaceTolerance(quality, &tolerance_offset, &tolerance_slope);
+      const double* a = cam.col(mesh.edges(e, 0)).data();
+      const double* b = cam.col(mesh.edges(e, 1)).data();
+      for (int k = 0; k < samples; ++k) {
+        const double t = (k + 0.5) / samples;
+        const double x = (1 - t) * a[0] + t * b[0];
+        const double y = (1 - t) * a[1] + t * b[1];
+        const double z = (1 - t) * a[2] + t * b[2];
+        Eigen::Vector3f color;
+        if (sample(x, y, z, tolerance_offset + tolerance_slope * z, &color))
+          colors->row(first_row + k) = color.transpose();
+        else
+          colors->row(first_row + k).setConstant(nan);
+      }
+    }
+  };
+  tbb::parallel_for(tbb::blocked_range<int>(0, e_count, kEdgeGrain), sample_range);
+}
 }  // namespace
 
 TextureMesh TextureMesh::Build(const Eigen::MatrixX3i& triangles) {
@@ -154,53 +222,53 @@ int ImagePool::Add(int frame_index, const cv::Mat& color_bgr, const PinholeCamer
   auto entry = std::make_unique<PoolEntry>();
   entry->frame_index = frame_index;
   entry->camera = camera;
-  entry->vertices = posed_vertices;
-  entry->visibility =
-      ComputeVisibility(posed_vertices, mesh_->triangles, camera, visibility_options_,
-                        options_.surface_aware_sampling ? &entry->surface : nullptr);
   entry->depth_tolerance = visibility_options_.depth_tolerance;
-  // Camera coordinates of every vertex (sample points along edges are linear in them).
   const int v_count = static_cast<int>(posed_vertices.rows());
-  const Eigen::Matrix3d rotation = camera.world_to_camera.linear();
-  const Eigen::Vector3d translation = camera.world_to_camera.translation();
   Eigen::Matrix3Xd cam(3, v_count);
-  for (int v = 0; v < v_count; ++v)
-    cam.col(v) = rotation * posed_vertices.row(v).transpose() + translation;
-  const auto project = [&camera](const Eigen::Vector3d& c) {
-    return Eigen::Vector2d(camera.fx * c.x() / c.z() + camera.cx,
-                           camera.fy * c.y() / c.z() + camera.cy);
-  };
-  // Crop to the projection of the subject.
-  std::vector<Eigen::Vector2d> pixels(v_count);
-  double min_x = std::numeric_limits<double>::infinity(), min_y = min_x;
-  double max_x = -min_x, max_y = -min_x;
-  for (int v = 0; v < v_count; ++v) {
-    pixels[v] = project(cam.col(v));
-    if (!(cam(2, v) > 0.0)) pixels[v].setConstant(std::numeric_limits<double>::quiet_NaN());
-    if (!pixels[v].allFinite()) continue;
-    min_x = std::min(min_x, pixels[v].x());
-    min_y = std::min(min_y, pixels[v].y());
-    max_x = std::max(max_x, pixels[v].x());
-    max_y = std::max(max_y, pixels[v].y());
-  }
-  const int x0 =
-      std::clamp(static_cast<int>(std::floor(min_x)) - options_.crop_margin, 0, camera.width);
-  const int y0 =
-      std::clamp(static_cast<int>(std::floor(min_y)) - options_.crop_margin, 0, camera.height);
-  const int x1 =
-      std::clamp(static_cast<int>(std::ceil(max_x)) + options_.crop_margin + 1, 0, camera.width);
-  const int y1 =
-      std::clamp(static_cast<int>(std::ceil(max_y)) + options_.crop_margin + 1, 0, camera.height);
-  if (x1 > x0 && y1 > y0) {
-    entry->image = color_bgr(cv::Rect(x0, y0, x1 - x0, y1 - y0)).clone();
-    entry->offset = {x0, y0};
-  } else {
-    entry->image = cv::Mat(1, 1, CV_8UC3, cv::Scalar(0, 0, 0));
-    entry->offset = {-10, -10};  // nothing samples inside
-  }
-  // Colours at vertices that belong to a visible triangle (with vertex_colors_need_full_ring:
-  // whose triangles are all visible), seen at the lowest quality of those.
-  const float nan = std::numeric_limits<float>::quiet_NaN();
+  std::vector<Eigen::Vector2d> pixels(v_count);  // NaN behind the camera
+  // The visibility z-buffer and the crop do not depend on each other: computed concurrently.
+  tbb::parallel_invoke(
+      [&] {
+        entry->visibility =
+            ComputeVisibility(posed_vertices, mesh_->triangles, camera, visibility_options_,
+                              options_.surface_aware_sampling ? &entry->surface : nullptr);
+      },
+      [&] {
+        entry->vertices = posed_vertices;
+        // Camera coordinates of every vertex (sample points along edges are linear in them).
+        const Eigen::Matrix3d rotation = camera.world_to_camera.linear();
+        const Eigen::Vector3d translation = camera.world_to_camera.translation();
+        for (int v = 0; v < v_count; ++v)
+          cam.col(v) = rotation * posed_vertices.row(v).transpose() + translation;
+        // Crop to the projection of the subject.
+        double min_x = std::numeric_limits<double>::infinity(), min_y = min_x;
+        double max_x = -min_x, max_y = -min_x;
+        for (int v = 0; v < v_count; ++v) {
+          pixels[v] = Eigen::Vector2d(camera.fx * cam(0, v) / cam(2, v) + camera.cx,
+                                      camera.fy * cam(1, v) / cam(2, v) + camera.cy);
+          if (!(cam(2, v) > 0.0)) pixels[v].setConstant(std::numeric_limits<double>::quiet_NaN());
+          if (!pixels[v].allFinite()) continue;
+          min_x = std::min(min_x, pixels[v].x());
+          min_y = std::min(min_y, pixels[v].y());
+          max_x = std::max(max_x, pixels[v].x());
+          max_y = std::max(max_y, pixels[v].y());
+        }
+        const int margin = options_.crop_margin;
+        const int x0 = std::clamp(static_cast<int>(std::floor(min_x)) - margin, 0, camera.width);
+        const int y0 = std::clamp(static_cast<int>(std::floor(min_y)) - margin, 0, camera.height);
+        const int x1 = std::clamp(static_cast<int>(std::ceil(max_x)) + margin + 1, 0, camera.width);
+        const int y1 =
+            std::clamp(static_cast<int>(std::ceil(max_y)) + margin + 1, 0, camera.height);
+        if (x1 > x0 && y1 > y0) {
+          entry->image = color_bgr(cv::Rect(x0, y0, x1 - x0, y1 - y0)).clone();
+          entry->offset = {x0, y0};
+        } else {
+          entry->image = cv::Mat(1, 1, CV_8UC3, cv::Scalar(0, 0, 0));
+          entry->offset = {-10, -10};  // nothing samples inside
+        }
+      });
+  // Vertex colours where a triangle around is visible (with vertex_colors_need_full_ring: all
+  // are), seen at the lowest quality of those; colours along edges.
   const TriangleVisibility& vis = entry->visibility;
   std::vector<float> vertex_quality(v_count, 2.0f);  // > 1: not seen
   for (int f = 0; f < mesh_->triangles.rows(); ++f) {
@@ -216,61 +284,8 @@ int ImagePool::Add(int frame_index, const cv::Mat& color_bgr, const PinholeCamer
       for (int c = 0; c < 3; ++c) vertex_quality[mesh_->triangles(f, c)] = 2.0f;
     }
   }
-  const SurfaceSampler sample(*entry);
-  const PoolEntry& e_ref = *entry;
-  ColorRows& vertex_colors = entry->vertex_colors;
-  vertex_colors.resize(v_count, 3);
-  tbb::parallel_for(
-      tbb::blocked_range<int>(0, v_count, kVertexGrain), [&](const tbb::blocked_range<int>& range) {
-        for (int v = range.begin(); v < range.end(); ++v) {
-          Eigen::Vector3f color;
-          bool seen = false;
-          if (vertex_quality[v] <= 1.0f && pixels[v].allFinite()) {
-            double tolerance_offset = 0.0, tolerance_slope = 0.0;
-            e_ref.SurfaceTolerance(vertex_quality[v], &tolerance_offset, &tolerance_slope);
-            const double z = cam(2, v);
-            seen = sample(cam(0, v), cam(1, v), z, tolerance_offset + tolerance_slope * z, &color);
-          }
-          if (seen)
-            vertex_colors.row(v) = color.transpose();
-          else
-            vertex_colors.row(v).setConstant(nan);
-        }
-      });
-  // Colours along edges with a visible side (edges are independent: parallel). The samples
-  // (1 - t) a + t b lie on the edge, seen at the edge's quality.
-  const int samples = options_.edge_samples;
-  const int e_count = static_cast<int>(mesh_->edges.rows());
-  ColorRows& edge_colors = entry->edge_colors;
-  edge_colors.resize(static_cast<Eigen::Index>(e_count) * samples, 3);
-  tbb::parallel_for(tbb::blocked_range<int>(0, e_count, kEdgeGrain),
-                    [&](const tbb::blocked_range<int>& range) {
-                      for (int e = range.begin(); e < range.end(); ++e) {
-                        const Eigen::Index first_row = static_cast<Eigen::Index>(e) * samples;
-                        const int f0 = mesh_->edge_faces(e, 0), f1 = mesh_->edge_faces(e, 1);
-                        if (!vis.visible[f0] && !vis.visible[f1]) {
-                          edge_colors.middleRows(first_row, samples).setConstant(nan);
-                          continue;
-                        }
-                        const float quality = std::min(vis.visible[f0] ? vis.quality[f0] : 1.0f,
-                                                       vis.visible[f1] ? vis.quality[f1] : 1.0f);
-                        double tolerance_offset = 0.0, tolerance_slope = 0.0;
-                        e_ref.SurfaceTolerance(quality, &tolerance_offset, &tolerance_slope);
-                        const double* a = cam.col(mesh_->edges(e, 0)).data();
-                        const double* b = cam.col(mesh_->edges(e, 1)).data();
-                        for (int k = 0; k < samples; ++k) {
-                          const double t = (k + 0.5) / samples;
-                          const double x = (1 - t) * a[0] + t * b[0];
-                          const double y = (1 - t) * a[1] + t * b[1];
-                          const double z = (1 - t) * a[2] + t * b[2];
-                          Eigen::Vector3f color;
-                          if (sample(x, y, z, tolerance_offset + tolerance_slope * z, &color))
-                            edge_colors.row(first_row + k) = color.transpose();
-                          else
-                            edge_colors.row(first_row + k).setConstant(nan);
-                        }
-                      }
-                    });
+  SampleVertexColors(*entry, cam, pixels, vertex_quality, &entry->vertex_colors);
+  SampleEdgeColors(*entry, *mesh_, cam, options_.edge_samples, &entry->edge_colors);
   // The entry's histogram level per triangle for pruning: 0 where not visible, else 1 + the bin
   // of W (the last bin includes W = 1).
   const int bins = options_.histogram_bins;

@@ -23,15 +23,18 @@ inline int RoundHalfAwayFromZero(double x) {
   return t + (fraction >= 0.5) - (fraction <= -0.5);
 }
 
-// Unit normal of the triangle (a, b, c) as ComputeTriangleNormals (models/normals.h) computes
-// it: zero when degenerate.
-inline Eigen::Vector3d UnitNormal(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
-                                  const Eigen::Vector3d& c) {
-  const Eigen::Vector3d n = (b - a).cross(c - a);
+// The unit normal of ComputeTriangleNormals (models/normals.h) from the area vector
+// n = (b - a) x (c - a): zero when degenerate.
+inline Eigen::Vector3d UnitNormal(const Eigen::Vector3d& n) {
   const double norm = n.norm();
   if (!(norm > 0.0) || !std::isfinite(norm)) return Eigen::Vector3d::Zero();
   return n / norm;
 }
+
+// A triangle whose area vector n and view vector d (centroid - camera centre) have
+// n . d > kFacingAwayMargin |n|_1 |d|_1 faces away by far more than the rounding errors of the
+// unit vectors and of their dot product (~1e-15): its quality W is 0.
+constexpr double kFacingAwayMargin = 1e-9;
 
 }  // namespace
 
@@ -146,7 +149,11 @@ TriangleVisibility ComputeVisibility(const Eigen::MatrixX3d& vertices,
           const Eigen::Vector3d b = vertices.row(triangles(f, 1));
           const Eigen::Vector3d c = vertices.row(triangles(f, 2));
           const Eigen::Vector3d centroid = (a + b + c) / 3.0;
-          const double w = TriangleQuality(UnitNormal(a, b, c), (centroid - center).normalized());
+          const Eigen::Vector3d n = (b - a).cross(c - a);
+          const Eigen::Vector3d view = centroid - center;
+          if (n.dot(view) > kFacingAwayMargin * n.cwiseAbs().sum() * view.cwiseAbs().sum())
+            continue;
+          const double w = TriangleQuality(UnitNormal(n), view.normalized());
           if (w <= 0.0) continue;
           // Samples in camera coordinates (linear in the world points).
           const Eigen::Vector3d ca = cam.col(triangles(f, 0)), cb = cam.col(triangles(f, 1)),
