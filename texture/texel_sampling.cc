@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
+#include <cstring>
 #include <limits>
 #include <sstream>
 
@@ -15,6 +17,294 @@ namespace {
 // Triangles projecting onto more pixels than this skip the whole-triangle z-buffer check of
 // SampleTriangle (the per-texel tests are then cheaper).
 constexpr int kMaxSurfaceCheckPixels = 4096;
+
+// Fast path of SampleTriangle. A triangle whose projection keeps kInsideMargin pixels from the
+// border of the crop's interpolation range is sampled from its footprint (the crop pixels and
+// z-buffer depths under it, read once) without per-texel bounds checks; the margin is far above
+// the rounding of a texel's projection against its corners' (< 1e-12 px in double) and the
+// float error bound below. Texels are projected in blocks of kTexelBlock (loops over arrays,
+// which the compiler vectorises).
+constexpr double kInsideMargin = 1e-3;
+constexpr int kTexelBlock = 64;
+// Texels whose colour is plain bilinear (all texels of a triangle without surface-aware tests)
+// get their positions in float when the footprint has at most kFloatFootprintSide pixels a side
+// and the corner depths differ by a factor of at most kFloatDepthRatio; otherwise, and for
+// surface-aware sampling (whose depth tests must see exactly the entry's cells and depths), in
+// double exactly as PoolEntry::SampleSurface. Float positions are evaluated relative to the
+// footprint's centre, |x| <= 4 px: with u = 2^-24 and depth ratio r <= 1.1, the numerator (a
+// 3-term dot product of rounded coefficients) and denominator errors contribute <= 16 r u each,
+// the reciprocal and product 8 u, the shift back by the centre 8 u: <= 52 u ~ 3.1e-6 px per
+// axis. A bilinear colour in [0, 1] changes by at most 1 per pixel along each axis, so colours
+// differ from the double-precision ones by < 7e-6.
+constexpr int kFloatFootprintSide = 8;
+constexpr double kFloatDepthRatio = 1.1;
+// Relative widening of a triangle's corner depth range that contains the depth of each of its
+// texels: texel barycentrics are floats >= 0 whose sum is 1 within ~6e-8.
+constexpr double kDepthRangeMargin = 1e-6;
+
+// The projection of a triangle's texels: operations and their order are those of
+// PoolEntry::SampleSurface, so every texel gets exactly its pixel position and depth there.
+struct TriangleProjection {
+  Eigen::Vector3d corner[3];  // camera coordinates (m)
+  double fx, fy, cx, cy;      // intrinsics (pixels)
+
+  // Full-image pixel (u, v) and camera depth z of the point with barycentrics w0, w1, w2.
+  void Project(double w0, double w1, double w2, double* u, double* v, double* z) const {
+    const double x = w0 * corner[0].x() + w1 * corner[1].x() + w2 * corner[2].x();
+    const double y = w0 * corner[0].y() + w1 * corner[1].y() + w2 * corner[2].y();
+    *z = w0 * corner[0].z() + w1 * corner[1].z() + w2 * corner[2].z();
+    const double inv_z = 1.0 / *z;
+    *u = fx * x * inv_z + cx;
+    *v = fy * y * inv_z + cy;
+  }
+};
+
+// SampleTriangle's whole-triangle z-buffer check: every depth depth_at(x, y) of the pixels
+// x0..x1, y0..y1 is within `tolerance` of every depth in [z_min, z_max].
+// Rows are tested whole (no early exit inside a row, which lets the compiler vectorise).
+template <typename DepthAt>
+bool AllNearSurface(int x0, int x1, int y0, int y1, const DepthAt& depth_at, double z_min,
+                    double z_max, double tolerance) {
+  for (int y = y0; y <= y1; ++y) {
+    bool near = true;
+    for (int x = x0; x <= x1; ++x) {
+      const double d = depth_at(x, y);
+      near &= (d - z_min <= tolerance) & (z_max - d <= tolerance);
+    }
+    if (!near) return false;
+  }
+  return true;
+}
+
+// The crop pixels around one triangle's projection: colours as floats (channels / 255, 3 per
+// pixel, rows of `width` pixels) and, for surface-aware sampling, z-buffer depths
+// (SurfaceDepth::At: +inf where there is no surface) and the outcomes of the depth test that
+// are the same for every texel depth of the triangle.
+struct Footprint {
+  static constexpr int kMaxPixels = 1024;  // larger footprints take the general path
+  int x0 = 0, y0 = 0;                      // crop pixel of element 0
+  int width = 0, height = 0;
+  // One float of padding: a pixel is read as 4 lanes (its 3 channels and one ignored value).
+  float color[3 * kMaxPixels + 1];
+  float depth[kMaxPixels];
+  // Per pixel, the outcome of PoolEntry::SampleSurfaceAt's depth test when it is the same for
+  // every texel depth of the triangle (kPasses, kFails), else 0.
+  static constexpr uint8_t kPasses = 1, kFails = 2;
+  uint8_t outcome[kMaxPixels];
+  // Per cell, by the element of its tap (x0, y0): 1 when the depth test passes at all 4 taps
+  // or fails at all 4 for every texel depth (then the surface-aware colour is the plain one).
+  uint8_t uniform[kMaxPixels];
+
+  void ReadColor(const cv::Mat& image) {
+    constexpr float kInv255 = 1.0f / 255.0f;
+    for (int y = 0; y < height; ++y) {
+      const uint8_t* src = image.ptr<uint8_t>(y0 + y) + 3 * x0;
+      float* dst = color + 3 * y * width;
+      for (int i = 0; i < 3 * width; ++i) dst[i] = src[i] * kInv255;
+    }
+    color[3 * width * height] = 0.0f;
+  }
+
+  void ReadDepth(const SurfaceDepth& surface, const Eigen::Vector2i& offset) {
+    const int sx = x0 + offset.x() - surface.x0, sy = y0 + offset.y() - surface.y0;
+    if (surface.scale == 1.0 && sx >= 0 && sy >= 0 && sx + width <= surface.width &&
+        sy + height <= surface.height) {
+      for (int y = 0; y < height; ++y) {
+        std::memcpy(depth + y * width,
+                    surface.depth.data() + static_cast<std::size_t>(sy + y) * surface.width + sx,
+                    width * sizeof(float));
+      }
+      return;
+    }
+    for (int y = 0; y < height; ++y) {
+      for (int x = 0; x < width; ++x)
+        depth[y * width + x] = surface.At(x0 + x + offset.x(), y0 + y + offset.y());
+    }
+  }
+  float DepthAt(int x, int y) const { return depth[y * width + x]; }
+
+  // Fills `outcome` and `uniform` for texel depths z in [z_lo, z_hi] (z_lo > 0) and the tolerance
+  // tolerance_offset + tolerance_slope * z of PoolEntry::SampleSurfaceAt. A tap's outcome is
+  // decided at the ends of the range: rounding is monotone, so a test that passes (fails) there
+  // with the smallest (largest) tolerance does so for every z in between, exactly as evaluated
+  // per texel.
+  // Returns whether every cell is uniform.
+  bool FindUniformCells(double z_lo, double z_hi, double tolerance_offset, double tolerance_slope) {
+    const double tolerance_lo = tolerance_offset + tolerance_slope * z_lo;
+    const double tolerance_hi = tolerance_offset + tolerance_slope * z_hi;
+    const double tolerance_min = std::min(tolerance_lo, tolerance_hi);
+    const double tolerance_max = std::max(tolerance_lo, tolerance_hi);
+    for (int i = 0; i < width * height; ++i) {
+      const double d = depth[i];
+      const bool passes = (d - z_lo <= tolerance_min) & (z_hi - d <= tolerance_min);
+      const bool fails = (d - z_hi > tolerance_max) | (z_lo - d > tolerance_max);
+      outcome[i] = passes * kPasses + fails * kFails;
+    }
+    bool all_uniform = true;
+    for (int y = 0; y + 1 < height; ++y) {
+      for (int x = 0; x + 1 < width; ++x) {
+        const int i = y * width + x;
+        uniform[i] =
+            (outcome[i] & outcome[i + 1] & outcome[i + width] & outcome[i + width + 1]) != 0;
+        all_uniform &= uniform[i];
+      }
+    }
+    return all_uniform;
+  }
+};
+
+// The projection of a triangle's texels in float, as footprint coordinates (pixels from
+// footprint pixel (0, 0)): the projective map (w . hx, w . hy) / (w . z) of homogeneous corner
+// coordinates, relative to the footprint's centre and scaled by the first corner's depth
+// (values ~1; see kFloatFootprintSide).
+struct FloatFootprintMap {
+  float hx[3], hy[3], z[3];
+  float centre_x, centre_y;
+
+  FloatFootprintMap(const TriangleProjection& projection, const Footprint& footprint,
+                    const Eigen::Vector2i& offset)
+      : centre_x(static_cast<float>(footprint.width / 2)),
+        centre_y(static_cast<float>(footprint.height / 2)) {
+    const double cx = projection.cx - offset.x() - footprint.x0 - centre_x;
+    const double cy = projection.cy - offset.y() - footprint.y0 - centre_y;
+    const double scale = 1.0 / projection.corner[0].z();
+    for (int k = 0; k < 3; ++k) {
+      const Eigen::Vector3d& c = projection.corner[k];
+      hx[k] = static_cast<float>((projection.fx * c.x() + cx * c.z()) * scale);
+      hy[k] = static_cast<float>((projection.fy * c.y() + cy * c.z()) * scale);
+      z[k] = static_cast<float>(c.z() * scale);
+    }
+  }
+};
+
+// The bilinear cells of up to kTexelBlock texels in a Footprint: PoolEntry::Cell for positions
+// whose cells lie inside the crop (so no clamping).
+struct FootprintCells {
+  int index[kTexelBlock];  // footprint element of tap (x0, y0); (x0 + 1, y0) is index + 1...
+  float fx[kTexelBlock];   // fractions, as PoolEntry::Cell
+  float fy[kTexelBlock];
+  double depth[kTexelBlock];  // camera depth (m) of the texel's point (double projection only)
+
+  // Texels at positions first .. first + n - 1 (n <= kTexelBlock) of `map`, exactly as
+  // PoolEntry::SampleSurface and PoolEntry::Cell (offset: the crop origin).
+  void Project(const TriangleProjection& projection, const Eigen::Vector2i& offset,
+               const Footprint& footprint, const AtlasMap& map, int first, int n);
+  // The same in float (no depths).
+  void Project(const FloatFootprintMap& m, int width, const AtlasMap& map, int first, int n);
+};
+
+void FootprintCells::Project(const TriangleProjection& projection, const Eigen::Vector2i& offset,
+                             const Footprint& footprint, const AtlasMap& map, int first, int n) {
+  const float* b0 = map.barycentrics(0) + first;
+  const float* b1 = map.barycentrics(1) + first;
+  const float* b2 = map.barycentrics(2) + first;
+  const double ox = offset.x(), oy = offset.y();
+  // Crop pixel (x0, y0) is footprint element (y0 - footprint.y0) * width + x0 - footprint.x0.
+  const double origin = static_cast<double>(footprint.y0) * footprint.width + footprint.x0;
+  for (int i = 0; i < n; ++i) {
+    double u, v;
+    projection.Project(b0[i], b1[i], b2[i], &u, &v, &depth[i]);
+    const double x = u - ox, y = v - oy;  // crop pixels
+    // Cell corner (x0, y0) = (int) (x, y), held in double (exact small integers).
+    const double x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+    fx[i] = static_cast<float>(x - x0);
+    fy[i] = static_cast<float>(y - y0);
+    index[i] = static_cast<int>(y0 * footprint.width + x0 - origin);
+  }
+}
+
+void FootprintCells::Project(const FloatFootprintMap& m, int width, const AtlasMap& map, int first,
+                             int n) {
+  const float* b0 = map.barycentrics(0) + first;
+  const float* b1 = map.barycentrics(1) + first;
+  const float* b2 = map.barycentrics(2) + first;
+  for (int i = 0; i < n; ++i) {
+    const float w0 = b0[i], w1 = b1[i], w2 = b2[i];
+    const float inv_z = 1.0f / (w0 * m.z[0] + w1 * m.z[1] + w2 * m.z[2]);
+    const float x = (w0 * m.hx[0] + w1 * m.hx[1] + w2 * m.hx[2]) * inv_z + m.centre_x;
+    const float y = (w0 * m.hy[0] + w1 * m.hy[1] + w2 * m.hy[2]) * inv_z + m.centre_y;
+    const float x0 = static_cast<int>(x), y0 = static_cast<int>(y);  // exact small integers
+    fx[i] = x - x0;
+    fy[i] = y - y0;
+    index[i] = static_cast<int>(y0 * width + x0);
+  }
+}
+
+// Stores a texel's colour: 4 lanes at once when `spill` (the 4th lands on the next texel's
+// first channel, which is written afterwards), else 3 floats.
+inline void PutTexel(const float rgbx[4], bool spill, float* out) {
+  if (spill)
+    std::memcpy(out, rgbx, 4 * sizeof(float));
+  else
+    std::memcpy(out, rgbx, 3 * sizeof(float));
+}
+
+// Bilinear colour at a cell (footprint element `index` of tap (x0, y0), fractions fx, fy), as
+// lerps along x then y: PoolEntry::Sample's arithmetic up to the order of operations (results
+// agree to float rounding, ~1e-7). Colours are computed as 4 lanes (3 channels and a
+// meaningless 4th), which is 4-lane arithmetic, and stored by PutTexel.
+inline void SampleFootprint(const Footprint& footprint, int index, float fx, float fy, bool spill,
+                            float* out) {
+  const float* t00 = footprint.color + 3 * index;
+  const float* t10 = t00 + 3;
+  const float* t01 = t00 + 3 * footprint.width;
+  const float* t11 = t01 + 3;
+  float rgbx[4];
+  for (int c = 0; c < 4; ++c) {
+    const float top = t00[c] + fx * (t10[c] - t00[c]);
+    const float bottom = t01[c] + fx * (t11[c] - t01[c]);
+    rgbx[c] = top + fy * (bottom - top);
+  }
+  PutTexel(rgbx, spill, out);
+}
+
+// PoolEntry::SampleSurfaceAt with fallback at cell k (double projection): the taps that pass
+// the depth test (the footprint's outcome where it is decided for every texel depth, else the
+// same double-precision test as there), bilinear weights renormalised over them; plain bilinear
+// when there are none. A failed tap adds 0 to the sums rather than being skipped (the same
+// sums), and a tap of zero weight needs no test. In a uniform cell the test passes at every tap
+// (the renormalised weights are the bilinear ones: their sum is 1 within float rounding) or at
+// none, so the colour is plain bilinear.
+inline void SampleSurfaceFootprint(const Footprint& footprint, const FootprintCells& cells, int k,
+                                   double tolerance_offset, double tolerance_slope, bool spill,
+                                   float* out) {
+  const int i = cells.index[k], w = footprint.width;
+  const float fx = cells.fx[k], fy = cells.fy[k];
+  if (footprint.uniform[i]) {
+    SampleFootprint(footprint, i, fx, fy, spill, out);
+    return;
+  }
+  const float weights[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy};
+  const int taps[4] = {i, i + 1, i + w, i + w + 1};
+  uint8_t outcome[4];
+  for (int t = 0; t < 4; ++t) outcome[t] = footprint.outcome[taps[t]];
+  float on_weights[4];
+  if (outcome[0] && outcome[1] && outcome[2] && outcome[3]) {  // decided at every tap
+    for (int t = 0; t < 4; ++t)
+      on_weights[t] = outcome[t] == Footprint::kPasses ? weights[t] : 0.0f;
+  } else {
+    const double z = cells.depth[k];
+    const double tolerance = tolerance_offset + tolerance_slope * z;
+    for (int t = 0; t < 4; ++t)
+      on_weights[t] = std::abs(footprint.depth[taps[t]] - z) <= tolerance ? weights[t] : 0.0f;
+  }
+  const float total = on_weights[0] + on_weights[1] + on_weights[2] + on_weights[3];
+  if (total <= 0.0f) {
+    SampleFootprint(footprint, i, fx, fy, spill, out);
+    return;
+  }
+  const float scale = 1.0f / total;
+  const float* t00 = footprint.color + 3 * i;
+  const float* t01 = t00 + 3 * w;
+  float rgbx[4];
+  for (int c = 0; c < 4; ++c) {
+    rgbx[c] = (on_weights[0] * t00[c] + on_weights[1] * t00[3 + c] + on_weights[2] * t01[c] +
+               on_weights[3] * t01[3 + c]) *
+              scale;
+  }
+  PutTexel(rgbx, spill, out);
+}
+
 }  // namespace
 
 AtlasMap::AtlasMap(const Template& tmpl, int size) : size_(size) {
@@ -64,7 +354,7 @@ AtlasMap::AtlasMap(const Template& tmpl, int size) : size_(size) {
     if (texel_triangle_[t] >= 0) ++offsets_[texel_triangle_[t] + 1];
   for (int f = 0; f < f_count; ++f) offsets_[f + 1] += offsets_[f];
   texels_.resize(offsets_[f_count]);
-  bary_.resize(offsets_[f_count]);
+  for (std::vector<float>& b : bary_) b.resize(offsets_[f_count]);
   texel_position_.assign(total, -1);
   std::vector<int> fill(offsets_.begin(), offsets_.end() - 1);
   for (std::size_t t = 0; t < total; ++t) {
@@ -72,7 +362,7 @@ AtlasMap::AtlasMap(const Template& tmpl, int size) : size_(size) {
     if (f < 0) continue;
     const int position = fill[f]++;
     texels_[position] = static_cast<int>(t);
-    bary_[position] = texel_bary[t];
+    for (int c = 0; c < 3; ++c) bary_[c][position] = texel_bary[t][c];
     texel_position_[t] = position;
   }
 }
@@ -83,25 +373,34 @@ double AtlasMap::Coverage() const {
 
 int SampleTriangle(const AtlasMap& map, int f, const Eigen::MatrixX3i& triangles,
                    const PoolEntry& entry, TexelBuffer* texels) {
+  if (map.first(f) == map.last(f)) return 0;
   // The texel's surface point w . (a, b, c) is projected through the entry's camera; camera
   // coordinates are linear in the barycentrics, so the corners are transformed once.
-  Eigen::Vector3d corner[3];
+  TriangleProjection projection;
   for (int k = 0; k < 3; ++k)
-    corner[k] = entry.camera.world_to_camera * entry.vertices.row(triangles(f, k)).transpose();
+    projection.corner[k] =
+        entry.camera.world_to_camera * entry.vertices.row(triangles(f, k)).transpose();
+  const PinholeCamera& camera = entry.camera;
+  projection.fx = camera.fx;
+  projection.fy = camera.fy;
+  projection.cx = camera.cx;
+  projection.cy = camera.cy;
+  const double ox = entry.offset.x(), oy = entry.offset.y();  // crop origin
   Eigen::Vector3f* color = texels->color.data();
   uint8_t* valid = texels->valid.data();
-  int written = 0;
   double tolerance_offset = 0.0, tolerance_slope = 0.0;
   entry.SurfaceTolerance(entry.visibility.quality[f], &tolerance_offset, &tolerance_slope);
-  const PinholeCamera& camera = entry.camera;
-  // When every z-buffer pixel around the triangle's projection is within the tolerance of every
-  // depth on the triangle, each texel's bilinear footprint lies on the surface: plain sampling
-  // gives the same colours without the per-pixel tests.
-  bool on_surface = entry.surface.depth.empty();
-  if (!on_surface && corner[0].z() > 0.0 && corner[1].z() > 0.0 && corner[2].z() > 0.0) {
-    double u_min = std::numeric_limits<double>::infinity(), v_min = u_min;
-    double u_max = -u_min, v_max = -u_min, z_min = u_min, z_max = -u_min;
-    for (const Eigen::Vector3d& k : corner) {
+  const SurfaceDepth& surface = entry.surface;
+  const Eigen::Vector3d* corner = projection.corner;
+
+  // Bounding box of the projected triangle (full-image pixels) and its depth range. With every
+  // corner in front of the camera, each texel projects inside the corners' convex hull (its
+  // barycentrics are >= 0 and the projection is invariant to their scale), up to rounding.
+  const bool in_front = corner[0].z() > 0.0 && corner[1].z() > 0.0 && corner[2].z() > 0.0;
+  double u_min = std::numeric_limits<double>::infinity(), v_min = u_min;
+  double u_max = -u_min, v_max = -u_min, z_min = u_min, z_max = -u_min;
+  if (in_front) {
+    for (const Eigen::Vector3d& k : projection.corner) {
       const double u = camera.fx * k.x() / k.z() + camera.cx;
       const double v = camera.fy * k.y() / k.z() + camera.cy;
       u_min = std::min(u_min, u);
@@ -111,30 +410,100 @@ int SampleTriangle(const AtlasMap& map, int f, const Eigen::MatrixX3i& triangles
       z_min = std::min(z_min, k.z());
       z_max = std::max(z_max, k.z());
     }
+  }
+
+  // Fast path: the whole projection lies inside the crop's interpolation range, so every
+  // texel's bilinear cell is in the crop without clamping, and the crop pixels and z-buffer
+  // depths of all cells (the footprint) are read once.
+  const double x_min = u_min - ox, x_max = u_max - ox;
+  const double y_min = v_min - oy, y_max = v_max - oy;
+  const bool inside = in_front && x_min >= kInsideMargin && y_min >= kInsideMargin &&
+                      x_max <= entry.image.cols - 1 - kInsideMargin &&
+                      y_max <= entry.image.rows - 1 - kInsideMargin;
+  Footprint footprint;
+  if (inside) {
+    footprint.x0 = static_cast<int>(x_min - kInsideMargin);
+    footprint.y0 = static_cast<int>(y_min - kInsideMargin);
+    footprint.width = static_cast<int>(x_max + kInsideMargin) + 2 - footprint.x0;
+    footprint.height = static_cast<int>(y_max + kInsideMargin) + 2 - footprint.y0;
+  }
+  const bool fast = inside && footprint.width * footprint.height <= Footprint::kMaxPixels;
+
+  // When every z-buffer pixel around the triangle's projection is within the tolerance of every
+  // depth on the triangle, each texel's bilinear footprint lies on the surface: plain sampling
+  // gives the same colours without the per-pixel tests.
+  bool on_surface = surface.depth.empty();
+  if (!on_surface && in_front && u_max - u_min < kMaxSurfaceCheckPixels &&
+      v_max - v_min < kMaxSurfaceCheckPixels) {
     const double tolerance = tolerance_offset + tolerance_slope * z_min;
     const int x0 = static_cast<int>(std::floor(u_min)),
               x1 = static_cast<int>(std::floor(u_max)) + 1;
     const int y0 = static_cast<int>(std::floor(v_min)),
               y1 = static_cast<int>(std::floor(v_max)) + 1;
-    on_surface = (x1 - x0 + 1) * (y1 - y0 + 1) <= kMaxSurfaceCheckPixels;
-    for (int y = y0; y <= y1 && on_surface; ++y) {
-      for (int x = x0; x <= x1 && on_surface; ++x) {
-        const float d = entry.surface.At(x, y);
-        on_surface = d - z_min <= tolerance && z_max - d <= tolerance;
+    if ((x1 - x0 + 1) * (y1 - y0 + 1) <= kMaxSurfaceCheckPixels) {
+      if (fast) {  // the footprint covers these pixels
+        footprint.ReadDepth(surface, entry.offset);
+        const int dx = entry.offset.x() + footprint.x0, dy = entry.offset.y() + footprint.y0;
+        on_surface = AllNearSurface(
+            x0 - dx, x1 - dx, y0 - dy, y1 - dy,
+            [&](int x, int y) { return footprint.DepthAt(x, y); }, z_min, z_max, tolerance);
+      } else {
+        on_surface = AllNearSurface(
+            x0, x1, y0, y1, [&](int x, int y) { return surface.At(x, y); }, z_min, z_max,
+            tolerance);
       }
     }
   }
-  for (int p = map.first(f); p < map.last(f); ++p) {
-    const Eigen::Vector3f& w = map.barycentric_at(p);
-    const Eigen::Vector3d c = w.x() * corner[0] + w.y() * corner[1] + w.z() * corner[2];
-    const double inv_z = 1.0 / c.z();
-    const double u = camera.fx * c.x() * inv_z + camera.cx;
-    const double v = camera.fy * c.y() * inv_z + camera.cy;
+
+  const int first = map.first(f), last = map.last(f);
+  if (fast) {
+    footprint.ReadColor(entry.image);
+    // When every cell is uniform, every texel's surface-aware colour is the plain one.
+    const bool plain = on_surface || footprint.FindUniformCells(z_min * (1.0 - kDepthRangeMargin),
+                                                                z_max * (1.0 + kDepthRangeMargin),
+                                                                tolerance_offset, tolerance_slope);
+    const bool float_positions = plain && footprint.width <= kFloatFootprintSide &&
+                                 footprint.height <= kFloatFootprintSide &&
+                                 z_max <= kFloatDepthRatio * z_min;
+    const FloatFootprintMap approximate(projection, footprint, entry.offset);
+    float* out = color[first].data();  // Vector3f: 3 contiguous floats per texel
+    FootprintCells cells;
+    for (int block = first; block < last; block += kTexelBlock) {
+      const int n = std::min(kTexelBlock, last - block);
+      if (float_positions)
+        cells.Project(approximate, footprint.width, map, block, n);
+      else
+        cells.Project(projection, entry.offset, footprint, map, block, n);
+      // Every texel but the triangle's last is stored with a spilling 4th lane.
+      const int spilling = block + n < last ? n : n - 1;
+      float* block_out = out + 3 * (block - first);
+      if (plain) {
+        for (int k = 0; k < n; ++k) {
+          SampleFootprint(footprint, cells.index[k], cells.fx[k], cells.fy[k], k < spilling,
+                          block_out + 3 * k);
+        }
+      } else {
+        for (int k = 0; k < n; ++k) {
+          SampleSurfaceFootprint(footprint, cells, k, tolerance_offset, tolerance_slope,
+                                 k < spilling, block_out + 3 * k);
+        }
+      }
+    }
+    std::fill(valid + first, valid + last, 1);
+    return last - first;
+  }
+  // General path (a corner behind the camera, the projection reaching the crop's border, or a
+  // large footprint): the pool entry's checked samplers.
+  int written = 0;
+  for (int p = first; p < last; ++p) {
+    double u, v, z;
+    projection.Project(map.barycentrics(0)[p], map.barycentrics(1)[p], map.barycentrics(2)[p], &u,
+                       &v, &z);
     Eigen::Vector3f value;
     const bool sampled =
-        on_surface ? entry.Sample(Eigen::Vector2d(u, v), &value)
-                   : entry.SampleSurfaceAt(u, v, c.z(), tolerance_offset + tolerance_slope * c.z(),
-                                           true, &value);
+        on_surface
+            ? entry.Sample(Eigen::Vector2d(u, v), &value)
+            : entry.SampleSurfaceAt(u, v, z, tolerance_offset + tolerance_slope * z, true, &value);
     if (!sampled) continue;
     color[p] = value;
     valid[p] = 1;
@@ -144,10 +513,9 @@ int SampleTriangle(const AtlasMap& map, int f, const Eigen::MatrixX3i& triangles
 }
 
 void ClearTriangle(const AtlasMap& map, int f, TexelBuffer* texels) {
-  for (int p = map.first(f); p < map.last(f); ++p) {
-    texels->color[p].setZero();
-    texels->valid[p] = 0;
-  }
+  std::fill(texels->color.begin() + map.first(f), texels->color.begin() + map.last(f),
+            Eigen::Vector3f::Zero());
+  std::fill(texels->valid.begin() + map.first(f), texels->valid.begin() + map.last(f), 0);
 }
 
 cv::Mat ComposeAtlas(const AtlasMap& map, const TexelBuffer& base,
@@ -166,7 +534,7 @@ cv::Mat ComposeAtlas(const AtlasMap& map, const TexelBuffer& base,
                           if (base.valid[p]) {
                             mask.data[t] = 255;
                             if (correct) {
-                              const Eigen::Vector3f& w = map.barycentric_at(p);
+                              const Eigen::Vector3f w = map.barycentric_at(p);
                               c += w.x() * corner_corrections->row(3 * f).transpose() +
                                    w.y() * corner_corrections->row(3 * f + 1).transpose() +
                                    w.z() * corner_corrections->row(3 * f + 2).transpose();

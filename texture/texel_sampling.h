@@ -31,14 +31,18 @@ class AtlasMap {
   // -1 for an uncovered texel.
   int position(int texel) const { return texel_position_[texel]; }
   // Barycentrics of the texel centre in its triangle (corners 0, 1, 2); the texel must be covered.
-  const Eigen::Vector3f& barycentric(int texel) const { return bary_[texel_position_[texel]]; }
+  Eigen::Vector3f barycentric(int texel) const { return barycentric_at(texel_position_[texel]); }
   // Texels of triangle f (texel indices y * size + x) and their positions first(f) .. last(f).
   const int* texels_begin(int f) const { return &texels_[offsets_[f]]; }
   const int* texels_end(int f) const { return &texels_[offsets_[f + 1]]; }
   int first(int f) const { return offsets_[f]; }
   int last(int f) const { return offsets_[f + 1]; }
   // Barycentrics by position (triangle-major order).
-  const Eigen::Vector3f& barycentric_at(int position) const { return bary_[position]; }
+  Eigen::Vector3f barycentric_at(int position) const {
+    return {bary_[0][position], bary_[1][position], bary_[2][position]};
+  }
+  // Barycentric coordinate c (corner 0, 1 or 2) of every covered texel, by position.
+  const float* barycentrics(int c) const { return bary_[c].data(); }
   int num_covered() const { return static_cast<int>(texels_.size()); }
   int num_triangles() const { return static_cast<int>(offsets_.size()) - 1; }
   double Coverage() const;  // fraction of texels covered by a triangle
@@ -49,7 +53,7 @@ class AtlasMap {
   std::vector<int32_t> texel_position_;  // size^2
   std::vector<int> offsets_;             // F + 1
   std::vector<int> texels_;              // covered texels, triangle-major
-  std::vector<Eigen::Vector3f> bary_;    // per position
+  std::vector<float> bary_[3];           // per corner, per position
 };
 
 // Texel colours (channel order of the pool images, [0, 1]) in the AtlasMap's triangle-major
@@ -64,7 +68,8 @@ struct TexelBuffer {
 
 // Samples every texel of triangle f from pool entry `entry` (bilinear, through the entry's
 // posed vertices and camera; surface-aware, PoolEntry::SampleSurface at the triangle's quality
-// in that image). Texels whose point falls outside the crop keep their old value.
+// in that image; colours agree with it within float rounding, < 1e-5). Texels whose point
+// falls outside the crop keep their old value.
 // Returns the number of texels written. Different triangles may be sampled concurrently.
 int SampleTriangle(const AtlasMap& map, int f, const Eigen::MatrixX3i& triangles,
                    const PoolEntry& entry, TexelBuffer* texels);
