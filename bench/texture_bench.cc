@@ -4,12 +4,12 @@
 // front; procedural subject texture, Lambert shading, exposure drift, sensor noise, floor and
 // wall behind), textured into a 2048^2 atlas.
 //
-// BM_AddFrame/<switch cost>: the texturer is warmed up with kWarmupFrames frames, then every
+// BM_AddFrame/<switch cost>/<surface aware>/<sweeps>: the texturer is warmed up with kWarmupFrames frames, then every
 //   iteration is one incremental AddFrame (visibility, pool, MRF with warm start, resampling of
 //   the changed triangles, levelling) on the next frame. Counters: medians over the timed frames
 //   of the wall time, of the process CPU time (all threads) and of each stage (stages after the
 //   MRF run concurrently); changed triangles (median, max; how many moved to the newest image or
-//   lost theirs to pruning) and seam edges per frame.
+//   lost theirs to pruning), seam edges per frame, and the energy the configured sweeps leave.
 // BM_ViewSelection/<solver>: the MRF of one frame (pool after kWarmupFrames + 1 images, warm start
 //   and Psi from the previous frame's labelling) built and solved by SelectViews with each
 //   solver: energy, TRW-S lower bound, iterations, solve time.
@@ -107,15 +107,22 @@ void BM_AddFrame(benchmark::State& state) {
     options.pool.surface_aware_sampling = false;
     options.pool.vertex_colors_need_full_ring = false;
   }
+  if (state.range(2) > 0) options.mrf.max_iterations = static_cast<int>(state.range(2));
   Texturer texturer(seq.body, options);
   for (int f = 0; f < kWarmupFrames; ++f)
     texturer.AddFrame(f, seq.color[f], seq.camera, seq.posed[f]);
+  // The same view-selection problem solved to convergence (outside the timing): how much energy
+  // the configured number of sweeps leaves per frame.
+  MrfSolverOptions converged_options = options.mrf;
+  converged_options.max_iterations = 50;
+  const std::unique_ptr<MrfSolver> converged = MrfSolver::Create(converged_options);
   std::vector<double> wall, cpu, pool, mrf, sampling, levelling, changed, seams, pool_size;
-  std::vector<double> to_newest, from_dropped, textured;
+  std::vector<double> to_newest, from_dropped, textured, energy_gap;
   uint64_t labels_hash = 1469598103934665603ull;  // FNV-1a over every frame's labels
   int frame = kWarmupFrames;
   for (auto _ : state) {
     const std::vector<int> before = texturer.triangle_frames();
+    const std::vector<double> seam_distance_before = texturer.seam_distance();
     const double cpu0 = ProcessCpuSeconds();
     const auto t0 = std::chrono::steady_clock::now();
     const TextureFrameSummary s =
@@ -140,6 +147,17 @@ void BM_AddFrame(benchmark::State& state) {
       labels_hash = (labels_hash ^ static_cast<uint64_t>(l + 1)) * 1099511628211ull;
     to_newest.push_back(newest);
     from_dropped.push_back(dropped);
+    state.PauseTiming();
+    ViewSelectionInput input;
+    input.mesh = &texturer.mesh();
+    input.pool = &texturer.pool();  // pruned before the selection, so the pool it used
+    input.current_frame = frame;
+    input.previous_frames = before;
+    input.seam_distance = seam_distance_before;
+    input.edge_weight = texturer.edge_weight();
+    const double best = SelectViews(input, options.selection, converged.get()).mrf.energy;
+    energy_gap.push_back((s.energy - best) / std::abs(best));
+    state.ResumeTiming();
     ++frame;
   }
   state.counters["median_ms"] = 1e3 * Median(wall);
@@ -156,17 +174,22 @@ void BM_AddFrame(benchmark::State& state) {
   state.counters["textured_tris"] = Median(textured);
   state.counters["changed_to_newest"] = Median(to_newest);
   state.counters["changed_from_dropped"] = Median(from_dropped);
+  state.counters["energy_gap"] = Median(energy_gap);
+  state.counters["energy_gap_max"] = *std::max_element(energy_gap.begin(), energy_gap.end());
   // Identifies the sequence of labellings (equal hashes: identical view selection).
   state.counters["labels_hash"] = static_cast<double>(labels_hash % 1000000007ull);
 }
 // Arguments: TextureTermOptions::switch_cost in thousandths (0: the paper's energy, default);
 // surface-aware sampling (1: default, 0: plain bilinear sampling and vertex colours wherever a
-// triangle around the vertex is visible).
+// triangle around the vertex is visible); alpha-expansion sweeps per frame (0: the default, one;
+// 50: converge every frame). energy_gap: median (max) over the frames of (E - E*) / E*, E* the
+// energy of the same frame's problem solved to convergence from the same warm start.
 BENCHMARK(BM_AddFrame)
-    ->ArgNames({"switch_cost_x1000", "surface_aware"})
-    ->Args({0, 1})
-    ->Args({0, 0})
-    ->Args({20, 1})
+    ->ArgNames({"switch_cost_x1000", "surface_aware", "sweeps"})
+    ->Args({0, 1, 0})
+    ->Args({0, 1, 50})
+    ->Args({0, 0, 0})
+    ->Args({20, 1, 0})
     ->Iterations(kTimedFrames)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
@@ -208,6 +231,7 @@ void BM_ViewSelection(benchmark::State& state) {
   const TexturingOptions options = BenchOptions();
   MrfSolverOptions mrf = options.mrf;
   mrf.type = static_cast<MrfSolverType>(state.range(0));
+  mrf.max_iterations = 50;  // every solver to convergence (texturing's default is one sweep)
   state.SetLabel(MrfSolverTypeToString(mrf.type));
   const std::unique_ptr<MrfSolver> solver = MrfSolver::Create(mrf);
   ViewSelectionResult result;

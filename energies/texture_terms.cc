@@ -35,12 +35,6 @@ double TriangleQuality(const Eigen::Vector3d& normal, const Eigen::Vector3d& vie
   return std::max(0.0, -normal.dot(view_direction));
 }
 
-double ViewDataCost(bool visible, double quality, double age_frames,
-                    const TextureTermOptions& options) {
-  if (!visible || quality < options.min_quality) return std::numeric_limits<double>::infinity();
-  const double age = std::min(options.t_max, std::max(0.0, age_frames)) / options.t_max;
-  return options.beta * (1.0 - quality) + (1.0 - options.beta) * age;
-}
 
 double SeamPairCost(double colour_cost, double temporal_cost, const TextureTermOptions& options) {
   return (1.0 - options.alpha) * colour_cost + options.alpha * temporal_cost;

@@ -5,6 +5,8 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <algorithm>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -36,9 +38,14 @@ struct TextureTermOptions {
 // centre towards the triangle (paper eq. 12).
 double TriangleQuality(const Eigen::Vector3d& normal, const Eigen::Vector3d& view_direction);
 
-// D(f, l) of eq. 13: +inf when not visible or quality < min_quality.
-double ViewDataCost(bool visible, double quality, double age_frames,
-                    const TextureTermOptions& options);
+// D(f, l) of eq. 13: +inf when not visible or quality < min_quality. (Inline: evaluated for
+// every triangle and pooled image each frame.)
+inline double ViewDataCost(bool visible, double quality, double age_frames,
+                           const TextureTermOptions& options) {
+  if (!visible || quality < options.min_quality) return std::numeric_limits<double>::infinity();
+  const double age = std::min(options.t_max, std::max(0.0, age_frames)) / options.t_max;
+  return options.beta * (1.0 - quality) + (1.0 - options.beta) * age;
+}
 
 // V_ij for l_i != l_j: (1 - alpha) Pi + alpha Psi (0 when the labels are equal: the caller
 // does not call it then).

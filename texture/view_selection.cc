@@ -9,7 +9,6 @@
 #include <limits>
 #include <numeric>
 #include <sstream>
-#include <unordered_map>
 
 #include "models/error.h"
 
@@ -42,75 +41,82 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
   const int width = slots + 1;   // candidates per triangle at most
   const double inf = std::numeric_limits<double>::infinity();
 
-  // Warm start in slots.
-  std::vector<int> warm(f_count, -1);
-  if (!input.previous_frames.empty()) {
-    std::unordered_map<int, int> slot_of_frame;
-    for (int s = 0; s < slots; ++s) slot_of_frame[pool.entry(s).frame_index] = s;
-    for (int f = 0; f < f_count; ++f) {
-      const int frame = input.previous_frames[f];
-      if (frame < 0) {
-        warm[f] = untextured;
-      } else {
-        const auto it = slot_of_frame.find(frame);
-        warm[f] = it == slot_of_frame.end() ? -1 : it->second;
-      }
-    }
-  }
-
   // Candidates per triangle (ascending labels) and their data costs, in parallel: the best
-  // max_candidates images by D (ties: older slot first), the warm-start label, "untextured".
+  // max_candidates images by D (ties: older slot first), the warm-start label (the previous
+  // frame's image when still pooled, "untextured" when it was untextured), "untextured".
+  const int keep = options.max_candidates > 0 ? std::min(options.max_candidates, slots) : slots;
+  const int stride = std::min(width, keep + 2);  // candidates per triangle at most
   ViewSelectionResult result;
+  std::vector<int> warm(f_count, -1);
   std::vector<int> count(f_count, 0);
-  std::vector<int> cand_labels(static_cast<std::size_t>(f_count) * width);
-  std::vector<double> cand_costs(static_cast<std::size_t>(f_count) * width);
+  std::vector<int> cand_labels(static_cast<std::size_t>(f_count) * stride);
+  std::vector<double> cand_costs(static_cast<std::size_t>(f_count) * stride);
   std::vector<const uint8_t*> slot_visible(slots);
   std::vector<const float*> slot_quality(slots);
+  std::vector<int> slot_frame(slots);
   for (int s = 0; s < slots; ++s) {
     slot_visible[s] = pool.entry(s).visibility.visible.data();
     slot_quality[s] = pool.entry(s).visibility.quality.data();
+    slot_frame[s] = pool.entry(s).frame_index;
   }
+  constexpr int kChunk = 256;
   tbb::parallel_for(
-      tbb::blocked_range<int>(0, f_count, 1024), [&](const tbb::blocked_range<int>& range) {
+      tbb::blocked_range<int>(0, f_count, kChunk), [&](const tbb::blocked_range<int>& range) {
+        // D of the chunk's triangles slot by slot (each slot's arrays read in storage order).
+        const int begin = range.begin(), size = range.end() - range.begin();
+        std::vector<double> chunk_d(static_cast<std::size_t>(slots) * size);
+        for (int s = 0; s < slots; ++s) {
+          const double age = input.current_frame - slot_frame[s];
+          double* out = &chunk_d[static_cast<std::size_t>(s) * size];
+          for (int k = 0; k < size; ++k) {
+            const int f = begin + k;
+            out[k] = slot_visible[s][f]
+                         ? ViewDataCost(true, slot_quality[s][f], age, options.terms)
+                         : inf;
+          }
+        }
         std::vector<double> d(slots);
-        std::vector<int> best;  // the best `keep` slots by (D, slot), ascending
-        std::vector<uint8_t> chosen(width);
-        const int keep = options.max_candidates > 0 ? options.max_candidates : slots;
+        std::vector<int> best(keep + 1);  // the best slots by (D, slot), ascending
         for (int f = range.begin(); f < range.end(); ++f) {
-          best.clear();
-          for (int s = 0; s < slots; ++s) {
-            if (!slot_visible[s][f]) {
-              d[s] = inf;
-              continue;
+          for (int s = 0; s < slots; ++s)
+            d[s] = chunk_d[static_cast<std::size_t>(s) * size + (f - begin)];
+          if (!input.previous_frames.empty()) {
+            const int frame = input.previous_frames[f];
+            if (frame < 0) {
+              warm[f] = untextured;
+            } else {
+              for (int s = 0; s < slots; ++s)
+                if (slot_frame[s] == frame) warm[f] = s;
             }
-            d[s] = ViewDataCost(true, slot_quality[s][f],
-                                input.current_frame - pool.entry(s).frame_index, options.terms);
+          }
+          int kept = 0;
+          for (int s = 0; s < slots; ++s) {
             if (!std::isfinite(d[s])) continue;
             // Slots come in ascending order, so on equal D the earlier (older) one stays first.
-            if (static_cast<int>(best.size()) == keep) {
-              if (!(d[s] < d[best.back()])) continue;
-              best.pop_back();
+            if (kept == keep && !(d[s] < d[best[kept - 1]])) continue;
+            int k = kept < keep ? kept++ : kept - 1;
+            while (k > 0 && d[best[k - 1]] > d[s]) {
+              best[k] = best[k - 1];
+              --k;
             }
-            auto it = best.end();
-            while (it != best.begin() && d[*(it - 1)] > d[s]) --it;
-            best.insert(it, s);
+            best[k] = s;
           }
-          std::fill(chosen.begin(), chosen.end(), 0);
-          for (int s : best) chosen[s] = 1;
-          if (warm[f] >= 0 && warm[f] < slots && std::isfinite(d[warm[f]])) chosen[warm[f]] = 1;
-          chosen[untextured] = 1;
-          int* labels = &cand_labels[static_cast<std::size_t>(f) * width];
-          double* costs = &cand_costs[static_cast<std::size_t>(f) * width];
+          int* labels = &cand_labels[static_cast<std::size_t>(f) * stride];
+          double* costs = &cand_costs[static_cast<std::size_t>(f) * stride];
           int n = 0;
+          for (int k = 0; k < kept; ++k) labels[n++] = best[k];
+          const int w = warm[f];
+          if (w >= 0 && w < slots && std::isfinite(d[w]) &&
+              std::find(labels, labels + n, w) == labels + n)
+            labels[n++] = w;
+          std::sort(labels, labels + n);
+          labels[n++] = untextured;
           // Hysteresis: other labels than a pooled previous image pay switch_cost.
-          const bool keeps =
-              warm[f] >= 0 && warm[f] != untextured && options.terms.switch_cost > 0.0;
-          for (int l = 0; l < width; ++l) {
-            if (!chosen[l]) continue;
-            labels[n] = l;
-            costs[n] = l == untextured ? options.untextured_cost : d[l];
-            if (keeps && l != warm[f]) costs[n] += options.terms.switch_cost;
-            ++n;
+          const bool keeps = w >= 0 && w != untextured && options.terms.switch_cost > 0.0;
+          for (int k = 0; k < n; ++k) {
+            const int l = labels[k];
+            costs[k] = l == untextured ? options.untextured_cost : d[l];
+            if (keeps && l != w) costs[k] += options.terms.switch_cost;
           }
           count[f] = n;
         }
@@ -127,7 +133,7 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
       node_of[f] = static_cast<int>(triangle_of.size());
       triangle_of.push_back(f);
     } else {
-      constant += cand_costs[static_cast<std::size_t>(f) * width];
+      constant += cand_costs[static_cast<std::size_t>(f) * stride];
     }
   }
   const double lambda = options.terms.lambda;
@@ -143,7 +149,7 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
   std::vector<float> tables(table_offset[e_count]);
   tbb::parallel_for(
       tbb::blocked_range<int>(0, e_count, 1024), [&](const tbb::blocked_range<int>& range) {
-        std::vector<int> pos_in_j(width), pos_in_i(width);
+        std::vector<int> pos_in_j(stride), pos_in_i(stride);
         for (int e = range.begin(); e < range.end(); ++e) {
           const int u = mesh.edges(e, 0), v = mesh.edges(e, 1);
           double distance = inf;
@@ -151,8 +157,8 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
             distance = 0.5 * (input.seam_distance[u] + input.seam_distance[v]);
           const double psi = TemporalSeamCost(distance, options.terms);
           const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
-          const int* li = &cand_labels[static_cast<std::size_t>(fi) * width];
-          const int* lj = &cand_labels[static_cast<std::size_t>(fj) * width];
+          const int* li = &cand_labels[static_cast<std::size_t>(fi) * stride];
+          const int* lj = &cand_labels[static_cast<std::size_t>(fj) * stride];
           float* table = &tables[table_offset[e]];
           const int ni = count[fi], nj = count[fj];
           // Where each side's labels sit among the other side's (-1: absent), for reusing the
@@ -208,7 +214,7 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
     const int free = first_free ? fi : fj;
     const double weight = input.edge_weight.empty() ? 1.0 : input.edge_weight[e];
     const float* table = &tables[table_offset[e]];
-    double* costs = &cand_costs[static_cast<std::size_t>(free) * width];
+    double* costs = &cand_costs[static_cast<std::size_t>(free) * stride];
     // The fixed side has one candidate, so the table is a row or a column of count[free].
     for (int p = 0; p < count[free]; ++p) costs[p] += lambda * weight * table[p];
   }
@@ -220,13 +226,13 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
   // Candidate labels are ascending with finite costs, so the problem's local candidate order is
   // the order of cand_labels and the tables go in as they are.
   for (int f : triangle_of) {
-    const std::size_t base = static_cast<std::size_t>(f) * width;
+    const std::size_t base = static_cast<std::size_t>(f) * stride;
     problem.AddNode(&cand_labels[base], &cand_costs[base], count[f]);
   }
   // One extra isolated node carries the fixed triangles' constant, so that every energy the
   // solver sees (its relative stopping tests, the callback) is that of the whole labelling.
   if (num_free < f_count) problem.AddNode({untextured}, {constant});
-  // Edges go in ordered by their lower node (first) and then the higher: the solvers walk nodes
+  // Edges go in ordered by their lower node (first): the solvers walk nodes
   // in ascending order, and reading the tables in storage order is what keeps them fast (the
   // tables do not fit in cache). V is symmetric, so a swapped edge takes the transposed table.
   std::vector<int> edge_start(num_free + 1, 0);
@@ -243,15 +249,7 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
       if (i >= 0 && j >= 0) sorted_edges[fill[std::min(i, j)]++] = e;
     }
   }
-  std::vector<float> transposed(static_cast<std::size_t>(width) * width);
-  for (int i = 0; i < num_free; ++i) {
-    // Edges of node i by their other node.
-    std::sort(sorted_edges.begin() + edge_start[i], sorted_edges.begin() + edge_start[i + 1],
-              [&](int a, int b) {
-                return node_of[mesh.edge_faces(a, 0)] + node_of[mesh.edge_faces(a, 1)] <
-                       node_of[mesh.edge_faces(b, 0)] + node_of[mesh.edge_faces(b, 1)];
-              });
-  }
+  std::vector<float> transposed(static_cast<std::size_t>(stride) * stride);
   for (int e : sorted_edges) {
     const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
     const double weight = input.edge_weight.empty() ? 1.0 : input.edge_weight[e];
