@@ -99,7 +99,6 @@ TextureFrameSummary Texturer::AddFrame(int frame, const cv::Mat& color_bgr,
   input.previous_frames = frames_;
   input.seam_distance = seam_distance_;
   input.edge_weight = edge_weight_;
-  input.cache = &seam_costs_;
   ViewSelectionResult result = SelectViews(input, options_.selection, solver_.get());
   s.seconds_mrf = SecondsSince(t_mrf);
   s.energy = result.mrf.energy;

@@ -101,7 +101,6 @@ class Texturer {
   std::unique_ptr<ImagePool> pool_;
   std::unique_ptr<MrfSolver> solver_;
   std::unique_ptr<MeshGeodesics> geodesics_;  // rest mesh, for Psi's distance field
-  SeamCostCache seam_costs_;                  // Pi reused across frames by SelectViews
   std::unique_ptr<SeamLeveller> leveller_;
   TexelBuffer base_;         // unlevelled texel colours (triangle-major)
   std::vector<int> frames_;  // F

@@ -13,27 +13,6 @@
 #include "models/error.h"
 
 namespace artex {
-namespace {
-
-// Pi of eq. 14 for images a and b along edge e: the mean colour difference over the edge's
-// samples seen in both (unseen_cost when none is).
-double SeamColourCost(const PoolEntry& a, const PoolEntry& b, int e, int samples,
-                      double unseen_cost) {
-  const float* ca = a.edge_colors.data() + static_cast<std::size_t>(e) * samples * 3;
-  const float* cb = b.edge_colors.data() + static_cast<std::size_t>(e) * samples * 3;
-  double sum = 0.0;
-  int n = 0;
-  for (int k = 0; k < 3 * samples; k += 3) {
-    const float d0 = ca[k] - cb[k], d1 = ca[k + 1] - cb[k + 1], d2 = ca[k + 2] - cb[k + 2];
-    const float squared = d0 * d0 + d1 * d1 + d2 * d2;
-    if (std::isnan(squared)) continue;  // a colour not seen in a or b
-    sum += std::sqrt(squared);
-    ++n;
-  }
-  return n > 0 ? sum / n : unseen_cost;
-}
-
-}  // namespace
 
 bool ViewSelectionOptions::IsValid(std::string* error) const {
   if (!terms.IsValid(error)) return false;
@@ -168,29 +147,9 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
         table_offset[e] +
         static_cast<std::int64_t>(count[mesh.edge_faces(e, 0)]) * count[mesh.edge_faces(e, 1)];
   std::vector<float> tables(table_offset[e_count]);
-  // Pi of the previous call's tables, by frame pair, when the cache fits this mesh.
-  SeamCostCache* cache = input.cache;
-  const bool reuse = cache != nullptr && cache->num_triangles() == f_count &&
-                     static_cast<int>(cache->offsets_.size()) == e_count + 1;
-  std::vector<double> pi_now(table_offset[e_count]);  // Pi per entry, NaN: no image pair
-  const double nan = std::numeric_limits<double>::quiet_NaN();
   tbb::parallel_for(
       tbb::blocked_range<int>(0, e_count, 1024), [&](const tbb::blocked_range<int>& range) {
-        std::vector<int> pos_in_j(stride), pos_in_i(stride), before_i(stride), before_j(stride);
-        // Position of each current candidate of triangle f among its previous ones (-1: none).
-        const auto previous_positions = [&](int f, const int* labels, int n, int* out) {
-          const int* frames = reuse ? &cache->frames_[static_cast<std::size_t>(f) *
-                                                      cache->stride_]
-                                    : nullptr;
-          const int m = reuse ? cache->counts_[f] : 0;
-          for (int p = 0; p < n; ++p) {
-            out[p] = -1;
-            if (labels[p] == untextured) continue;
-            const int frame = slot_frame[labels[p]];
-            for (int k = 0; k < m; ++k)
-              if (frames[k] == frame) out[p] = k;
-          }
-        };
+        std::vector<int> pos_in_j(stride), pos_in_i(stride);
         for (int e = range.begin(); e < range.end(); ++e) {
           const int u = mesh.edges(e, 0), v = mesh.edges(e, 1);
           double distance = inf;
@@ -201,7 +160,6 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
           const int* li = &cand_labels[static_cast<std::size_t>(fi) * stride];
           const int* lj = &cand_labels[static_cast<std::size_t>(fj) * stride];
           float* table = &tables[table_offset[e]];
-          double* pis = &pi_now[table_offset[e]];
           const int ni = count[fi], nj = count[fj];
           // Where each side's labels sit among the other side's (-1: absent), for reusing the
           // symmetric V(b, a) = V(a, b).
@@ -213,52 +171,39 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
             const int p = static_cast<int>(std::lower_bound(li, li + ni, lj[q]) - li);
             pos_in_i[q] = p < ni && li[p] == lj[q] ? p : -1;
           }
-          previous_positions(fi, li, ni, before_i.data());
-          previous_positions(fj, lj, nj, before_j.data());
-          const int previous_nj = reuse ? cache->counts_[fj] : 0;
-          const double* previous_pis = reuse ? &cache->pi_[cache->offsets_[e]] : nullptr;
           for (int p = 0; p < ni; ++p) {
             for (int q = 0; q < nj; ++q) {
               const int a = li[p], b = lj[q];
               float cost = 0.0f;
-              double pi = nan;
               const int p2 = pos_in_i[q], q2 = pos_in_j[p];
               if (a != b && p2 >= 0 && q2 >= 0 && p2 * nj + q2 < p * nj + q) {
                 cost = table[p2 * nj + q2];
-                pi = pis[p2 * nj + q2];
               } else if (a != b) {
-                if (a == untextured || b == untextured || samples == 0) {
-                  cost = static_cast<float>(
-                      SeamPairCost(options.unseen_colour_cost, psi, options.terms));
-                } else {
-                  if (before_i[p] >= 0 && before_j[q] >= 0)
-                    pi = previous_pis[before_i[p] * previous_nj + before_j[q]];
-                  if (std::isnan(pi)) pi = SeamColourCost(pool.entry(a), pool.entry(b), e,
-                                                          samples, options.unseen_colour_cost);
-                  cost = static_cast<float>(SeamPairCost(pi, psi, options.terms));
+                double pi = options.unseen_colour_cost;
+                if (a != untextured && b != untextured && samples > 0) {
+                  const float* ca = pool.entry(a).edge_colors.data() +
+                                    static_cast<std::size_t>(e) * samples * 3;
+                  const float* cb = pool.entry(b).edge_colors.data() +
+                                    static_cast<std::size_t>(e) * samples * 3;
+                  double sum = 0.0;
+                  int n = 0;
+                  for (int k = 0; k < 3 * samples; k += 3) {
+                    const float d0 = ca[k] - cb[k], d1 = ca[k + 1] - cb[k + 1],
+                                d2 = ca[k + 2] - cb[k + 2];
+                    const float squared = d0 * d0 + d1 * d1 + d2 * d2;
+                    if (std::isnan(squared)) continue;  // a colour not seen in a or b
+                    sum += std::sqrt(squared);
+                    ++n;
+                  }
+                  if (n > 0) pi = sum / n;
                 }
+                cost = static_cast<float>(SeamPairCost(pi, psi, options.terms));
               }
               table[p * nj + q] = cost;
-              pis[p * nj + q] = pi;
             }
           }
         }
       });
-  if (cache != nullptr) {
-    // Remember this call's candidates (as frames) and Pi for the next one.
-    cache->stride_ = stride;
-    cache->frames_.resize(static_cast<std::size_t>(f_count) * stride);
-    cache->counts_ = count;
-    for (int f = 0; f < f_count; ++f) {
-      for (int k = 0; k < count[f]; ++k) {
-        const int l = cand_labels[static_cast<std::size_t>(f) * stride + k];
-        cache->frames_[static_cast<std::size_t>(f) * stride + k] =
-            l == untextured ? -1 : slot_frame[l];
-      }
-    }
-    cache->offsets_ = table_offset;
-    cache->pi_ = std::move(pi_now);
-  }
 
   // Edges with one fixed side: lambda w c(l, untextured) joins the free side's unaries (in the
   // single precision the MRF stores pairwise costs in).

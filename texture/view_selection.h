@@ -4,7 +4,6 @@
 // solved by any MrfSolver (solvers/mrf.h), warm-started from the previous labelling.
 #pragma once
 
-#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -27,25 +26,6 @@ struct ViewSelectionOptions {
   bool IsValid(std::string* error) const;
 };
 
-// The seam colour costs Pi of the last SelectViews call, kept for the next one: Pi of an image
-// pair along an edge depends only on those two pooled images, so pairs that stay candidates are
-// not recomputed (identical results). Use one cache per pool and set of options.
-struct ViewSelectionInput;
-struct ViewSelectionResult;
-class SeamCostCache {
- public:
-  int num_triangles() const { return static_cast<int>(counts_.size()); }
-
- private:
-  friend ViewSelectionResult SelectViews(const ViewSelectionInput& input,
-                                         const ViewSelectionOptions& options, MrfSolver* solver);
-  int stride_ = 0;
-  std::vector<int> frames_;             // F x stride_: candidate frames (-1: untextured)
-  std::vector<int> counts_;             // F
-  std::vector<std::int64_t> offsets_;   // E + 1: table offsets
-  std::vector<double> pi_;              // Pi per table entry, NaN where not an image pair
-};
-
 struct ViewSelectionInput {
   const TextureMesh* mesh = nullptr;
   const ImagePool* pool = nullptr;
@@ -56,8 +36,6 @@ struct ViewSelectionInput {
   std::vector<double> seam_distance;
   // E: 3D edge lengths (rest mesh) normalised by their mean.
   std::vector<double> edge_weight;
-  // Optional: Pi from the previous call, updated by this one (see SeamCostCache).
-  SeamCostCache* cache = nullptr;
 };
 
 struct ViewSelectionResult {

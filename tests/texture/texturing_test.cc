@@ -404,36 +404,6 @@ TEST(TexturingTest, SwitchCostKeepsSources) {
   EXPECT_THROW(Texturer(scene.sphere, bad), Error);
 }
 
-TEST(TexturingTest, SeamCostCacheGivesTheSameSelection) {
-  // SelectViews with Pi carried over from the previous frame equals recomputing everything.
-  Scene scene;
-  const TexturingOptions o = SmallOptions();
-  const TextureMesh mesh = TextureMesh::Build(scene.sphere.triangles);
-  ImagePool pool(&mesh, o.pool, o.visibility);
-  const std::unique_ptr<MrfSolver> solver = MrfSolver::Create(o.mrf);
-  SeamCostCache cache;
-  std::vector<int> previous;
-  for (int f = 0; f < 8; ++f) {
-    const double angle = 0.15 * f;
-    pool.Add(f, scene.Image(f, angle, 1.0 + 0.1 * (f % 2)), OrbitCamera(angle, scene.image_size),
-             scene.sphere.vertices);
-    pool.Prune();
-    ViewSelectionInput input;
-    input.mesh = &mesh;
-    input.pool = &pool;
-    input.current_frame = f;
-    input.previous_frames = previous;
-    const ViewSelectionResult fresh = SelectViews(input, o.selection, solver.get());
-    input.cache = &cache;
-    const ViewSelectionResult cached = SelectViews(input, o.selection, solver.get());
-    EXPECT_EQ(cache.num_triangles(), scene.sphere.num_triangles());
-    EXPECT_EQ(cached.frames, fresh.frames) << "frame " << f;
-    EXPECT_EQ(cached.mrf.energy, fresh.mrf.energy) << "frame " << f;
-    EXPECT_EQ(cached.mrf.initial_energy, fresh.mrf.initial_energy) << "frame " << f;
-    previous = cached.frames;
-  }
-}
-
 TEST(TexturingTest, BadInputIsRejected) {
   Scene scene;
   TexturingOptions bad = SmallOptions();
