@@ -36,13 +36,7 @@ double TriangleQuality(const Eigen::Vector3d& normal, const Eigen::Vector3d& vie
 }
 
 
-double SeamPairCost(double colour_cost, double temporal_cost, const TextureTermOptions& options) {
-  return (1.0 - options.alpha) * colour_cost + options.alpha * temporal_cost;
-}
 
-double TemporalSeamCost(double distance, const TextureTermOptions& options) {
-  return std::min(1.0, distance / options.seam_distance_scale);
-}
 
 std::vector<double> MeshDistanceField(const Eigen::MatrixX3d& vertices,
                                       const Eigen::MatrixX3i& triangles,

@@ -49,10 +49,15 @@ inline double ViewDataCost(bool visible, double quality, double age_frames,
 
 // V_ij for l_i != l_j: (1 - alpha) Pi + alpha Psi (0 when the labels are equal: the caller
 // does not call it then).
-double SeamPairCost(double colour_cost, double temporal_cost, const TextureTermOptions& options);
+inline double SeamPairCost(double colour_cost, double temporal_cost,
+                           const TextureTermOptions& options) {
+  return (1.0 - options.alpha) * colour_cost + options.alpha * temporal_cost;
+}
 
 // Psi per mesh edge from a per-vertex distance field d (m) to the previous seams.
-double TemporalSeamCost(double distance, const TextureTermOptions& options);
+inline double TemporalSeamCost(double distance, const TextureTermOptions& options) {
+  return std::min(1.0, distance / options.seam_distance_scale);
+}
 
 // Distance (m, shortest paths along mesh edges of `vertices`) from every vertex to the nearest
 // vertex in `sources`; +inf everywhere when sources is empty (no previous seams: Psi = 1).
