@@ -26,12 +26,8 @@
 #include <memory>
 #include <vector>
 
+#include "bench/walk_sequence.h"
 #include "energies/texture_terms.h"
-#include "models/skinning.h"
-#include "models/template_generator.h"
-#include "sensors/motion.h"
-#include "sensors/subject_texture.h"
-#include "sensors/virtual_kinect.h"
 #include "solvers/seam_levelling.h"
 #include "texture/texturer.h"
 
@@ -41,57 +37,12 @@ namespace {
 constexpr int kWarmupFrames = 10;
 constexpr int kTimedFrames = 30;
 constexpr int kAtlasSize = 2048;
-constexpr int kSubjectTextureSize = 1024;  // the true texture (rendering only)
-constexpr double kMotionRampSeconds = 0.3;
 
-double ProcessCpuSeconds() {
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return t.tv_sec + 1e-9 * t.tv_nsec;
-}
+using bench::Median;
+using bench::ProcessCpuSeconds;
+using Sequence = bench::WalkSequence;
 
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-// The walk sequence: posed template and colour image per frame (built once).
-struct Sequence {
-  Template body;
-  PinholeCamera camera;
-  std::vector<Eigen::MatrixX3d> posed;
-  std::vector<cv::Mat> color;
-};
-
-const Sequence& Walk() {
-  static const Sequence seq = [] {
-    Sequence s;
-    s.body = GenerateTemplate();
-    SubjectTextureOptions texture_options;
-    texture_options.size = kSubjectTextureSize;
-    const cv::Mat texture = GenerateSubjectTexture(s.body, texture_options);
-    MotionOptions motion;
-    motion.type = MotionType::kWalk;
-    motion.frames = kWarmupFrames + kTimedFrames + 1;
-    motion.ramp_s = kMotionRampSeconds;
-    const std::vector<Pose> poses = GenerateMotion(s.body, motion);
-    const Skinning skinning(s.body);
-    const VirtualKinect kinect(VirtualKinectOptions(), s.body, texture);
-    s.camera = kinect.calibration().color;
-    const std::vector<ColorConditions> conditions = GenerateColorConditions(
-        kinect.options().color_model, kinect.options().seed, static_cast<int>(poses.size()));
-    for (std::size_t f = 0; f < poses.size(); ++f) {
-      Eigen::MatrixX3d posed;
-      skinning.Apply(poses[f], &posed);
-      s.color.push_back(kinect.RenderColor(static_cast<int>(f), &posed, conditions[f]));
-      s.posed.push_back(std::move(posed));
-    }
-    return s;
-  }();
-  return seq;
-}
+const Sequence& Walk() { return bench::Walk(kWarmupFrames + kTimedFrames + 1); }
 
 TexturingOptions BenchOptions() {
   TexturingOptions o;
