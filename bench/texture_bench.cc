@@ -4,11 +4,11 @@
 // front; procedural subject texture, Lambert shading, exposure drift, sensor noise, floor and
 // wall behind), textured into a 2048^2 atlas.
 //
-// BM_AddFrame/<switch cost>/<surface aware>/<sweeps>: the texturer is warmed up with kWarmupFrames frames, then every
-//   iteration is one incremental AddFrame (visibility, pool, MRF with warm start, resampling of
-//   the changed triangles, levelling) on the next frame. Counters: medians over the timed frames
-//   of the wall time, of the process CPU time (all threads) and of each stage (stages after the
-//   MRF run concurrently); changed triangles (median, max; how many moved to the newest image or
+// BM_AddFrame/<switch cost>/<surface aware>/<sweeps>: the texturer is warmed up with
+//   kWarmupFrames frames, then every iteration is one incremental AddFrame (visibility, pool, MRF
+//   with warm start, resampling of the changed triangles, levelling) on the next frame.
+//   Counters: medians over the timed frames of the wall time, of the process CPU time (all
+//   threads) and of each stage (stages after the MRF run concurrently); changed triangles (median, max; how many moved to the newest image or
 //   lost theirs to pruning), seam edges per frame, and the energy the configured sweeps leave.
 // BM_ViewSelection/<solver>: the MRF of one frame (pool after kWarmupFrames + 1 images, warm start
 //   and Psi from the previous frame's labelling) built and solved by SelectViews with each
@@ -276,9 +276,8 @@ void BM_ResampleTriangles(benchmark::State& state) {
   pool_options.surface_aware_sampling = state.range(0) != 0;
   const TextureMesh mesh = TextureMesh::Build(seq.body.triangles);
   ImagePool pool(&mesh, pool_options, VisibilityOptions());
-  const PoolEntry& entry =
-      pool.entry(pool.Add(kWarmupFrames, seq.color[kWarmupFrames], seq.camera,
-                          seq.posed[kWarmupFrames]));
+  const PoolEntry& entry = pool.entry(
+      pool.Add(kWarmupFrames, seq.color[kWarmupFrames], seq.camera, seq.posed[kWarmupFrames]));
   const AtlasMap map(seq.body, kAtlasSize);
   TexelBuffer texels(map);
   std::vector<int> visible;

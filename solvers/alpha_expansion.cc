@@ -176,8 +176,7 @@ MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<in
     for (int p = adjacency.offsets[i]; p < adjacency.offsets[i + 1]; ++p) {
       const int e = adjacency.edges[p];
       const int j = problem.edge_first(e) == i ? problem.edge_second(e) : problem.edge_first(e);
-      for (int k = 0; k < problem.num_candidates(j); ++k)
-        dirty[problem.candidate_labels(j)[k]] = 1;
+      for (int k = 0; k < problem.num_candidates(j); ++k) dirty[problem.candidate_labels(j)[k]] = 1;
     }
   };
   summary.termination = "max_iterations";

@@ -53,8 +53,8 @@ MrfProblem MrfProblem::FromDenseUnaries(int num_nodes, int num_labels,
 int MrfProblem::AddNode(const std::vector<int>& labels, const std::vector<double>& costs) {
   if (labels.size() != costs.size()) {
     throw Error("MrfProblem::AddNode (node " + std::to_string(num_nodes()) +
-                "): costs: expected one per label (" + std::to_string(labels.size()) +
-                "), found " + std::to_string(costs.size()));
+                "): costs: expected one per label (" + std::to_string(labels.size()) + "), found " +
+                std::to_string(costs.size()));
   }
   return AddNode(labels.data(), costs.data(), static_cast<int>(labels.size()));
 }
@@ -136,8 +136,8 @@ namespace {
 
 void CheckEdge(const MrfProblem& p, int i, int j, double weight, const char* function) {
   const auto fail = [&](const std::string& what) {
-    throw Error(std::string("MrfProblem::") + function + " (edge " +
-                std::to_string(p.num_edges()) + "): " + what);
+    throw Error(std::string("MrfProblem::") + function + " (edge " + std::to_string(p.num_edges()) +
+                "): " + what);
   };
   for (int node : {i, j}) {
     if (node < 0 || node >= p.num_nodes()) {

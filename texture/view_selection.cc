@@ -70,9 +70,8 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
           double* out = &chunk_d[static_cast<std::size_t>(s) * size];
           for (int k = 0; k < size; ++k) {
             const int f = begin + k;
-            out[k] = slot_visible[s][f]
-                         ? ViewDataCost(true, slot_quality[s][f], age, options.terms)
-                         : inf;
+            out[k] = slot_visible[s][f] ? ViewDataCost(true, slot_quality[s][f], age, options.terms)
+                                        : inf;
           }
         }
         std::vector<double> d(slots);
@@ -181,10 +180,10 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
               } else if (a != b) {
                 double pi = options.unseen_colour_cost;
                 if (a != untextured && b != untextured && samples > 0) {
-                  const float* ca = pool.entry(a).edge_colors.data() +
-                                    static_cast<std::size_t>(e) * samples * 3;
-                  const float* cb = pool.entry(b).edge_colors.data() +
-                                    static_cast<std::size_t>(e) * samples * 3;
+                  const float* ca =
+                      pool.entry(a).edge_colors.data() + static_cast<std::size_t>(e) * samples * 3;
+                  const float* cb =
+                      pool.entry(b).edge_colors.data() + static_cast<std::size_t>(e) * samples * 3;
                   double sum = 0.0;
                   int n = 0;
                   for (int k = 0; k < 3 * samples; k += 3) {

@@ -15,34 +15,19 @@
 
 #include "models/error.h"
 #include "render/rasterizer.h"
+#include "tests/texture/sphere_mesh.h"
 #include "texture/visibility.h"
 
 namespace artex {
 namespace {
 
-// Appends a UV sphere (closed, outward-facing counter-clockwise triangles).
+// Appends a closed UV sphere (its atlas is not used here).
 void AddSphere(int rings, int segments, double r, const Eigen::Vector3d& c,
                std::vector<Eigen::Vector3d>* vertices, std::vector<Eigen::Vector3i>* triangles) {
-  const int first = static_cast<int>(vertices->size());
-  vertices->push_back(c + Eigen::Vector3d(0, r, 0));
-  vertices->push_back(c - Eigen::Vector3d(0, r, 0));
-  for (int i = 1; i < rings; ++i) {
-    const double phi = M_PI * i / rings;
-    for (int j = 0; j < segments; ++j) {
-      const double theta = 2.0 * M_PI * j / segments;
-      vertices->push_back(c + r * Eigen::Vector3d(std::sin(phi) * std::sin(theta), std::cos(phi),
-                                                  std::sin(phi) * std::cos(theta)));
-    }
-  }
-  const auto ring = [&](int i, int j) { return first + 2 + (i - 1) * segments + j % segments; };
-  for (int j = 0; j < segments; ++j) {
-    triangles->emplace_back(first, ring(1, j), ring(1, j + 1));
-    for (int i = 1; i < rings - 1; ++i) {
-      triangles->emplace_back(ring(i, j), ring(i + 1, j), ring(i + 1, j + 1));
-      triangles->emplace_back(ring(i, j), ring(i + 1, j + 1), ring(i, j + 1));
-    }
-    triangles->emplace_back(first + 1, ring(rings - 1, j + 1), ring(rings - 1, j));
-  }
+  std::vector<Eigen::Vector2d> uvs;
+  std::vector<Eigen::Vector3i> uv_triangles;
+  testing::AddUvSphere(rings, segments, r, c, 0.0, 1.0, 0.0, 1.0, vertices, triangles, &uvs,
+                       &uv_triangles);
 }
 
 struct Scene {
