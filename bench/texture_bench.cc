@@ -8,8 +8,9 @@
 //   kWarmupFrames frames, then every iteration is one incremental AddFrame (visibility, pool, MRF
 //   with warm start, resampling of the changed triangles, levelling) on the next frame.
 //   Counters: medians over the timed frames of the wall time, of the process CPU time (all
-//   threads) and of each stage (stages after the MRF run concurrently); changed triangles (median, max; how many moved to the newest image or
-//   lost theirs to pruning), seam edges per frame, and the energy the configured sweeps leave.
+//   threads) and of each stage (stages after the MRF run concurrently); changed triangles
+//   (median, max; how many moved to the newest image or lost theirs to pruning), seam edges per
+//   frame, and the energy the configured sweeps leave.
 // BM_ViewSelection/<solver>: the MRF of one frame (pool after kWarmupFrames + 1 images, warm start
 //   and Psi from the previous frame's labelling) built and solved by SelectViews with each
 //   solver: energy, TRW-S lower bound, iterations, solve time.
