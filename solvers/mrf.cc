@@ -154,11 +154,7 @@ void CheckEdge(const MrfProblem& p, int i, int j, double weight, const char* fun
 
 int MrfProblem::AddPottsEdge(int i, int j, double weight) {
   CheckEdge(*this, i, j, weight, "AddPottsEdge");
-  edge_nodes_.push_back(i);
-  edge_nodes_.push_back(j);
-  edge_weights_.push_back(weight);
-  table_offsets_.push_back(-1);
-  return num_edges() - 1;
+  return AppendEdge(i, j, weight, -1);
 }
 
 int MrfProblem::AddEdge(int i, int j, double weight, const std::function<double(int, int)>& cost) {
@@ -182,11 +178,7 @@ int MrfProblem::AddEdge(int i, int j, double weight, const std::function<double(
       tables_[offset + a * kj + b] = static_cast<float>(c);
     }
   }
-  edge_nodes_.push_back(i);
-  edge_nodes_.push_back(j);
-  edge_weights_.push_back(weight);
-  table_offsets_.push_back(offset);
-  return num_edges() - 1;
+  return AppendEdge(i, j, weight, offset);
 }
 
 int MrfProblem::AddEdgeTable(int i, int j, double weight, const float* table) {
@@ -200,10 +192,14 @@ int MrfProblem::AddEdgeTable(int i, int j, double weight, const float* table) {
   }
   const std::int64_t offset = static_cast<std::int64_t>(tables_.size());
   tables_.insert(tables_.end(), table, table + size);
+  return AppendEdge(i, j, weight, offset);
+}
+
+int MrfProblem::AppendEdge(int i, int j, double weight, std::int64_t table_offset) {
   edge_nodes_.push_back(i);
   edge_nodes_.push_back(j);
   edge_weights_.push_back(weight);
-  table_offsets_.push_back(offset);
+  table_offsets_.push_back(table_offset);
   return num_edges() - 1;
 }
 

@@ -96,6 +96,9 @@ class MrfProblem {
   std::size_t MemoryBytes() const;
 
  private:
+  // Stores a checked edge whose table (if any, offset >= 0) is already in tables_.
+  int AppendEdge(int i, int j, double weight, std::int64_t table_offset);
+
   int num_labels_;
   double lambda_ = 1.0;
   int max_candidates_ = 0;
