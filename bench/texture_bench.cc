@@ -178,20 +178,30 @@ const SelectionSetup& Selection() {
   return setup;
 }
 
+// SelectViews on the Selection() input with a solver made from `mrf`, once per iteration: the
+// last result, and the median solve time (s) in *solve_seconds.
+ViewSelectionResult TimeSelection(benchmark::State& state, const MrfSolverOptions& mrf,
+                                  double* solve_seconds) {
+  const SelectionSetup& setup = Selection();
+  const std::unique_ptr<MrfSolver> solver = MrfSolver::Create(mrf);
+  ViewSelectionResult result;
+  std::vector<double> seconds;
+  for (auto _ : state) {
+    result = SelectViews(setup.input, BenchOptions().selection, solver.get());
+    seconds.push_back(result.mrf.seconds);
+  }
+  *solve_seconds = Median(seconds);
+  return result;
+}
+
 void BM_ViewSelection(benchmark::State& state) {
   const SelectionSetup& setup = Selection();
-  const TexturingOptions options = BenchOptions();
-  MrfSolverOptions mrf = options.mrf;
+  MrfSolverOptions mrf = BenchOptions().mrf;
   mrf.type = static_cast<MrfSolverType>(state.range(0));
   mrf.max_iterations = 50;  // every solver to convergence (texturing's default is one sweep)
   state.SetLabel(MrfSolverTypeToString(mrf.type));
-  const std::unique_ptr<MrfSolver> solver = MrfSolver::Create(mrf);
-  ViewSelectionResult result;
-  std::vector<double> solve_seconds;
-  for (auto _ : state) {
-    result = SelectViews(setup.input, options.selection, solver.get());
-    solve_seconds.push_back(result.mrf.seconds);
-  }
+  double solve_seconds = 0.0;
+  const ViewSelectionResult result = TimeSelection(state, mrf, &solve_seconds);
   int changed = 0;
   for (std::size_t f = 0; f < result.frames.size(); ++f)
     changed += result.frames[f] != setup.input.previous_frames[f];
@@ -200,7 +210,7 @@ void BM_ViewSelection(benchmark::State& state) {
   state.counters["lower_bound"] =
       std::isfinite(result.mrf.lower_bound) ? result.mrf.lower_bound : 0.0;
   state.counters["iterations"] = result.mrf.iterations;
-  state.counters["solve_ms"] = 1e3 * Median(solve_seconds);
+  state.counters["solve_ms"] = 1e3 * solve_seconds;
   state.counters["changed_tris"] = changed;
   state.counters["candidates"] = result.num_candidates;
 }
@@ -212,20 +222,13 @@ BENCHMARK(BM_ViewSelection)
 
 // Alpha-expansion on the same problem with at most state.range(0) sweeps.
 void BM_ExpansionSweeps(benchmark::State& state) {
-  const SelectionSetup& setup = Selection();
-  const TexturingOptions options = BenchOptions();
-  MrfSolverOptions mrf = options.mrf;
+  MrfSolverOptions mrf = BenchOptions().mrf;
   mrf.max_iterations = static_cast<int>(state.range(0));
-  const std::unique_ptr<MrfSolver> solver = MrfSolver::Create(mrf);
-  ViewSelectionResult result;
-  std::vector<double> solve_seconds;
-  for (auto _ : state) {
-    result = SelectViews(setup.input, options.selection, solver.get());
-    solve_seconds.push_back(result.mrf.seconds);
-  }
+  double solve_seconds = 0.0;
+  const ViewSelectionResult result = TimeSelection(state, mrf, &solve_seconds);
   state.counters["energy"] = result.mrf.energy;
   state.counters["initial_energy"] = result.mrf.initial_energy;
-  state.counters["solve_ms"] = 1e3 * Median(solve_seconds);
+  state.counters["solve_ms"] = 1e3 * solve_seconds;
 }
 BENCHMARK(BM_ExpansionSweeps)
     ->ArgName("max_sweeps")
