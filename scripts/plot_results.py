@@ -106,18 +106,25 @@ def save(fig, path, dpi):
     print(f"plot_results: wrote {path}")
 
 
+def panel_grid(count, width, height):
+    """A figure with `count` panels of width x height inches, at most 3 per row; the panels as a
+    flat list (unused cells of the last row hidden)."""
+    cols = min(3, count)
+    rows = (count + cols - 1) // cols
+    fig, grid = plt.subplots(rows, cols, figsize=(width * cols, height * rows), squeeze=False)
+    axes = [ax for row in grid for ax in row]
+    for ax in axes[count:]:
+        ax.axis("off")
+    return fig, axes
+
+
 def plot_per_frame_error(runs, path, dpi):
     sequences = sorted({r["sequence"] for r in runs})
     has_truth = any(math.isfinite(to_float(row["vertex_error_mm"])) for r in runs for row in r["trace"])
     if not has_truth:
         return
-    cols = min(3, len(sequences))
-    rows = (len(sequences) + cols - 1) // cols
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.0 * rows), squeeze=False)
-    axes = [[ax for row in axes for ax in row]]
-    for ax in axes[0][len(sequences):]:
-        ax.axis("off")
-    for ax, seq in zip(axes[0], sequences):
+    fig, axes = panel_grid(len(sequences), 4.2, 3.0)
+    for ax, seq in zip(axes, sequences):
         for r in (r for r in runs if r["sequence"] == seq):
             rows = [row for row in r["trace"] if row["skipped"] == "0"]
             ax.plot([int(row["frame"]) for row in rows],
@@ -126,7 +133,7 @@ def plot_per_frame_error(runs, path, dpi):
         ax.set_xlabel("frame")
         ax.set_ylabel("mean vertex error (mm)")
         ax.grid(alpha=0.3)
-    axes[0][len(sequences) - 1].legend(fontsize=7)
+    axes[len(sequences) - 1].legend(fontsize=7)
     save(fig, path, dpi)
 
 
@@ -149,26 +156,21 @@ def plot_against_key(runs, key, all_keys, path, dpi):
     if not metrics:
         return
     others = [k for k in all_keys if k != key]
-    cols = min(3, len(metrics))
-    rows = (len(metrics) + cols - 1) // cols
-    fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 2.9 * rows), squeeze=False)
-    axes = [[ax for row in axes for ax in row]]
-    for ax in axes[0][len(metrics):]:
-        ax.axis("off")
+    fig, axes = panel_grid(len(metrics), 3.6, 2.9)
     groups = {}
     for r in runs:
         if key not in r["overrides"]:
             continue
         group = r["sequence"] + ("" if not others else " | " + label(r, others))
         groups.setdefault(group, []).append(r)
-    for ax, (metric, title) in zip(axes[0], metrics):
+    for ax, (metric, title) in zip(axes, metrics):
         for group, members in sorted(groups.items()):
             pts = sorted((to_float(r["overrides"][key]), r["metrics"].get(metric, math.nan)) for r in members)
             ax.plot([p[0] for p in pts], [p[1] for p in pts], marker="o", lw=1.2, label=group)
         ax.set_xlabel(key)
         ax.set_title(title, fontsize=9)
         ax.grid(alpha=0.3)
-    axes[0][len(metrics) - 1].legend(fontsize=7)
+    axes[len(metrics) - 1].legend(fontsize=7)
     save(fig, path, dpi)
 
 
