@@ -105,7 +105,7 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
 void BindTexture(const Config& c, TexturingOptions* o) {
   c.CheckKeys({"beta", "t_max", "alpha", "lambda", "seam_distance_scale", "min_quality",
                "untextured_cost", "max_candidates", "solver", "mrf_max_iterations",
-               "trws_max_iterations", "warm_start", "max_images", "hard_max_images",
+               "mrf_parallel_min_nodes", "trws_max_iterations", "warm_start", "max_images", "hard_max_images",
                "histogram_bins", "edge_samples", "atlas_size", "padding_texels",
                "seam_levelling", "levelling_smoothness", "add_every", "depth_tolerance",
                "switch_cost", "raster_scale", "surface_aware_sampling",
@@ -129,6 +129,7 @@ void BindTexture(const Config& c, TexturingOptions* o) {
     }
   }
   c.Get("mrf_max_iterations", &o->mrf.max_iterations);
+  c.Get("mrf_parallel_min_nodes", &o->mrf.expansion_parallel_min_nodes);
   c.Get("trws_max_iterations", &o->mrf.trws_max_iterations);
   c.Get("warm_start", &o->mrf.warm_start);
   c.Get("max_images", &o->pool.max_images);

@@ -1,6 +1,7 @@
 #include "solvers/alpha_expansion.h"
 
 #include <maxflow/graph.h>
+#include <tbb/parallel_invoke.h>
 
 #include <algorithm>
 #include <cmath>
@@ -149,69 +150,215 @@ bool ApplyBinaryMove(const MrfProblem& problem, const MrfAdjacency& adjacency,
   return true;
 }
 
+std::vector<char> BisectByLevels(const MrfProblem& problem, const MrfAdjacency& adjacency) {
+  const int n = problem.num_nodes();
+  std::vector<int> level(n, -1);
+  std::vector<int> order;  // breadth-first order, components one after another
+  order.reserve(n);
+  int next_level = 0;
+  for (int root = 0; root < n; ++root) {
+    if (level[root] >= 0) continue;
+    level[root] = next_level;
+    order.push_back(root);
+    for (std::size_t k = order.size() - 1; k < order.size(); ++k) {
+      const int i = order[k];
+      next_level = std::max(next_level, level[i] + 1);
+      for (int p = adjacency.offsets[i]; p < adjacency.offsets[i + 1]; ++p) {
+        const int e = adjacency.edges[p];
+        const int j = problem.edge_first(e) == i ? problem.edge_second(e) : problem.edge_first(e);
+        if (level[j] < 0) {
+          level[j] = level[i] + 1;
+          order.push_back(j);
+        }
+      }
+    }
+  }
+  // Work per level: candidates per node (the move variables an expansion sweep visits).
+  std::vector<long> work(next_level + 1, 0);
+  long total = 0;
+  for (int i = 0; i < n; ++i) {
+    work[level[i]] += problem.num_candidates(i);
+    total += problem.num_candidates(i);
+  }
+  int separator = 0;
+  for (long below = 0; separator < next_level; ++separator) {
+    if (2 * (below + work[separator]) >= total) break;
+    below += work[separator];
+  }
+  std::vector<char> part(n);
+  for (int i = 0; i < n; ++i)
+    part[i] = level[i] < separator ? 0 : level[i] > separator ? 1 : kSeparatorPart;
+  return part;
+}
+
+namespace {
+
+// The label index restricted to the nodes of one part.
+MrfLabelIndex RestrictLabelIndex(const MrfLabelIndex& index, const std::vector<char>& part,
+                                 char which) {
+  MrfLabelIndex out;
+  const int num_labels = static_cast<int>(index.offsets.size()) - 1;
+  out.offsets.assign(num_labels + 1, 0);
+  for (int l = 0; l < num_labels; ++l) {
+    for (int p = index.offsets[l]; p < index.offsets[l + 1]; ++p) {
+      if (part[index.nodes[p]] != which) continue;
+      out.nodes.push_back(index.nodes[p]);
+      out.local.push_back(index.local[p]);
+    }
+    out.offsets[l + 1] = static_cast<int>(out.nodes.size());
+  }
+  return out;
+}
+
+// One expansion sweep over the nodes of one label index (all nodes, or one part with the other
+// nodes fixed), with its own cut, move and energy bookkeeping. var_of is shared between parts:
+// a part writes the entries of its own nodes and reads those of their neighbours, which are in
+// the part or the separator (whose entries stay -1 while the parts sweep).
+struct Sweeper {
+  const MrfProblem* problem;
+  const MrfAdjacency* adjacency;
+  const MrfLabelIndex* labels;  // the nodes this sweeper moves
+  std::vector<char> dirty;      // labels whose expansion might still lower the energy
+  mrf_internal::BinaryMove move;
+  std::vector<char> y;
+  mrf_internal::BinaryMoveCut cut;
+  double energy_change = 0.0;  // accumulated by the accepted moves (the caller re-evaluates)
+  MrfSummary counts;           // accepted_moves, truncated_terms
+
+  Sweeper(const MrfProblem& p, const MrfAdjacency& a, const MrfLabelIndex& l)
+      : problem(&p), adjacency(&a), labels(&l), dirty(p.num_labels(), 1) {}
+
+  // A label's move depends only on the labels of its variables (nodes having it as a candidate)
+  // and of their neighbours: marks the labels whose move node i's label enters.
+  static void MarkAround(const MrfProblem& problem, const MrfAdjacency& adjacency, int i,
+                         std::vector<char>* marks) {
+    for (int k = 0; k < problem.num_candidates(i); ++k)
+      (*marks)[problem.candidate_labels(i)[k]] = 1;
+    for (int p = adjacency.offsets[i]; p < adjacency.offsets[i + 1]; ++p) {
+      const int e = adjacency.edges[p];
+      const int j = problem.edge_first(e) == i ? problem.edge_second(e) : problem.edge_first(e);
+      for (int k = 0; k < problem.num_candidates(j); ++k)
+        (*marks)[problem.candidate_labels(j)[k]] = 1;
+    }
+  }
+
+  // One expansion per dirty label; every changed node marks `marks` (this sweeper's dirty flags
+  // among them).
+  void Sweep(std::vector<int>* var_of, std::vector<int>* x,
+             const std::vector<std::vector<char>*>& marks) {
+    const MrfLabelIndex& index = *labels;
+    for (int alpha = 0; alpha < problem->num_labels(); ++alpha) {
+      if (!dirty[alpha]) continue;
+      // A label is clean after an expansion that changed nothing, or after an accepted exact
+      // move (no majorised pair term: the labelling is then optimal over the move space, and
+      // the next expansion's move space is a subset of it), until a node in its neighbourhood
+      // changes.
+      dirty[alpha] = 0;
+      for (int i : move.vars) (*var_of)[i] = -1;
+      move.Clear();
+      for (int p = index.offsets[alpha]; p < index.offsets[alpha + 1]; ++p) {
+        const int i = index.nodes[p];
+        const int alpha_k = index.local[p];
+        if (alpha_k != (*x)[i]) {
+          (*var_of)[i] = move.size();
+          move.Add(i, (*x)[i], alpha_k, false);
+        }
+      }
+      if (move.size() == 0) continue;
+      const long truncated_before = counts.truncated_terms;
+      if (!mrf_internal::ApplyBinaryMove(*problem, *adjacency, move, *var_of, &cut, &y, x,
+                                         &energy_change, &counts))
+        continue;
+      for (int v = 0; v < move.size(); ++v) {
+        if (y[v] == move.current[v]) continue;
+        for (std::vector<char>* m : marks) MarkAround(*problem, *adjacency, move.vars[v], m);
+      }
+      dirty[alpha] = counts.truncated_terms > truncated_before;
+    }
+    for (int i : move.vars) (*var_of)[i] = -1;
+    move.Clear();
+  }
+};
+
+bool AnyDirty(const std::vector<char>& dirty) {
+  return std::find(dirty.begin(), dirty.end(), 1) != dirty.end();
+}
+
+}  // namespace
+
 }  // namespace mrf_internal
 
 MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<int>* labels) {
+  using mrf_internal::Sweeper;
   MrfSummary summary;
   mrf_internal::SolveRun run(problem, options_, *labels, &summary);
   std::vector<int>& x = run.local();
   const int n = problem.num_nodes();
-  const int num_labels = problem.num_labels();
   const MrfAdjacency adjacency = BuildMrfAdjacency(problem);
   const MrfLabelIndex label_index = BuildMrfLabelIndex(problem);
+  std::vector<int> var_of(n, -1);  // move variable of node i, -1 when fixed
+
+  // Parallel sweeps: two parts sweep concurrently with the separator fixed, then the separator.
+  const bool parallel =
+      options_.expansion_parallel_min_nodes > 0 && n >= options_.expansion_parallel_min_nodes;
+  std::vector<char> part;
+  MrfLabelIndex part_index[3];
+  if (parallel) {
+    part = mrf_internal::BisectByLevels(problem, adjacency);
+    for (char k = 0; k < 3; ++k)
+      part_index[k] = mrf_internal::RestrictLabelIndex(label_index, part, k);
+  }
+  Sweeper whole(problem, adjacency, label_index);
+  Sweeper sides[2] = {Sweeper(problem, adjacency, part_index[0]),
+                      Sweeper(problem, adjacency, part_index[1])};
+  Sweeper separator(problem, adjacency, part_index[mrf_internal::kSeparatorPart]);
+  // Labels whose separator move the parts' changes touched (one array per part: no shared
+  // writes while they run).
+  std::vector<char> touched[2] = {std::vector<char>(problem.num_labels(), 0),
+                                  std::vector<char>(problem.num_labels(), 0)};
 
   double energy = summary.initial_energy;
-  std::vector<int> var_of(n, -1);  // move variable of node i, -1 when fixed
-  mrf_internal::BinaryMove move;   // y = 0 keeps the current label, y = 1 switches to alpha
-  std::vector<char> y;
-  mrf_internal::BinaryMoveCut cut;
-  // A label is dirty while its expansion might still lower the energy. Its move depends only on
-  // the labels of its variables (nodes having it as a candidate) and of their neighbours, so it
-  // is clean after an expansion that changed nothing, or after an accepted exact move (no
-  // majorised pair term: the labelling is then optimal over the move space, and the next
-  // expansion's move space is a subset of it), until a node in that neighbourhood changes.
-  std::vector<char> dirty(num_labels, 1);
-  const auto mark_dirty_around = [&](int i) {
-    for (int k = 0; k < problem.num_candidates(i); ++k) dirty[problem.candidate_labels(i)[k]] = 1;
-    for (int p = adjacency.offsets[i]; p < adjacency.offsets[i + 1]; ++p) {
-      const int e = adjacency.edges[p];
-      const int j = problem.edge_first(e) == i ? problem.edge_second(e) : problem.edge_first(e);
-      for (int k = 0; k < problem.num_candidates(j); ++k) dirty[problem.candidate_labels(j)[k]] = 1;
-    }
-  };
   summary.termination = "max_iterations";
-
+  // Parallel sweeps until they stop lowering the energy, then sequential sweeps over all nodes
+  // (from every label), so that "converged" always means no expansion move lowers the energy.
+  bool split = parallel;
   for (int iteration = 0; iteration < options_.max_iterations; ++iteration) {
     const double sweep_start = energy;
-    for (int alpha = 0; alpha < num_labels; ++alpha) {
-      if (!dirty[alpha]) continue;
-      dirty[alpha] = 0;
-      for (int i : move.vars) var_of[i] = -1;
-      move.Clear();
-      for (int p = label_index.offsets[alpha]; p < label_index.offsets[alpha + 1]; ++p) {
-        const int i = label_index.nodes[p];
-        const int alpha_k = label_index.local[p];
-        if (alpha_k != x[i]) {
-          var_of[i] = move.size();
-          move.Add(i, x[i], alpha_k, false);
-        }
+    bool converged = false;
+    if (!split) {
+      whole.Sweep(&var_of, &x, {&whole.dirty});
+      converged = !mrf_internal::AnyDirty(whole.dirty);
+    } else {
+      tbb::parallel_invoke(
+          [&] {
+            sides[0].Sweep(&var_of, &x, {&sides[0].dirty, &touched[0]});
+          },
+          [&] {
+            sides[1].Sweep(&var_of, &x, {&sides[1].dirty, &touched[1]});
+          });
+      for (int l = 0; l < problem.num_labels(); ++l) {
+        separator.dirty[l] |= touched[0][l] | touched[1][l];
+        touched[0][l] = touched[1][l] = 0;
       }
-      if (move.size() == 0) continue;
-      const long truncated_before = summary.truncated_terms;
-      if (!mrf_internal::ApplyBinaryMove(problem, adjacency, move, var_of, &cut, &y, &x, &energy,
-                                         &summary))
-        continue;
-      for (int v = 0; v < move.size(); ++v)
-        if (y[v] != move.current[v]) mark_dirty_around(move.vars[v]);
-      dirty[alpha] = summary.truncated_terms > truncated_before;
+      separator.Sweep(&var_of, &x, {&sides[0].dirty, &sides[1].dirty, &separator.dirty});
+      converged = !mrf_internal::AnyDirty(sides[0].dirty) &&
+                  !mrf_internal::AnyDirty(sides[1].dirty) &&
+                  !mrf_internal::AnyDirty(separator.dirty);
     }
     energy = problem.EnergyLocal(x);  // drop the rounding of the accumulated deltas
     if (!run.EndIteration(energy, -std::numeric_limits<double>::infinity())) break;
-    const bool converged = std::find(dirty.begin(), dirty.end(), 1) == dirty.end();
     if (converged || sweep_start - energy <= options_.energy_tolerance * std::abs(sweep_start)) {
+      if (split) {
+        split = false;  // whole.dirty: every label
+        continue;
+      }
       summary.termination = "converged";
       break;
     }
+  }
+  for (const Sweeper* s : {&whole, &sides[0], &sides[1], &separator}) {
+    summary.accepted_moves += s->counts.accepted_moves;
+    summary.truncated_terms += s->counts.truncated_terms;
   }
   run.Finish(labels);
   return summary;

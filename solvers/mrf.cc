@@ -387,6 +387,10 @@ bool MrfSolverOptions::IsValid(std::string* error) const {
     return fail("energy_tolerance: expected finite and >= 0, found " +
                 std::to_string(energy_tolerance));
   }
+  if (expansion_parallel_min_nodes < 0) {
+    return fail("expansion_parallel_min_nodes: expected >= 0, found " +
+                std::to_string(expansion_parallel_min_nodes));
+  }
   if (trws_max_iterations < 1) {
     return fail("trws_max_iterations: expected >= 1, found " + std::to_string(trws_max_iterations));
   }

@@ -6,9 +6,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <iterator>
 #include <limits>
 #include <numeric>
 #include <sstream>
+#include <utility>
 
 #include "models/error.h"
 
@@ -59,6 +61,10 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
     slot_quality[s] = pool.entry(s).visibility.quality.data();
     slot_frame[s] = pool.entry(s).frame_index;
   }
+  // (frame, slot) ascending, for the warm-start slot of each triangle's previous frame.
+  std::vector<std::pair<int, int>> frame_slots(slots);
+  for (int s = 0; s < slots; ++s) frame_slots[s] = {slot_frame[s], s};
+  std::sort(frame_slots.begin(), frame_slots.end());
   constexpr int kChunk = 256;
   tbb::parallel_for(
       tbb::blocked_range<int>(0, f_count, kChunk), [&](const tbb::blocked_range<int>& range) {
@@ -84,17 +90,22 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
             if (frame < 0) {
               warm[f] = untextured;
             } else {
-              for (int s = 0; s < slots; ++s)
-                if (slot_frame[s] == frame) warm[f] = s;
+              // The last slot holding that frame, if any.
+              const auto it = std::upper_bound(frame_slots.begin(), frame_slots.end(),
+                                               std::make_pair(frame, slots));
+              if (it != frame_slots.begin() && std::prev(it)->first == frame)
+                warm[f] = std::prev(it)->second;
             }
           }
+          // The best `keep` by (D, slot). Newest slots first: with the lifetime term they tend to
+          // be the best, so older ones rarely enter and the loop mostly skips. A slot s enters
+          // before an equal D of a later (newer) slot, as (D, s) orders it first.
           int kept = 0;
-          for (int s = 0; s < slots; ++s) {
+          for (int s = slots - 1; s >= 0; --s) {
             if (!std::isfinite(d[s])) continue;
-            // Slots come in ascending order, so on equal D the earlier (older) one stays first.
-            if (kept == keep && !(d[s] < d[best[kept - 1]])) continue;
+            if (kept == keep && !(d[s] <= d[best[kept - 1]])) continue;
             int k = kept < keep ? kept++ : kept - 1;
-            while (k > 0 && d[best[k - 1]] > d[s]) {
+            while (k > 0 && d[best[k - 1]] >= d[s]) {
               best[k] = best[k - 1];
               --k;
             }

@@ -1,6 +1,7 @@
 // Black-box conformance of every MRF solver (in the spirit of OpenGM's blackboxtester): small
 // seeded problems solved against brute force, plus problem validation and a medium sanity case.
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 #include <algorithm>
 #include <cmath>
@@ -10,6 +11,7 @@
 #include <vector>
 
 #include "models/error.h"
+#include "solvers/alpha_expansion.h"
 #include "solvers/mrf.h"
 
 namespace artex {
@@ -444,6 +446,91 @@ TEST(MrfGuaranteesTest, MediumPottsExpansionBeatsIcmAndIsNearTrwsBound) {
   EXPECT_LE(t.lower_bound, t.energy + Tolerance(t.energy));
   EXPECT_LE(e.energy - t.lower_bound, 0.03 * std::abs(t.lower_bound));
   EXPECT_NEAR(e.energy, problem.Energy(expansion), Tolerance(e.energy));
+}
+
+TEST(MrfGuaranteesTest, BisectionSeparatesTheHalves) {
+  // A 30 x 40 grid and a random graph (small diameter, so large levels) with two components (the
+  // second: a 12-node chain).
+  std::mt19937_64 rng(77);
+  std::vector<std::pair<int, int>> random_edges = RandomGraphEdges(300, 200, &rng);
+  for (const auto& [i, j] : ChainEdges(12)) random_edges.emplace_back(300 + i, 300 + j);
+  const std::pair<int, std::vector<std::pair<int, int>>> graphs[] = {{1200, GridEdges(30, 40)},
+                                                                      {312, random_edges}};
+  for (const auto& [n, edges] : graphs) {
+    const MrfProblem problem = MakeSpec(n, 3, edges, PairKind::kPotts, 0.0, 5).Build();
+    const std::vector<char> part =
+        mrf_internal::BisectByLevels(problem, BuildMrfAdjacency(problem));
+    ASSERT_EQ(static_cast<int>(part.size()), n);
+    int count[3] = {0, 0, 0};
+    for (char p : part) {
+      ASSERT_TRUE(p == 0 || p == 1 || p == mrf_internal::kSeparatorPart);
+      ++count[static_cast<int>(p)];
+    }
+    for (const auto& [i, j] : edges) {
+      EXPECT_FALSE((part[i] == 0 && part[j] == 1) || (part[i] == 1 && part[j] == 0))
+          << "edge " << i << "-" << j << " joins the halves";
+    }
+    EXPECT_GT(count[0], 0);
+    EXPECT_GT(count[1], 0);
+    if (n == 1200) {  // on the grid: balanced, with a separator much smaller than the halves
+      EXPECT_GT(count[0], n / 3);
+      EXPECT_GT(count[1], n / 3);
+      EXPECT_LT(count[2], n / 16);
+    }
+  }
+}
+
+// Parallel sweeps (two halves concurrently, then the separator): the energy never rises, the
+// result does not depend on the number of threads, and "converged" still means that no
+// expansion move over the whole problem lowers the energy.
+TEST(MrfGuaranteesTest, ParallelExpansionSweepsAreMonotoneDeterministicAndConverge) {
+  std::mt19937_64 rng(91);
+  const Spec specs[] = {MakeSpec(1200, 5, GridEdges(30, 40), PairKind::kPotts, 0.1, 11),
+                        MakeSpec(1200, 4, GridEdges(40, 30), PairKind::kTruncatedLinear, 0.1, 12),
+                        MakeSpec(400, 4, RandomGraphEdges(400, 300, &rng), PairKind::kNonMetric,
+                                 0.1, 13)};
+  for (const Spec& spec : specs) {
+    const MrfProblem problem = spec.Build();
+    MrfSolverOptions options = Options(MrfSolverType::kAlphaExpansion);
+    options.expansion_parallel_min_nodes = 1;
+    std::vector<double> energies;
+    options.callback = [&energies](const MrfIterationInfo& info) {
+      energies.push_back(info.energy);
+      return true;
+    };
+    std::vector<int> labels;
+    const MrfSummary summary = MrfSolver::Create(options)->Solve(problem, &labels);
+    EXPECT_EQ(summary.termination, "converged");
+    ASSERT_GE(energies.size(), 2u);  // at least one parallel sweep and one whole sweep
+    EXPECT_LE(energies.front(), summary.initial_energy + Tolerance(summary.initial_energy));
+    for (std::size_t k = 1; k < energies.size(); ++k)
+      EXPECT_LE(energies[k], energies[k - 1] + Tolerance(energies[k - 1]));
+    EXPECT_NEAR(summary.energy, spec.Energy(labels), Tolerance(summary.energy));
+
+    // One sequential sweep from the result changes nothing.
+    MrfSolverOptions sequential = Options(MrfSolverType::kAlphaExpansion);
+    sequential.expansion_parallel_min_nodes = 0;
+    sequential.max_iterations = 1;
+    std::vector<int> again = labels;
+    const MrfSummary check = MrfSolver::Create(sequential)->Solve(problem, &again);
+    EXPECT_EQ(check.accepted_moves, 0);
+    EXPECT_EQ(again, labels);
+
+    // The same labelling on one thread, and for one parallel sweep.
+    options.callback = nullptr;
+    options.max_iterations = 1;
+    std::vector<int> one_sweep, one_sweep_single_thread, single_thread;
+    MrfSolver::Create(options)->Solve(problem, &one_sweep);
+    {
+      const tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+      MrfSolver::Create(options)->Solve(problem, &one_sweep_single_thread);
+      options.max_iterations = 50;
+      MrfSolver::Create(options)->Solve(problem, &single_thread);
+    }
+    EXPECT_EQ(one_sweep, one_sweep_single_thread);
+    EXPECT_EQ(single_thread, labels);
+    EXPECT_LT(problem.Energy(one_sweep), summary.initial_energy);
+  }
 }
 
 TEST(MrfProblemTest, SparseCandidatesMatchDenseConstruction) {
