@@ -300,19 +300,11 @@ TEST(TexturingTest, HalfResolutionVisibilityMostlyAgrees) {
   EXPECT_TRUE(std::isinf(depth.At(0, 0)));
 }
 
-// The leveller's corrections solve the normal equations of its least-squares problem, built
-// here densely and independently on a small labelled sphere.
-TEST(TexturingTest, SeamLevellerSolvesTheLeastSquaresProblem) {
-  const Template sphere = UvSphere(6, 8, 1.0, Eigen::Vector3d::Zero());
-  const int f_count = sphere.num_triangles(), v_count = sphere.num_vertices();
-  std::vector<int> labels(f_count);
-  for (int f = 0; f < f_count; ++f) {
-    const Eigen::Vector3d c =
-        (sphere.vertices.row(sphere.triangles(f, 0)) + sphere.vertices.row(sphere.triangles(f, 1)) +
-         sphere.vertices.row(sphere.triangles(f, 2))) /
-        3.0;
-    labels[f] = c.y() > 0.5 ? -1 : (c.x() > 0 ? 3 : (c.z() > 0 ? 7 : 9));
-  }
+// Expects the leveller's corrections to solve the normal equations of its least-squares
+// problem, built here densely and independently (some colours unknown).
+void ExpectSolvesNormalEquations(int v_count, const Eigen::MatrixX3i& triangles,
+                                 const std::vector<int>& labels) {
+  const int f_count = static_cast<int>(triangles.rows());
   const auto colour = [](int v, int l, Eigen::Vector3f* c) {
     if ((v + l) % 11 == 0) return false;  // some unknown colours
     *c = Eigen::Vector3f(0.1f * l + 0.01f * v, 0.5f - 0.03f * l, 0.2f + 0.002f * v * l);
@@ -321,14 +313,13 @@ TEST(TexturingTest, SeamLevellerSolvesTheLeastSquaresProblem) {
   SeamLevellingOptions options;
   Eigen::MatrixX3f corrections;
   SeamLevellingSummary summary;
-  LevelSeams(v_count, sphere.triangles, labels, colour, options, &corrections, &summary);
+  LevelSeams(v_count, triangles, labels, colour, options, &corrections, &summary);
   ASSERT_GT(summary.seam_equations, 0);
   // Dense reference: unknowns (v, l) in order of first use.
   std::map<std::pair<int, int>, int> index;
   for (int f = 0; f < f_count; ++f)
     for (int c = 0; c < 3; ++c)
-      if (labels[f] >= 0)
-        index.emplace(std::make_pair(sphere.triangles(f, c), labels[f]), index.size());
+      if (labels[f] >= 0) index.emplace(std::make_pair(triangles(f, c), labels[f]), index.size());
   const int n = static_cast<int>(index.size());
   EXPECT_EQ(n, summary.unknowns);
   Eigen::MatrixXd a = options.regularisation * Eigen::MatrixXd::Identity(n, n);
@@ -352,8 +343,8 @@ TEST(TexturingTest, SeamLevellerSolvesTheLeastSquaresProblem) {
   for (int f = 0; f < f_count; ++f) {
     if (labels[f] < 0) continue;
     for (int c = 0; c < 3; ++c) {
-      const int p = index.at({sphere.triangles(f, c), labels[f]});
-      const int q = index.at({sphere.triangles(f, (c + 1) % 3), labels[f]});
+      const int p = index.at({triangles(f, c), labels[f]});
+      const int q = index.at({triangles(f, (c + 1) % 3), labels[f]});
       const double w = options.smoothness;
       a(p, p) += w;
       a(q, q) += w;
@@ -368,12 +359,40 @@ TEST(TexturingTest, SeamLevellerSolvesTheLeastSquaresProblem) {
         EXPECT_EQ(corrections.row(3 * f + c).norm(), 0.0f);
         continue;
       }
-      const int p = index.at({sphere.triangles(f, c), labels[f]});
+      const int p = index.at({triangles(f, c), labels[f]});
       EXPECT_NEAR((corrections.row(3 * f + c).cast<double>() - g.row(p)).norm(), 0.0, 1e-5)
           << "triangle " << f << " corner " << c;
     }
   }
   EXPECT_LT(summary.seam_residual_after, summary.seam_residual_before);
+}
+
+// The leveller's corrections solve the normal equations of its least-squares problem on a
+// small sphere with four regions (one untextured).
+TEST(TexturingTest, SeamLevellerSolvesTheLeastSquaresProblem) {
+  const Template sphere = UvSphere(6, 8, 1.0, Eigen::Vector3d::Zero());
+  const int f_count = sphere.num_triangles();
+  std::vector<int> labels(f_count);
+  for (int f = 0; f < f_count; ++f) {
+    const Eigen::Vector3d c =
+        (sphere.vertices.row(sphere.triangles(f, 0)) + sphere.vertices.row(sphere.triangles(f, 1)) +
+         sphere.vertices.row(sphere.triangles(f, 2))) /
+        3.0;
+    labels[f] = c.y() > 0.5 ? -1 : (c.x() > 0 ? 3 : (c.z() > 0 ? 7 : 9));
+  }
+  ExpectSolvesNormalEquations(sphere.num_vertices(), sphere.triangles, labels);
+}
+
+// Also with fragmented labels (many vertices with three or more labels), scattered
+// untextured triangles and a duplicated triangle, on a mesh large enough for wide supernodes.
+TEST(TexturingTest, SeamLevellerSolvesFragmentedLabellings) {
+  const Template sphere = UvSphere(12, 24, 1.0, Eigen::Vector3d::Zero());
+  Eigen::MatrixX3i triangles(sphere.num_triangles() + 1, 3);
+  triangles << sphere.triangles, sphere.triangles.row(5);
+  std::vector<int> labels(triangles.rows());
+  for (int f = 0; f < static_cast<int>(labels.size()); ++f)
+    labels[f] = f % 13 == 0 ? -1 : (f / 9) % 4 + 2 * (f % 3 == 0);
+  ExpectSolvesNormalEquations(sphere.num_vertices(), triangles, labels);
 }
 
 // With a switch cost, triangles keep their source image unless another is clearly better.
