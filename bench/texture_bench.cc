@@ -180,14 +180,15 @@ const SelectionSetup& Selection() {
 
 // SelectViews on the Selection() input with a solver made from `mrf`, once per iteration: the
 // last result, and the median solve time (s) in *solve_seconds.
-ViewSelectionResult TimeSelection(benchmark::State& state, const MrfSolverOptions& mrf,
-                                  double* solve_seconds) {
+ViewSelectionResult TimeSelection(
+    benchmark::State& state, const MrfSolverOptions& mrf, double* solve_seconds,
+    const ViewSelectionOptions& selection = BenchOptions().selection) {
   const SelectionSetup& setup = Selection();
   const std::unique_ptr<MrfSolver> solver = MrfSolver::Create(mrf);
   ViewSelectionResult result;
   std::vector<double> seconds;
   for (auto _ : state) {
-    result = SelectViews(setup.input, BenchOptions().selection, solver.get());
+    result = SelectViews(setup.input, selection, solver.get());
     seconds.push_back(result.mrf.seconds);
   }
   *solve_seconds = Median(seconds);
@@ -235,6 +236,27 @@ BENCHMARK(BM_ExpansionSweeps)
     ->Arg(1)
     ->Arg(2)
     ->Arg(50)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(0.5);
+
+// The same problem with at most state.range(0) candidate images per triangle (0: every visible
+// image), alpha-expansion with at most state.range(1) sweeps. Energies compare across the limits:
+// a labelling's energy does not depend on the candidates it did not choose.
+void BM_CandidateLimit(benchmark::State& state) {
+  MrfSolverOptions mrf = BenchOptions().mrf;
+  mrf.max_iterations = static_cast<int>(state.range(1));
+  ViewSelectionOptions selection = BenchOptions().selection;
+  selection.max_candidates = static_cast<int>(state.range(0));
+  double solve_seconds = 0.0;
+  const ViewSelectionResult result = TimeSelection(state, mrf, &solve_seconds, selection);
+  state.counters["energy"] = result.mrf.energy;
+  state.counters["candidates"] = result.num_candidates;
+  state.counters["solve_ms"] = 1e3 * solve_seconds;
+}
+BENCHMARK(BM_CandidateLimit)
+    ->ArgNames({"max_candidates", "max_sweeps"})
+    ->ArgsProduct({{0, 2, 3, 4, 6}, {1, 50}})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->MinTime(0.5);

@@ -211,9 +211,9 @@ MrfLabelIndex RestrictLabelIndex(const MrfLabelIndex& index, const std::vector<c
 }
 
 // One expansion sweep over the nodes of one label index (all nodes, or one part with the other
-// nodes fixed), with its own cut, move and energy bookkeeping. var_of is shared between parts:
-// a part writes the entries of its own nodes and reads those of their neighbours, which are in
-// the part or the separator (whose entries stay -1 while the parts sweep).
+// nodes fixed), with its own cut, move, node-to-variable map and energy bookkeeping. The two
+// halves sweep concurrently, each on its own copy of the labelling (their nodes interleave in
+// memory: shared arrays would be written from both threads within the same cache lines).
 struct Sweeper {
   const MrfProblem* problem;
   const MrfAdjacency* adjacency;
@@ -222,11 +222,16 @@ struct Sweeper {
   mrf_internal::BinaryMove move;
   std::vector<char> y;
   mrf_internal::BinaryMoveCut cut;
+  std::vector<int> var_of;     // move variable of node i, -1 when fixed
   double energy_change = 0.0;  // accumulated by the accepted moves (the caller re-evaluates)
   MrfSummary counts;           // accepted_moves, truncated_terms
 
   Sweeper(const MrfProblem& p, const MrfAdjacency& a, const MrfLabelIndex& l)
-      : problem(&p), adjacency(&a), labels(&l), dirty(p.num_labels(), 1) {}
+      : problem(&p),
+        adjacency(&a),
+        labels(&l),
+        dirty(p.num_labels(), 1),
+        var_of(p.num_nodes(), -1) {}
 
   // A label's move depends only on the labels of its variables (nodes having it as a candidate)
   // and of their neighbours: marks the labels whose move node i's label enters.
@@ -244,8 +249,7 @@ struct Sweeper {
 
   // One expansion per dirty label; every changed node marks `marks` (this sweeper's dirty flags
   // among them).
-  void Sweep(std::vector<int>* var_of, std::vector<int>* x,
-             const std::vector<std::vector<char>*>& marks) {
+  void Sweep(std::vector<int>* x, const std::vector<std::vector<char>*>& marks) {
     const MrfLabelIndex& index = *labels;
     for (int alpha = 0; alpha < problem->num_labels(); ++alpha) {
       if (!dirty[alpha]) continue;
@@ -254,19 +258,19 @@ struct Sweeper {
       // the next expansion's move space is a subset of it), until a node in its neighbourhood
       // changes.
       dirty[alpha] = 0;
-      for (int i : move.vars) (*var_of)[i] = -1;
+      for (int i : move.vars) var_of[i] = -1;
       move.Clear();
       for (int p = index.offsets[alpha]; p < index.offsets[alpha + 1]; ++p) {
         const int i = index.nodes[p];
         const int alpha_k = index.local[p];
         if (alpha_k != (*x)[i]) {
-          (*var_of)[i] = move.size();
+          var_of[i] = move.size();
           move.Add(i, (*x)[i], alpha_k, false);
         }
       }
       if (move.size() == 0) continue;
       const long truncated_before = counts.truncated_terms;
-      if (!mrf_internal::ApplyBinaryMove(*problem, *adjacency, move, *var_of, &cut, &y, x,
+      if (!mrf_internal::ApplyBinaryMove(*problem, *adjacency, move, var_of, &cut, &y, x,
                                          &energy_change, &counts))
         continue;
       for (int v = 0; v < move.size(); ++v) {
@@ -275,7 +279,7 @@ struct Sweeper {
       }
       dirty[alpha] = counts.truncated_terms > truncated_before;
     }
-    for (int i : move.vars) (*var_of)[i] = -1;
+    for (int i : move.vars) var_of[i] = -1;
     move.Clear();
   }
 };
@@ -296,7 +300,6 @@ MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<in
   const int n = problem.num_nodes();
   const MrfAdjacency adjacency = BuildMrfAdjacency(problem);
   const MrfLabelIndex label_index = BuildMrfLabelIndex(problem);
-  std::vector<int> var_of(n, -1);  // move variable of node i, -1 when fixed
 
   // Parallel sweeps: two parts sweep concurrently with the separator fixed, then the separator.
   const bool parallel =
@@ -314,6 +317,7 @@ MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<in
   Sweeper separator(problem, adjacency, part_index[mrf_internal::kSeparatorPart]);
   // Labels whose separator move the parts' changes touched (one array per part: no shared
   // writes while they run).
+  std::vector<int> side_x[2];  // the halves' copies of the labelling
   std::vector<char> touched[2] = {std::vector<char>(problem.num_labels(), 0),
                                   std::vector<char>(problem.num_labels(), 0)};
 
@@ -326,21 +330,25 @@ MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<in
     const double sweep_start = energy;
     bool converged = false;
     if (!split) {
-      whole.Sweep(&var_of, &x, {&whole.dirty});
+      whole.Sweep(&x, {&whole.dirty});
       converged = !mrf_internal::AnyDirty(whole.dirty);
     } else {
+      side_x[0] = x;
+      side_x[1] = x;
       tbb::parallel_invoke(
           [&] {
-            sides[0].Sweep(&var_of, &x, {&sides[0].dirty, &touched[0]});
+            sides[0].Sweep(&side_x[0], {&sides[0].dirty, &touched[0]});
           },
           [&] {
-            sides[1].Sweep(&var_of, &x, {&sides[1].dirty, &touched[1]});
+            sides[1].Sweep(&side_x[1], {&sides[1].dirty, &touched[1]});
           });
+      for (int i = 0; i < n; ++i)
+        if (part[i] != mrf_internal::kSeparatorPart) x[i] = side_x[static_cast<int>(part[i])][i];
       for (int l = 0; l < problem.num_labels(); ++l) {
         separator.dirty[l] |= touched[0][l] | touched[1][l];
         touched[0][l] = touched[1][l] = 0;
       }
-      separator.Sweep(&var_of, &x, {&sides[0].dirty, &sides[1].dirty, &separator.dirty});
+      separator.Sweep(&x, {&sides[0].dirty, &sides[1].dirty, &separator.dirty});
       converged = !mrf_internal::AnyDirty(sides[0].dirty) &&
                   !mrf_internal::AnyDirty(sides[1].dirty) &&
                   !mrf_internal::AnyDirty(separator.dirty);

@@ -155,6 +155,34 @@ TextureMesh TextureMesh::Build(const Eigen::MatrixX3i& triangles) {
     mesh.edges.row(e) << edges[e][0], edges[e][1];
     mesh.edge_faces.row(e) << edges[e][2], edges[e][3];
   }
+  // Breadth-first triangle order over the shared edges (CSR adjacency of the triangles).
+  const int f_count = static_cast<int>(triangles.rows());
+  std::vector<int> offsets(f_count + 1, 0), neighbours(2 * edges.size());
+  for (const auto& e : edges) {
+    ++offsets[e[2] + 1];
+    ++offsets[e[3] + 1];
+  }
+  for (int f = 0; f < f_count; ++f) offsets[f + 1] += offsets[f];
+  std::vector<int> fill(offsets.begin(), offsets.end() - 1);
+  for (const auto& e : edges) {
+    neighbours[fill[e[2]]++] = e[3];
+    neighbours[fill[e[3]]++] = e[2];
+  }
+  std::vector<uint8_t> seen(f_count, 0);
+  mesh.triangle_order.reserve(f_count);
+  for (int root = 0; root < f_count; ++root) {
+    if (seen[root]) continue;
+    seen[root] = 1;
+    mesh.triangle_order.push_back(root);
+    for (std::size_t k = mesh.triangle_order.size() - 1; k < mesh.triangle_order.size(); ++k) {
+      const int f = mesh.triangle_order[k];
+      for (int p = offsets[f]; p < offsets[f + 1]; ++p) {
+        if (seen[neighbours[p]]) continue;
+        seen[neighbours[p]] = 1;
+        mesh.triangle_order.push_back(neighbours[p]);
+      }
+    }
+  }
   return mesh;
 }
 

@@ -24,6 +24,10 @@ struct TextureMesh {
   Eigen::MatrixX3i triangles;   // F x 3
   Eigen::MatrixX2i edges;       // E x 2 vertex indices
   Eigen::MatrixX2i edge_faces;  // E x 2 triangles on either side
+  // Every triangle once, breadth first over shared edges from the lowest unvisited triangle:
+  // neighbours come close together (view selection numbers its MRF nodes in this order, for
+  // the memory locality of the solvers).
+  std::vector<int> triangle_order;
   static TextureMesh Build(const Eigen::MatrixX3i& triangles);
 };
 

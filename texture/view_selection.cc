@@ -138,7 +138,10 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
   std::vector<int> node_of(f_count, -1);
   std::vector<int> triangle_of;
   double constant = 0.0;
-  for (int f = 0; f < f_count; ++f) {
+  // Nodes in the mesh's breadth-first triangle order when it has one (memory locality).
+  const bool ordered = static_cast<int>(mesh.triangle_order.size()) == f_count;
+  for (int k = 0; k < f_count; ++k) {
+    const int f = ordered ? mesh.triangle_order[k] : k;
     if (count[f] > 1) {
       node_of[f] = static_cast<int>(triangle_of.size());
       triangle_of.push_back(f);

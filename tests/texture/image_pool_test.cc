@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <opencv2/core.hpp>
@@ -219,6 +220,38 @@ TEST(ImagePoolTest, PruningFollowsTheHistogramRuleAndStaysBounded) {
     }
   }
   EXPECT_GT(kept_above_max, 0);
+}
+
+// Every triangle once; each one after the first of its component shares an edge with an earlier
+// one, and the second sphere's triangles (another component) all come after the first's.
+TEST(ImagePoolTest, TriangleOrderIsBreadthFirstOverSharedEdges) {
+  const Scene scene;
+  const TextureMesh& mesh = scene.mesh;
+  const int f_count = static_cast<int>(scene.triangles.rows());
+  ASSERT_EQ(static_cast<int>(mesh.triangle_order.size()), f_count);
+  std::vector<int> position(f_count, -1);
+  for (int k = 0; k < f_count; ++k) {
+    const int f = mesh.triangle_order[k];
+    ASSERT_GE(f, 0);
+    ASSERT_LT(f, f_count);
+    ASSERT_EQ(position[f], -1) << "triangle " << f << " twice";
+    position[f] = k;
+  }
+  std::vector<int> earliest_neighbour(f_count, f_count);
+  for (int e = 0; e < mesh.edges.rows(); ++e) {
+    const int a = mesh.edge_faces(e, 0), b = mesh.edge_faces(e, 1);
+    earliest_neighbour[a] = std::min(earliest_neighbour[a], position[b]);
+    earliest_neighbour[b] = std::min(earliest_neighbour[b], position[a]);
+  }
+  const int first_sphere = 2 * 32 * (16 - 1);  // triangles of the 16 x 32 sphere
+  int roots = 0;
+  for (int f = 0; f < f_count; ++f) {
+    if (earliest_neighbour[f] > position[f]) ++roots;
+    if (f < first_sphere) EXPECT_LT(position[f], first_sphere);
+  }
+  EXPECT_EQ(roots, 2);  // one per sphere
+  EXPECT_EQ(mesh.triangle_order[0], 0);
+  EXPECT_EQ(mesh.triangle_order[first_sphere], first_sphere);
 }
 
 TEST(ImagePoolTest, BadOptionsAreRejected) {
