@@ -35,9 +35,6 @@ double TriangleQuality(const Eigen::Vector3d& normal, const Eigen::Vector3d& vie
   return std::max(0.0, -normal.dot(view_direction));
 }
 
-
-
-
 std::vector<double> MeshDistanceField(const Eigen::MatrixX3d& vertices,
                                       const Eigen::MatrixX3i& triangles,
                                       const std::vector<int>& sources) {
@@ -70,12 +67,14 @@ MeshGeodesics::MeshGeodesics(const Eigen::MatrixX3d& vertices, const Eigen::Matr
     for (auto it = adjacency.begin() + degree[v]; it != end; ++it) {
       neighbours_.push_back(*it);
       lengths_.push_back((vertices.row(*it) - vertices.row(v)).norm());
+      max_edge_length_ = std::max(max_edge_length_, lengths_.back());
     }
     offsets_[v + 1] = static_cast<int>(neighbours_.size());
   }
 }
 
-std::vector<double> MeshGeodesics::DistanceField(const std::vector<int>& sources) const {
+std::vector<double> MeshGeodesics::DistanceField(const std::vector<int>& sources,
+                                                 double max_distance) const {
   const int n = num_vertices();
   std::vector<double> dist(n, std::numeric_limits<double>::infinity());
   using Item = std::pair<double, int>;
@@ -97,7 +96,7 @@ std::vector<double> MeshGeodesics::DistanceField(const std::vector<int>& sources
     for (int k = offsets_[v]; k < offsets_[v + 1]; ++k) {
       const int u = neighbours_[k];
       const double nd = d + lengths_[k];
-      if (nd < dist[u]) {
+      if (nd < dist[u] && nd <= max_distance) {
         dist[u] = nd;
         heap.push_back({nd, u});
         std::push_heap(heap.begin(), heap.end(), later);

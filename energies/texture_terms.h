@@ -73,13 +73,19 @@ class MeshGeodesics {
   // vertices: V x 3; triangles: F x 3 with indices in [0, V).
   MeshGeodesics(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& triangles);
   int num_vertices() const { return static_cast<int>(offsets_.size()) - 1; }
-  // As MeshDistanceField; sources outside [0, V) are ignored.
-  std::vector<double> DistanceField(const std::vector<int>& sources) const;
+  // As MeshDistanceField; sources outside [0, V) are ignored. Distances above max_distance are
+  // +inf (the search stops there; distances up to it are exact).
+  std::vector<double> DistanceField(
+      const std::vector<int>& sources,
+      double max_distance = std::numeric_limits<double>::infinity()) const;
+  // The longest edge (m), 0 without edges.
+  double max_edge_length() const { return max_edge_length_; }
 
  private:
   std::vector<int> offsets_;     // V + 1 (CSR)
   std::vector<int> neighbours_;  // unique neighbours per vertex
   std::vector<double> lengths_;  // edge length per neighbour entry
+  double max_edge_length_ = 0.0;
 };
 
 }  // namespace artex

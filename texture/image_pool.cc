@@ -9,6 +9,7 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <numeric>
 #include <sstream>
 #include <utility>
 
@@ -149,12 +150,6 @@ TextureMesh TextureMesh::Build(const Eigen::MatrixX3i& triangles) {
   for (const auto& [key, faces] : faces_of_edge) {
     if (faces.size() == 2) edges.push_back({key.first, key.second, faces[0], faces[1]});
   }
-  mesh.edges.resize(static_cast<Eigen::Index>(edges.size()), 2);
-  mesh.edge_faces.resize(static_cast<Eigen::Index>(edges.size()), 2);
-  for (std::size_t e = 0; e < edges.size(); ++e) {
-    mesh.edges.row(e) << edges[e][0], edges[e][1];
-    mesh.edge_faces.row(e) << edges[e][2], edges[e][3];
-  }
   // Breadth-first triangle order over the shared edges (CSR adjacency of the triangles).
   const int f_count = static_cast<int>(triangles.rows());
   std::vector<int> offsets(f_count + 1, 0), neighbours(2 * edges.size());
@@ -182,6 +177,23 @@ TextureMesh TextureMesh::Build(const Eigen::MatrixX3i& triangles) {
         mesh.triangle_order.push_back(neighbours[p]);
       }
     }
+  }
+  // Edges by the earlier of their triangles in that order (ties: vertex pairs), so that passes
+  // over the edges visit neighbouring triangles together.
+  std::vector<int> position(f_count);
+  for (int k = 0; k < f_count; ++k) position[mesh.triangle_order[k]] = k;
+  std::vector<int> key(edges.size());
+  for (std::size_t e = 0; e < edges.size(); ++e)
+    key[e] = std::min(position[edges[e][2]], position[edges[e][3]]);
+  std::vector<int> by_key(edges.size());
+  std::iota(by_key.begin(), by_key.end(), 0);
+  std::stable_sort(by_key.begin(), by_key.end(), [&key](int a, int b) { return key[a] < key[b]; });
+  mesh.edges.resize(static_cast<Eigen::Index>(edges.size()), 2);
+  mesh.edge_faces.resize(static_cast<Eigen::Index>(edges.size()), 2);
+  for (std::size_t k = 0; k < edges.size(); ++k) {
+    const std::array<int, 4>& edge = edges[by_key[k]];
+    mesh.edges.row(k) << edge[0], edge[1];
+    mesh.edge_faces.row(k) << edge[2], edge[3];
   }
   return mesh;
 }

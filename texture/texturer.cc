@@ -143,7 +143,12 @@ TextureFrameSummary Texturer::AddFrame(int frame, const cv::Mat& color_bgr,
         seam_vertices.push_back(mesh_.edges(e, 1));
       }
     }
-    seam_distance_ = geodesics_->DistanceField(seam_vertices);
+    // Psi = min(1, d / seam_distance_scale) of an edge's mean vertex distance d: an edge with
+    // d < seam_distance_scale has both ends within seam_distance_scale plus half its length,
+    // so distances beyond seam_distance_scale plus the longest edge are not needed (Psi = 1).
+    seam_distance_ =
+        geodesics_->DistanceField(seam_vertices, options_.selection.terms.seam_distance_scale +
+                                                     geodesics_->max_edge_length());
   };
   const auto level = [&] {
     const auto t_level = std::chrono::steady_clock::now();

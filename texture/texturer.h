@@ -89,7 +89,8 @@ class Texturer {
   const TextureMesh& mesh() const { return mesh_; }
   const AtlasMap& atlas_map() const { return *map_; }
   // V: distance (m, along the rest mesh) to the current labelling's seams (Psi of the next
-  // frame; +inf without seams). E: rest edge lengths over their mean (the MRF edge weights).
+  // frame; +inf without seams, and beyond seam_distance_scale plus the longest rest edge, where
+  // Psi = 1). E: rest edge lengths over their mean (the MRF edge weights).
   const std::vector<double>& seam_distance() const { return seam_distance_; }
   const std::vector<double>& edge_weight() const { return edge_weight_; }
 

@@ -239,6 +239,13 @@ TEST(TexturingTest, TermsFollowThePaper) {
   const auto d = MeshDistanceField(v, t, {0});
   EXPECT_DOUBLE_EQ(d[2], 2.0);
   EXPECT_DOUBLE_EQ(d[3], std::sqrt(2.0));
+  // Bounded: exact up to the bound, +inf beyond.
+  const MeshGeodesics geodesics(v, t);
+  EXPECT_DOUBLE_EQ(geodesics.max_edge_length(), std::sqrt(2.0));
+  const auto bounded = geodesics.DistanceField({0}, 1.5);
+  EXPECT_DOUBLE_EQ(bounded[1], 1.0);
+  EXPECT_DOUBLE_EQ(bounded[3], std::sqrt(2.0));
+  EXPECT_TRUE(std::isinf(bounded[2]));
 }
 
 // A white square (z = 1 m) in the left half of a black image, its right border on the pixel
