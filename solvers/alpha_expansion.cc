@@ -210,15 +210,25 @@ MrfLabelIndex RestrictLabelIndex(const MrfLabelIndex& index, const std::vector<c
   return out;
 }
 
+// Per-label flags of one part, padded so that the flags of parts sweeping concurrently never
+// share a cache line (the padding stays 0).
+constexpr int kFlagPadding = 64;
+std::vector<char> LabelFlags(int num_labels, char value) {
+  std::vector<char> flags(num_labels + kFlagPadding, 0);
+  std::fill(flags.begin(), flags.begin() + num_labels, value);
+  return flags;
+}
+
 // One expansion sweep over the nodes of one label index (all nodes, or one part with the other
 // nodes fixed), with its own cut, move, node-to-variable map and energy bookkeeping. The two
 // halves sweep concurrently, each on its own copy of the labelling (their nodes interleave in
-// memory: shared arrays would be written from both threads within the same cache lines).
-struct Sweeper {
+// memory: shared arrays would be written from both threads within the same cache lines);
+// aligned for the same reason.
+struct alignas(64) Sweeper {
   const MrfProblem* problem;
   const MrfAdjacency* adjacency;
   const MrfLabelIndex* labels;  // the nodes this sweeper moves
-  std::vector<char> dirty;      // labels whose expansion might still lower the energy
+  std::vector<char> dirty;      // labels whose expansion might still lower the energy (padded)
   mrf_internal::BinaryMove move;
   std::vector<char> y;
   mrf_internal::BinaryMoveCut cut;
@@ -230,7 +240,7 @@ struct Sweeper {
       : problem(&p),
         adjacency(&a),
         labels(&l),
-        dirty(p.num_labels(), 1),
+        dirty(LabelFlags(p.num_labels(), 1)),
         var_of(p.num_nodes(), -1) {}
 
   // A label's move depends only on the labels of its variables (nodes having it as a candidate)
@@ -318,8 +328,8 @@ MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<in
   // Labels whose separator move the parts' changes touched (one array per part: no shared
   // writes while they run).
   std::vector<int> side_x[2];  // the halves' copies of the labelling
-  std::vector<char> touched[2] = {std::vector<char>(problem.num_labels(), 0),
-                                  std::vector<char>(problem.num_labels(), 0)};
+  std::vector<char> touched[2] = {mrf_internal::LabelFlags(problem.num_labels(), 0),
+                                  mrf_internal::LabelFlags(problem.num_labels(), 0)};
 
   double energy = summary.initial_energy;
   summary.termination = "max_iterations";
