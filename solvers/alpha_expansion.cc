@@ -325,16 +325,13 @@ MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<in
   Sweeper sides[2] = {Sweeper(problem, adjacency, part_index[0]),
                       Sweeper(problem, adjacency, part_index[1])};
   Sweeper separator(problem, adjacency, part_index[mrf_internal::kSeparatorPart]);
-  // Labels whose separator move the parts' changes touched (one array per part: no shared
-  // writes while they run).
   std::vector<int> side_x[2];  // the halves' copies of the labelling
-  std::vector<char> touched[2] = {mrf_internal::LabelFlags(problem.num_labels(), 0),
-                                  mrf_internal::LabelFlags(problem.num_labels(), 0)};
 
   double energy = summary.initial_energy;
   summary.termination = "max_iterations";
-  // Parallel sweeps until they stop lowering the energy, then sequential sweeps over all nodes
-  // (from every label), so that "converged" always means no expansion move lowers the energy.
+  // The first sweep in parallel, then sequential sweeps over all nodes (from every label), so
+  // that "converged" always means that no expansion move lowers the energy (measured: parallel
+  // sweeps until they stall and then sequential ones converge slower than this).
   bool split = parallel;
   for (int iteration = 0; iteration < options_.max_iterations; ++iteration) {
     const double sweep_start = energy;
@@ -345,31 +342,19 @@ MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<in
     } else {
       side_x[0] = x;
       side_x[1] = x;
-      tbb::parallel_invoke(
-          [&] {
-            sides[0].Sweep(&side_x[0], {&sides[0].dirty, &touched[0]});
-          },
-          [&] {
-            sides[1].Sweep(&side_x[1], {&sides[1].dirty, &touched[1]});
-          });
+      tbb::parallel_invoke([&] { sides[0].Sweep(&side_x[0], {&sides[0].dirty}); },
+                           [&] { sides[1].Sweep(&side_x[1], {&sides[1].dirty}); });
       for (int i = 0; i < n; ++i)
         if (part[i] != mrf_internal::kSeparatorPart) x[i] = side_x[static_cast<int>(part[i])][i];
-      for (int l = 0; l < problem.num_labels(); ++l) {
-        separator.dirty[l] |= touched[0][l] | touched[1][l];
-        touched[0][l] = touched[1][l] = 0;
-      }
-      separator.Sweep(&x, {&sides[0].dirty, &sides[1].dirty, &separator.dirty});
-      converged = !mrf_internal::AnyDirty(sides[0].dirty) &&
-                  !mrf_internal::AnyDirty(sides[1].dirty) &&
-                  !mrf_internal::AnyDirty(separator.dirty);
+      separator.Sweep(&x, {&separator.dirty});  // from every label (all start dirty)
     }
     energy = problem.EnergyLocal(x);  // drop the rounding of the accumulated deltas
     if (!run.EndIteration(energy, -std::numeric_limits<double>::infinity())) break;
+    if (split) {
+      split = false;  // whole.dirty: every label
+      continue;
+    }
     if (converged || sweep_start - energy <= options_.energy_tolerance * std::abs(sweep_start)) {
-      if (split) {
-        split = false;  // whole.dirty: every label
-        continue;
-      }
       summary.termination = "converged";
       break;
     }

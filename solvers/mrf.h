@@ -164,11 +164,12 @@ struct MrfSolverOptions {
   // Stop when a sweep lowers the energy by <= energy_tolerance * |energy| (0: only when a sweep
   // changes nothing). >= 0.
   double energy_tolerance = 1e-9;
-  // Alpha-expansion on problems of at least this many nodes (0: never): each sweep splits the
-  // nodes into two halves and a separator (breadth-first levels, so no edge joins the halves),
-  // sweeps the halves concurrently with the separator fixed, then sweeps the separator. Every
-  // move is an exact expansion restricted to its part, so the energy still never rises; the
-  // result differs from a sequential sweep's but not with the number of threads. >= 0.
+  // Alpha-expansion on problems of at least this many nodes (0: never): the first sweep of each
+  // Solve splits the nodes into two halves and a separator (breadth-first levels, so no edge
+  // joins the halves), sweeps the halves concurrently with the separator fixed, then sweeps the
+  // separator; later sweeps are sequential. Every move is an exact expansion restricted to its
+  // part, so the energy still never rises; the result differs from a sequential sweep's but not
+  // with the number of threads. >= 0.
   int expansion_parallel_min_nodes = 4096;
   // TRW-S: maximum number of iterations (forward + backward pass each). >= 1.
   int trws_max_iterations = 100;
