@@ -20,7 +20,7 @@ struct ViewSelectionOptions {
   // Keep only the best `max_candidates` images per triangle by D (plus its warm-start label);
   // 0 keeps all. Bounds the MRF size for a large pool. With the lifetime term the best are the
   // newest images; docs/texturing.md measures the energy each limit leaves (BM_CandidateLimit:
-  // 3 costs 6e-5 of the energy against 4 and saves ~11 % of a frame).
+  // 3 costs 8e-5 of the energy against 4 and saves ~11 % of a frame).
   int max_candidates = 3;
   // Pi for a label pair where one side has no colour along the edge.
   double unseen_colour_cost = 1.0;
