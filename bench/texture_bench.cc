@@ -15,6 +15,8 @@
 //   and Psi from the previous frame's labelling) built and solved by SelectViews with each
 //   solver: energy, TRW-S lower bound, iterations, solve time.
 // BM_ExpansionSweeps/<n>: the same with alpha-expansion limited to n sweeps.
+// BM_CandidateLimit/<max_candidates>/<max_sweeps>: the same with at most max_candidates images
+//   per triangle (0: all); energies compare across the limits.
 // BM_LevelSeams: seam levelling of one labelling.
 // Median figures: --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
 #include <benchmark/benchmark.h>
