@@ -480,7 +480,7 @@ TEST(MrfGuaranteesTest, BisectionSeparatesTheHalves) {
   }
 }
 
-// Parallel sweeps (two halves concurrently, then the separator): the energy never rises, the
+// A parallel first sweep (two halves concurrently, then the separator): the energy never rises, the
 // result does not depend on the number of threads, and "converged" still means that no
 // expansion move over the whole problem lowers the energy.
 TEST(MrfGuaranteesTest, ParallelExpansionSweepsAreMonotoneDeterministicAndConverge) {
