@@ -19,7 +19,9 @@ void MaxflowError(const char* /*message*/) { throw std::bad_alloc(); }
 
 }  // namespace
 
-struct BinaryMoveCut::Impl {
+// Cache-line aligned (and so padded): cuts of parts sweeping concurrently are allocated one
+// after the other, and max-flow writes its graph's bookkeeping all the time.
+struct alignas(64) BinaryMoveCut::Impl {
   Graph graph{0, 0, &MaxflowError};
 };
 
