@@ -105,8 +105,8 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
 void BindTexture(const Config& c, TexturingOptions* o) {
   c.CheckKeys({"beta", "t_max", "alpha", "lambda", "seam_distance_scale", "min_quality",
                "untextured_cost", "max_candidates", "solver", "mrf_max_iterations",
-               "mrf_parallel_min_nodes", "trws_max_iterations", "warm_start", "max_images", "hard_max_images",
-               "histogram_bins", "edge_samples", "atlas_size", "padding_texels",
+               "mrf_parallel_min_nodes", "trws_max_iterations", "warm_start", "max_images",
+               "hard_max_images", "histogram_bins", "edge_samples", "atlas_size", "padding_texels",
                "seam_levelling", "levelling_smoothness", "add_every", "depth_tolerance",
                "switch_cost", "raster_scale", "surface_aware_sampling",
                "vertex_colors_need_full_ring"});

@@ -234,9 +234,8 @@ struct alignas(64) Sweeper {
   mrf_internal::BinaryMove move;
   std::vector<char> y;
   mrf_internal::BinaryMoveCut cut;
-  std::vector<int> var_of;     // move variable of node i, -1 when fixed
-  double energy_change = 0.0;  // accumulated by the accepted moves (the caller re-evaluates)
-  MrfSummary counts;           // accepted_moves, truncated_terms
+  std::vector<int> var_of;  // move variable of node i, -1 when fixed
+  MrfSummary counts;        // accepted_moves, truncated_terms
 
   Sweeper(const MrfProblem& p, const MrfAdjacency& a, const MrfLabelIndex& l)
       : problem(&p),
@@ -246,23 +245,21 @@ struct alignas(64) Sweeper {
         var_of(p.num_nodes(), -1) {}
 
   // A label's move depends only on the labels of its variables (nodes having it as a candidate)
-  // and of their neighbours: marks the labels whose move node i's label enters.
-  static void MarkAround(const MrfProblem& problem, const MrfAdjacency& adjacency, int i,
-                         std::vector<char>* marks) {
-    for (int k = 0; k < problem.num_candidates(i); ++k)
-      (*marks)[problem.candidate_labels(i)[k]] = 1;
-    for (int p = adjacency.offsets[i]; p < adjacency.offsets[i + 1]; ++p) {
-      const int e = adjacency.edges[p];
-      const int j = problem.edge_first(e) == i ? problem.edge_second(e) : problem.edge_first(e);
-      for (int k = 0; k < problem.num_candidates(j); ++k)
-        (*marks)[problem.candidate_labels(j)[k]] = 1;
+  // and of their neighbours: marks dirty the labels whose move node i's label enters.
+  void MarkDirtyAround(int i) {
+    for (int k = 0; k < problem->num_candidates(i); ++k) dirty[problem->candidate_labels(i)[k]] = 1;
+    for (int p = adjacency->offsets[i]; p < adjacency->offsets[i + 1]; ++p) {
+      const int e = adjacency->edges[p];
+      const int j = problem->edge_first(e) == i ? problem->edge_second(e) : problem->edge_first(e);
+      for (int k = 0; k < problem->num_candidates(j); ++k)
+        dirty[problem->candidate_labels(j)[k]] = 1;
     }
   }
 
-  // One expansion per dirty label; every changed node marks `marks` (this sweeper's dirty flags
-  // among them).
-  void Sweep(std::vector<int>* x, const std::vector<std::vector<char>*>& marks) {
+  // One expansion per dirty label of this sweeper's nodes.
+  void Sweep(std::vector<int>* x) {
     const MrfLabelIndex& index = *labels;
+    double energy_change = 0.0;  // ApplyBinaryMove's running sum (the caller re-evaluates)
     for (int alpha = 0; alpha < problem->num_labels(); ++alpha) {
       if (!dirty[alpha]) continue;
       // A label is clean after an expansion that changed nothing, or after an accepted exact
@@ -287,7 +284,7 @@ struct alignas(64) Sweeper {
         continue;
       for (int v = 0; v < move.size(); ++v) {
         if (y[v] == move.current[v]) continue;
-        for (std::vector<char>* m : marks) MarkAround(*problem, *adjacency, move.vars[v], m);
+        MarkDirtyAround(move.vars[v]);
       }
       dirty[alpha] = counts.truncated_terms > truncated_before;
     }
@@ -320,13 +317,13 @@ MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<in
   MrfLabelIndex part_index[3];
   if (parallel) {
     part = mrf_internal::BisectByLevels(problem, adjacency);
-    for (char k = 0; k < 3; ++k)
-      part_index[k] = mrf_internal::RestrictLabelIndex(label_index, part, k);
+    for (int k = 0; k < 3; ++k)
+      part_index[k] = mrf_internal::RestrictLabelIndex(label_index, part, static_cast<char>(k));
   }
   Sweeper whole(problem, adjacency, label_index);
   Sweeper sides[2] = {Sweeper(problem, adjacency, part_index[0]),
                       Sweeper(problem, adjacency, part_index[1])};
-  Sweeper separator(problem, adjacency, part_index[mrf_internal::kSeparatorPart]);
+  Sweeper separator(problem, adjacency, part_index[static_cast<int>(mrf_internal::kSeparatorPart)]);
   std::vector<int> side_x[2];  // the halves' copies of the labelling
 
   double energy = summary.initial_energy;
@@ -339,16 +336,16 @@ MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<in
     const double sweep_start = energy;
     bool converged = false;
     if (!split) {
-      whole.Sweep(&x, {&whole.dirty});
+      whole.Sweep(&x);
       converged = !mrf_internal::AnyDirty(whole.dirty);
     } else {
       side_x[0] = x;
       side_x[1] = x;
-      tbb::parallel_invoke([&] { sides[0].Sweep(&side_x[0], {&sides[0].dirty}); },
-                           [&] { sides[1].Sweep(&side_x[1], {&sides[1].dirty}); });
+      tbb::parallel_invoke([&] { sides[0].Sweep(&side_x[0]); },
+                           [&] { sides[1].Sweep(&side_x[1]); });
       for (int i = 0; i < n; ++i)
         if (part[i] != mrf_internal::kSeparatorPart) x[i] = side_x[static_cast<int>(part[i])][i];
-      separator.Sweep(&x, {&separator.dirty});  // from every label (all start dirty)
+      separator.Sweep(&x);  // from every label (all start dirty)
     }
     energy = problem.EnergyLocal(x);  // drop the rounding of the accumulated deltas
     if (!run.EndIteration(energy, -std::numeric_limits<double>::infinity())) break;

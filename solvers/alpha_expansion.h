@@ -73,17 +73,17 @@ struct BinaryMove {
 // result to x when its true energy change is negative (the cut minimised a majoriser of it):
 // then adds the change to *energy and counts the move in summary->accepted_moves. Majorised pair
 // terms are counted in summary->truncated_terms. Returns whether the move was applied.
+bool ApplyBinaryMove(const MrfProblem& problem, const MrfAdjacency& adjacency,
+                     const BinaryMove& move, const std::vector<int>& var_of, BinaryMoveCut* cut,
+                     std::vector<char>* y, std::vector<int>* x, double* energy,
+                     MrfSummary* summary);
+
 // Parallel sweeps (MrfSolverOptions::expansion_parallel_min_nodes): part[i] is 0 or 1 for the two
 // halves, kSeparatorPart for the separator; no edge joins the halves. Breadth-first levels from
 // node 0 (components one after another, from their lowest node); the level at which the
 // cumulative work (candidates per node) reaches half is the separator. Deterministic.
 constexpr char kSeparatorPart = 2;
 std::vector<char> BisectByLevels(const MrfProblem& problem, const MrfAdjacency& adjacency);
-
-bool ApplyBinaryMove(const MrfProblem& problem, const MrfAdjacency& adjacency,
-                     const BinaryMove& move, const std::vector<int>& var_of, BinaryMoveCut* cut,
-                     std::vector<char>* y, std::vector<int>* x, double* energy,
-                     MrfSummary* summary);
 
 }  // namespace mrf_internal
 
