@@ -38,13 +38,25 @@ struct TextureTermOptions {
 // centre towards the triangle (paper eq. 12).
 double TriangleQuality(const Eigen::Vector3d& normal, const Eigen::Vector3d& view_direction);
 
-// D(f, l) of eq. 13: +inf when not visible or quality < min_quality. (Inline: evaluated for
-// every triangle and pooled image each frame.)
+// The lifetime part of D: (1 - beta) min(t_max, max(0, age)) / t_max, the same for every
+// triangle of one image.
+inline double ViewAgeCost(double age_frames, const TextureTermOptions& options) {
+  return (1.0 - options.beta) *
+         (std::min(options.t_max, std::max(0.0, age_frames)) / options.t_max);
+}
+
+// D(f, l) of eq. 13 from the image's ViewAgeCost: +inf when not visible or quality <
+// min_quality. (Inline: evaluated for every triangle and pooled image each frame.)
+inline double ViewDataCostFromAge(bool visible, double quality, double age_cost,
+                                  const TextureTermOptions& options) {
+  if (!visible || quality < options.min_quality) return std::numeric_limits<double>::infinity();
+  return options.beta * (1.0 - quality) + age_cost;
+}
+
+// D(f, l) of eq. 13 for an image age_frames old.
 inline double ViewDataCost(bool visible, double quality, double age_frames,
                            const TextureTermOptions& options) {
-  if (!visible || quality < options.min_quality) return std::numeric_limits<double>::infinity();
-  const double age = std::min(options.t_max, std::max(0.0, age_frames)) / options.t_max;
-  return options.beta * (1.0 - quality) + (1.0 - options.beta) * age;
+  return ViewDataCostFromAge(visible, quality, ViewAgeCost(age_frames, options), options);
 }
 
 // V_ij for l_i != l_j: (1 - alpha) Pi + alpha Psi (0 when the labels are equal: the caller

@@ -195,6 +195,52 @@ int MrfProblem::AddEdgeTable(int i, int j, double weight, const float* table) {
   return AppendEdge(i, j, weight, offset);
 }
 
+void MrfProblem::AddEdgeTables(const std::vector<int>& first, const std::vector<int>& second,
+                               const std::vector<double>& weights, std::vector<float> tables) {
+  const std::size_t n = first.size();
+  if (second.size() != n || weights.size() != n) {
+    throw Error("MrfProblem::AddEdgeTables: expected as many second nodes and weights as first "
+                "nodes (" + std::to_string(n) + "), found " + std::to_string(second.size()) +
+                " and " + std::to_string(weights.size()));
+  }
+  const int e0 = num_edges();
+  std::int64_t size = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    CheckEdge(*this, first[k], second[k], weights[k], "AddEdgeTables");
+    const std::int64_t entries =
+        static_cast<std::int64_t>(num_candidates(first[k])) * num_candidates(second[k]);
+    if (size + entries > static_cast<std::int64_t>(tables.size())) {
+      throw Error("MrfProblem::AddEdgeTables (edge " + std::to_string(e0 + k) +
+                  "): tables: expected at least " + std::to_string(size + entries) +
+                  " entries, found " + std::to_string(tables.size()));
+    }
+    for (std::int64_t i = size; i < size + entries; ++i) {
+      if (!std::isfinite(tables[i])) {
+        throw Error("MrfProblem::AddEdgeTables (edge " + std::to_string(e0 + k) + "): table[" +
+                    std::to_string(i - size) + "]: expected finite, found " +
+                    std::to_string(tables[i]));
+      }
+    }
+    size += entries;
+  }
+  if (size != static_cast<std::int64_t>(tables.size())) {
+    throw Error("MrfProblem::AddEdgeTables: tables: expected " + std::to_string(size) +
+                " entries, found " + std::to_string(tables.size()));
+  }
+  std::int64_t offset = static_cast<std::int64_t>(tables_.size());
+  if (tables_.empty())
+    tables_ = std::move(tables);
+  else
+    tables_.insert(tables_.end(), tables.begin(), tables.end());
+  edge_nodes_.reserve(edge_nodes_.size() + 2 * n);
+  edge_weights_.reserve(edge_weights_.size() + n);
+  table_offsets_.reserve(table_offsets_.size() + n);
+  for (std::size_t k = 0; k < n; ++k) {
+    AppendEdge(first[k], second[k], weights[k], offset);
+    offset += static_cast<std::int64_t>(num_candidates(first[k])) * num_candidates(second[k]);
+  }
+}
+
 int MrfProblem::AppendEdge(int i, int j, double weight, std::int64_t table_offset) {
   edge_nodes_.push_back(i);
   edge_nodes_.push_back(j);

@@ -49,6 +49,12 @@ class MrfProblem {
   // Same with the table given directly: K_i x K_j row-major over the candidates of i and j in
   // ascending label order (num_candidates / candidate_labels); must be finite.
   int AddEdgeTable(int i, int j, double weight, const float* table);
+  // Adds the edges k = 0 .. n - 1 between first[k] and second[k] with weight weights[k], as
+  // AddEdgeTable would one by one, their tables stored one after the other in `tables` (sum over
+  // k of K_first K_second entries; taken over without a copy when the problem has no tables
+  // yet). Throws artex::Error naming the first offending edge; nothing is added then.
+  void AddEdgeTables(const std::vector<int>& first, const std::vector<int>& second,
+                     const std::vector<double>& weights, std::vector<float> tables);
   // Reserves room for this many more nodes, candidates (sum of K_i), edges and table entries
   // (sum of K_i K_j over table edges); optional.
   void Reserve(int nodes, std::int64_t candidates, int edges, std::int64_t table_entries);

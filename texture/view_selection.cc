@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <iterator>
 #include <limits>
+#include <memory>
 #include <numeric>
 #include <sstream>
 #include <utility>
@@ -15,6 +16,10 @@
 #include "models/error.h"
 
 namespace artex {
+namespace {
+// Tables ahead whose colours the pairwise-table loop prefetches.
+constexpr int kPrefetchTables = 4;
+}  // namespace
 
 bool ViewSelectionOptions::IsValid(std::string* error) const {
   if (!terms.IsValid(error)) return false;
@@ -65,36 +70,47 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
   std::vector<std::pair<int, int>> frame_slots(slots);
   for (int s = 0; s < slots; ++s) frame_slots[s] = {slot_frame[s], s};
   std::sort(frame_slots.begin(), frame_slots.end());
+  // The lifetime part of D per slot (the same for every triangle of an image).
+  std::vector<double> slot_age_cost(slots);
+  for (int s = 0; s < slots; ++s)
+    slot_age_cost[s] = ViewAgeCost(input.current_frame - slot_frame[s], options.terms);
   constexpr int kChunk = 256;
   tbb::parallel_for(
       tbb::blocked_range<int>(0, f_count, kChunk), [&](const tbb::blocked_range<int>& range) {
+        // A local copy: the compiler then knows that writing costs does not change the terms.
+        const TextureTermOptions terms = options.terms;
         // D of the chunk's triangles slot by slot (each slot's arrays read in storage order).
         const int begin = range.begin(), size = range.end() - range.begin();
-        std::vector<double> chunk_d(static_cast<std::size_t>(slots) * size);
+        const std::unique_ptr<double[]> chunk_d(new double[static_cast<std::size_t>(slots) * size]);
         for (int s = 0; s < slots; ++s) {
-          const double age = input.current_frame - slot_frame[s];
+          const uint8_t* visible = slot_visible[s] + begin;
+          const float* quality = slot_quality[s] + begin;
+          const double age_cost = slot_age_cost[s];
           double* out = &chunk_d[static_cast<std::size_t>(s) * size];
-          for (int k = 0; k < size; ++k) {
-            const int f = begin + k;
-            out[k] = slot_visible[s][f] ? ViewDataCost(true, slot_quality[s][f], age, options.terms)
-                                        : inf;
-          }
+          for (int k = 0; k < size; ++k)
+            out[k] = ViewDataCostFromAge(visible[k] != 0, quality[k], age_cost, terms);
         }
-        std::vector<double> d(slots);
-        std::vector<int> best(keep + 1);  // the best slots by (D, slot), ascending
+        std::vector<int> best(keep + 1);       // the best slots by (D, slot), ascending
+        std::vector<double> best_d(keep + 1);  // and their D
+        int memo_frame = -1, memo_slot = -1;   // the last warm-start lookup
         for (int f = range.begin(); f < range.end(); ++f) {
-          for (int s = 0; s < slots; ++s)
-            d[s] = chunk_d[static_cast<std::size_t>(s) * size + (f - begin)];
+          // D of this triangle in slot s: column[s * size].
+          const double* column = &chunk_d[f - begin];
           if (!input.previous_frames.empty()) {
             const int frame = input.previous_frames[f];
             if (frame < 0) {
               warm[f] = untextured;
             } else {
-              // The last slot holding that frame, if any.
-              const auto it = std::upper_bound(frame_slots.begin(), frame_slots.end(),
-                                               std::make_pair(frame, slots));
-              if (it != frame_slots.begin() && std::prev(it)->first == frame)
-                warm[f] = std::prev(it)->second;
+              if (frame != memo_frame) {
+                // The last slot holding that frame, if any.
+                memo_frame = frame;
+                memo_slot = -1;
+                const auto it = std::upper_bound(frame_slots.begin(), frame_slots.end(),
+                                                 std::make_pair(frame, slots));
+                if (it != frame_slots.begin() && std::prev(it)->first == frame)
+                  memo_slot = std::prev(it)->second;
+              }
+              warm[f] = memo_slot;
             }
           }
           // The best `keep` by (D, slot). Newest slots first: with the lifetime term they tend to
@@ -102,21 +118,24 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
           // before an equal D of a later (newer) slot, as (D, s) orders it first.
           int kept = 0;
           for (int s = slots - 1; s >= 0; --s) {
-            if (!std::isfinite(d[s])) continue;
-            if (kept == keep && !(d[s] <= d[best[kept - 1]])) continue;
+            const double d = column[static_cast<std::size_t>(s) * size];
+            if (!(d < inf)) continue;  // not a candidate (+inf)
+            if (kept == keep && !(d <= best_d[kept - 1])) continue;
             int k = kept < keep ? kept++ : kept - 1;
-            while (k > 0 && d[best[k - 1]] >= d[s]) {
+            while (k > 0 && best_d[k - 1] >= d) {
               best[k] = best[k - 1];
+              best_d[k] = best_d[k - 1];
               --k;
             }
             best[k] = s;
+            best_d[k] = d;
           }
           int* labels = &cand_labels[static_cast<std::size_t>(f) * stride];
           double* costs = &cand_costs[static_cast<std::size_t>(f) * stride];
           int n = 0;
           for (int k = 0; k < kept; ++k) labels[n++] = best[k];
           const int w = warm[f];
-          if (w >= 0 && w < slots && std::isfinite(d[w]) &&
+          if (w >= 0 && w < slots && column[static_cast<std::size_t>(w) * size] < inf &&
               std::find(labels, labels + n, w) == labels + n)
             labels[n++] = w;
           std::sort(labels, labels + n);
@@ -125,7 +144,8 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
           const bool keeps = w >= 0 && w != untextured && options.terms.switch_cost > 0.0;
           for (int k = 0; k < n; ++k) {
             const int l = labels[k];
-            costs[k] = l == untextured ? options.untextured_cost : d[l];
+            costs[k] =
+                l == untextured ? options.untextured_cost : column[static_cast<std::size_t>(l) * size];
             if (keeps && l != w) costs[k] += options.terms.switch_cost;
           }
           count[f] = n;
@@ -149,30 +169,94 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
       constant += cand_costs[static_cast<std::size_t>(f) * stride];
     }
   }
+  const int num_free = static_cast<int>(triangle_of.size());
   const double lambda = options.terms.lambda;
 
-  // Pairwise tables over the candidates of both sides, computed in parallel.
+  // The pairwise terms. Edges between two free triangles are edges of the MRF: they go in
+  // ordered by their lower node, lower node first (the solvers walk nodes in ascending order,
+  // and reading the tables in storage order is what keeps them fast: they do not fit in cache).
+  // Edges with one fixed side: lambda w c(l, untextured) joins the free side's unaries. Edges
+  // between two fixed triangles cost a constant 0 (both untextured).
+  std::vector<int> edge_start(num_free + 1, 0);
+  std::vector<int> fixed_edges;  // ascending
+  for (int e = 0; e < e_count; ++e) {
+    const int i = node_of[mesh.edge_faces(e, 0)], j = node_of[mesh.edge_faces(e, 1)];
+    if (i >= 0 && j >= 0)
+      ++edge_start[std::min(i, j) + 1];
+    else if (i >= 0 || j >= 0)
+      fixed_edges.push_back(e);
+  }
+  for (int i = 0; i < num_free; ++i) edge_start[i + 1] += edge_start[i];
+  const int num_edges = edge_start[num_free];
+  const int num_fixed = static_cast<int>(fixed_edges.size());
+  // Per table (MRF edges first, then the edges with a fixed side): its mesh edge, the triangles
+  // of its rows and columns (the free one first for fixed sides) and where it starts.
+  std::vector<int> table_edge(num_edges + num_fixed), row_face(num_edges + num_fixed),
+      column_face(num_edges + num_fixed);
+  {
+    std::vector<int> fill(edge_start.begin(), edge_start.end() - 1);
+    for (int e = 0; e < e_count; ++e) {
+      const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
+      const int i = node_of[fi], j = node_of[fj];
+      if (i < 0 || j < 0) continue;
+      const int k = fill[std::min(i, j)]++;
+      table_edge[k] = e;
+      row_face[k] = i < j ? fi : fj;
+      column_face[k] = i < j ? fj : fi;
+    }
+    for (int k = 0; k < num_fixed; ++k) {
+      const int e = fixed_edges[k];
+      const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
+      const bool first_free = node_of[fi] >= 0;
+      table_edge[num_edges + k] = e;
+      row_face[num_edges + k] = first_free ? fi : fj;
+      column_face[num_edges + k] = first_free ? fj : fi;
+    }
+  }
+  std::vector<std::int64_t> table_offset(num_edges + num_fixed + 1, 0);
+  for (int k = 0; k < num_edges + num_fixed; ++k)
+    table_offset[k + 1] =
+        table_offset[k] + static_cast<std::int64_t>(count[row_face[k]]) * count[column_face[k]];
+  // The MRF's tables, then those of the fixed sides (one row each).
+  std::vector<float> tables(table_offset[num_edges]);
+  std::vector<float> fixed_tables(table_offset[num_edges + num_fixed] - table_offset[num_edges]);
+
+  // The tables over the candidates of both sides, computed in parallel.
   const int samples =
       slots > 0 ? static_cast<int>(pool.entry(0).edge_colors.rows() / std::max(1, e_count)) : 0;
-  std::vector<std::int64_t> table_offset(e_count + 1, 0);
-  for (int e = 0; e < e_count; ++e)
-    table_offset[e + 1] =
-        table_offset[e] +
-        static_cast<std::int64_t>(count[mesh.edge_faces(e, 0)]) * count[mesh.edge_faces(e, 1)];
-  std::vector<float> tables(table_offset[e_count]);
+  std::vector<const float*> slot_colors(slots);
+  for (int s = 0; s < slots; ++s) slot_colors[s] = pool.entry(s).edge_colors.data();
+  const std::size_t edge_floats = static_cast<std::size_t>(samples) * 3;
   tbb::parallel_for(
-      tbb::blocked_range<int>(0, e_count, 1024), [&](const tbb::blocked_range<int>& range) {
+      tbb::blocked_range<int>(0, num_edges + num_fixed, 1024),
+      [&](const tbb::blocked_range<int>& range) {
         std::vector<int> pos_in_j(stride), pos_in_i(stride);
-        for (int e = range.begin(); e < range.end(); ++e) {
+        for (int t = range.begin(); t < range.end(); ++t) {
+          // The colours of an edge in each pooled image are far apart in memory (one array per
+          // image): those of a later table's candidates are requested ahead of their use.
+          if (samples > 0 && t + kPrefetchTables < range.end()) {
+            const int ahead = t + kPrefetchTables;
+            const std::size_t first = static_cast<std::size_t>(table_edge[ahead]) * edge_floats;
+            for (const int g : {row_face[ahead], column_face[ahead]}) {
+              const int* labels = &cand_labels[static_cast<std::size_t>(g) * stride];
+              for (int k = 0; k + 1 < count[g]; ++k) {  // the last label is "untextured"
+                const char* at = reinterpret_cast<const char*>(slot_colors[labels[k]] + first);
+                __builtin_prefetch(at);
+                __builtin_prefetch(at + edge_floats * sizeof(float) - 1);
+              }
+            }
+          }
+          const int e = table_edge[t];
           const int u = mesh.edges(e, 0), v = mesh.edges(e, 1);
           double distance = inf;
           if (!input.seam_distance.empty())
             distance = 0.5 * (input.seam_distance[u] + input.seam_distance[v]);
           const double psi = TemporalSeamCost(distance, options.terms);
-          const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
+          const int fi = row_face[t], fj = column_face[t];
           const int* li = &cand_labels[static_cast<std::size_t>(fi) * stride];
           const int* lj = &cand_labels[static_cast<std::size_t>(fj) * stride];
-          float* table = &tables[table_offset[e]];
+          float* table = t < num_edges ? &tables[table_offset[t]]
+                                       : &fixed_tables[table_offset[t] - table_offset[num_edges]];
           const int ni = count[fi], nj = count[fj];
           // Where each side's labels sit among the other side's (-1: absent), for reusing the
           // symmetric V(b, a) = V(a, b).
@@ -194,10 +278,8 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
               } else if (a != b) {
                 double pi = options.unseen_colour_cost;
                 if (a != untextured && b != untextured && samples > 0) {
-                  const float* ca =
-                      pool.entry(a).edge_colors.data() + static_cast<std::size_t>(e) * samples * 3;
-                  const float* cb =
-                      pool.entry(b).edge_colors.data() + static_cast<std::size_t>(e) * samples * 3;
+                  const float* ca = slot_colors[a] + static_cast<std::size_t>(e) * edge_floats;
+                  const float* cb = slot_colors[b] + static_cast<std::size_t>(e) * edge_floats;
                   double sum = 0.0;
                   int n = 0;
                   for (int k = 0; k < 3 * samples; k += 3) {
@@ -218,24 +300,20 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
         }
       });
 
-  // Edges with one fixed side: lambda w c(l, untextured) joins the free side's unaries (in the
-  // single precision the MRF stores pairwise costs in).
-  for (int e = 0; e < e_count; ++e) {
-    const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
-    if ((node_of[fi] >= 0) == (node_of[fj] >= 0)) continue;
-    const bool first_free = node_of[fi] >= 0;
-    const int free = first_free ? fi : fj;
+  // The fixed sides' terms join the unaries (in the single precision the MRF stores pairwise
+  // costs in), edge by edge in ascending order.
+  for (int k = 0; k < num_fixed; ++k) {
+    const int e = fixed_edges[k];
+    const int free = row_face[num_edges + k];
     const double weight = input.edge_weight.empty() ? 1.0 : input.edge_weight[e];
-    const float* table = &tables[table_offset[e]];
+    const float* table = &fixed_tables[table_offset[num_edges + k] - table_offset[num_edges]];
     double* costs = &cand_costs[static_cast<std::size_t>(free) * stride];
-    // The fixed side has one candidate, so the table is a row or a column of count[free].
     for (int p = 0; p < count[free]; ++p) costs[p] += lambda * weight * table[p];
   }
 
-  const int num_free = static_cast<int>(triangle_of.size());
   MrfProblem problem(slots + 1);
   for (int f = 0; f < f_count; ++f) result.num_candidates += count[f];
-  problem.Reserve(num_free + 1, result.num_candidates, e_count, table_offset[e_count]);
+  problem.Reserve(num_free + 1, result.num_candidates, 0, 0);
   // Candidate labels are ascending with finite costs, so the problem's local candidate order is
   // the order of cand_labels and the tables go in as they are.
   for (int f : triangle_of) {
@@ -245,36 +323,15 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
   // One extra isolated node carries the fixed triangles' constant, so that every energy the
   // solver sees (its relative stopping tests, the callback) is that of the whole labelling.
   if (num_free < f_count) problem.AddNode({untextured}, {constant});
-  // Edges go in ordered by their lower node (first): the solvers walk nodes
-  // in ascending order, and reading the tables in storage order is what keeps them fast (the
-  // tables do not fit in cache). V is symmetric, so a swapped edge takes the transposed table.
-  std::vector<int> edge_start(num_free + 1, 0);
-  for (int e = 0; e < e_count; ++e) {
-    const int i = node_of[mesh.edge_faces(e, 0)], j = node_of[mesh.edge_faces(e, 1)];
-    if (i >= 0 && j >= 0) ++edge_start[std::min(i, j) + 1];
-  }
-  for (int i = 0; i < num_free; ++i) edge_start[i + 1] += edge_start[i];
-  std::vector<int> sorted_edges(edge_start[num_free]);
   {
-    std::vector<int> fill(edge_start.begin(), edge_start.end() - 1);
-    for (int e = 0; e < e_count; ++e) {
-      const int i = node_of[mesh.edge_faces(e, 0)], j = node_of[mesh.edge_faces(e, 1)];
-      if (i >= 0 && j >= 0) sorted_edges[fill[std::min(i, j)]++] = e;
+    std::vector<int> first(num_edges), second(num_edges);
+    std::vector<double> weights(num_edges);
+    for (int k = 0; k < num_edges; ++k) {
+      first[k] = node_of[row_face[k]];
+      second[k] = node_of[column_face[k]];
+      weights[k] = input.edge_weight.empty() ? 1.0 : input.edge_weight[table_edge[k]];
     }
-  }
-  std::vector<float> transposed(static_cast<std::size_t>(stride) * stride);
-  for (int e : sorted_edges) {
-    const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
-    const double weight = input.edge_weight.empty() ? 1.0 : input.edge_weight[e];
-    const float* table = &tables[table_offset[e]];
-    if (node_of[fi] < node_of[fj]) {
-      problem.AddEdgeTable(node_of[fi], node_of[fj], weight, table);
-    } else {
-      const int ni = count[fi], nj = count[fj];
-      for (int p = 0; p < ni; ++p)
-        for (int q = 0; q < nj; ++q) transposed[q * ni + p] = table[p * nj + q];
-      problem.AddEdgeTable(node_of[fj], node_of[fi], weight, transposed.data());
-    }
+    problem.AddEdgeTables(first, second, weights, std::move(tables));
   }
   problem.set_smoothness(lambda);
 

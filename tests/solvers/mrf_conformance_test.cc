@@ -611,6 +611,71 @@ TEST(MrfProblemTest, EdgeTablesMatchCostCallbacks) {
   EXPECT_THROW(with_tables.AddNode(duplicate, unsorted_costs, 2), Error);
 }
 
+TEST(MrfProblemTest, BulkEdgeTablesMatchOneByOne) {
+  const auto cost = [](int a, int b) { return a == b ? 0.0 : 0.1 * (3 * a + b + 1); };
+  const std::vector<std::vector<int>> labels = {{0, 2, 3}, {1, 2}, {0, 1, 3}};
+  const std::vector<std::vector<double>> costs = {{0.5, 0.0, 1.0}, {0.2, 0.4}, {1.0, 0.3, 0.6}};
+  const std::vector<std::pair<int, int>> edges = {{0, 1}, {1, 2}, {2, 0}};
+  const std::vector<double> weights = {1.5, 0.5, 2.0};
+  const auto table_of = [&](int i, int j) {
+    std::vector<float> table;
+    for (int a : labels[i])
+      for (int b : labels[j]) table.push_back(static_cast<float>(cost(a, b)));
+    return table;
+  };
+  const auto nodes = [&](MrfProblem* p) {
+    for (std::size_t i = 0; i < labels.size(); ++i) p->AddNode(labels[i], costs[i]);
+  };
+  MrfProblem one_by_one(4), bulk(4), appended(4);
+  nodes(&one_by_one);
+  nodes(&bulk);
+  nodes(&appended);
+  for (std::size_t k = 0; k < edges.size(); ++k) {
+    one_by_one.AddEdgeTable(edges[k].first, edges[k].second, weights[k],
+                            table_of(edges[k].first, edges[k].second).data());
+  }
+  std::vector<int> first, second;
+  std::vector<float> tables;
+  for (const auto& [i, j] : edges) {
+    first.push_back(i);
+    second.push_back(j);
+    const std::vector<float> t = table_of(i, j);
+    tables.insert(tables.end(), t.begin(), t.end());
+  }
+  bulk.AddEdgeTables(first, second, weights, tables);  // taken over (no tables yet)
+  // Appended after an edge added one by one (copied).
+  appended.AddEdgeTable(edges[0].first, edges[0].second, weights[0],
+                        table_of(edges[0].first, edges[0].second).data());
+  appended.AddEdgeTables({first[1], first[2]}, {second[1], second[2]}, {weights[1], weights[2]},
+                         std::vector<float>(tables.begin() + 6, tables.end()));
+  ASSERT_EQ(bulk.num_edges(), 3);
+  ASSERT_EQ(appended.num_edges(), 3);
+  for (int a : labels[0]) {
+    for (int b : labels[1]) {
+      for (int c : labels[2]) {
+        EXPECT_EQ(bulk.Energy({a, b, c}), one_by_one.Energy({a, b, c}));
+        EXPECT_EQ(appended.Energy({a, b, c}), one_by_one.Energy({a, b, c}));
+      }
+    }
+  }
+  EXPECT_EQ(bulk.MemoryBytes(), one_by_one.MemoryBytes());
+  // Bad input throws and adds nothing.
+  std::vector<float> nan_table = tables;
+  nan_table[7] = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_THROW(bulk.AddEdgeTables(first, second, weights, nan_table), Error);
+  EXPECT_THROW(bulk.AddEdgeTables(first, second, weights,
+                                  std::vector<float>(tables.begin(), tables.end() - 1)),
+               Error);
+  std::vector<float> longer = tables;
+  longer.push_back(0.0f);
+  EXPECT_THROW(bulk.AddEdgeTables(first, second, weights, longer), Error);
+  EXPECT_THROW(bulk.AddEdgeTables(first, {1, 2}, weights, tables), Error);
+  EXPECT_THROW(bulk.AddEdgeTables(first, {1, 2, 0}, {1.5, -1.0, 2.0}, tables), Error);
+  EXPECT_THROW(bulk.AddEdgeTables({0, 1, 2}, {1, 2, 2}, weights, tables), Error);
+  EXPECT_EQ(bulk.num_edges(), 3);
+  EXPECT_EQ(bulk.MemoryBytes(), one_by_one.MemoryBytes());
+}
+
 TEST(MrfProblemTest, RejectsBadInput) {
   MrfProblem p(3);
   EXPECT_THROW(MrfProblem(0), Error);
