@@ -1,6 +1,7 @@
 #include "energies/texture_terms.h"
 
 #include <algorithm>
+#include <cstdint>
 #include <cmath>
 #include <functional>
 #include <limits>
@@ -68,6 +69,7 @@ MeshGeodesics::MeshGeodesics(const Eigen::MatrixX3d& vertices, const Eigen::Matr
       neighbours_.push_back(*it);
       lengths_.push_back((vertices.row(*it) - vertices.row(v)).norm());
       max_edge_length_ = std::max(max_edge_length_, lengths_.back());
+      min_edge_length_ = std::min(min_edge_length_, lengths_.back());
     }
     offsets_[v + 1] = static_cast<int>(neighbours_.size());
   }
@@ -75,6 +77,55 @@ MeshGeodesics::MeshGeodesics(const Eigen::MatrixX3d& vertices, const Eigen::Matr
 
 std::vector<double> MeshGeodesics::DistanceField(const std::vector<int>& sources,
                                                  double max_distance) const {
+  // Bounded searches run over buckets of distance (Dial's algorithm) of width half the shortest
+  // edge: a relaxation then moves at least one bucket on even with rounding, so every vertex of
+  // the lowest non-empty bucket has its final distance, and each distance is the same minimum
+  // over the neighbours' final distances plus the edge lengths as Dijkstra's (bit for bit).
+  // Relaxations reach at most max_edge / width + 1 buckets ahead: a ring of buckets suffices.
+  constexpr double kMaxBuckets = 1 << 22;  // else (very short edges, far bounds) the heap
+  constexpr double kMaxRing = 4096;
+  const double width = 0.5 * min_edge_length_;
+  if (!(width > 0.0) || !(max_distance / width < kMaxBuckets) ||
+      !(max_edge_length_ / width + 2.0 < kMaxRing))
+    return HeapDistanceField(sources, max_distance);
+  const int n = num_vertices();
+  std::vector<double> dist(n, std::numeric_limits<double>::infinity());
+  const int ring_size = static_cast<int>(max_edge_length_ / width) + 2;
+  std::vector<std::vector<int>> ring(ring_size);
+  std::vector<uint8_t> done(n, 0);
+  std::size_t pending = 0;
+  for (int s : sources) {
+    if (s >= 0 && s < n && dist[s] > 0.0) {
+      dist[s] = 0.0;
+      ring[0].push_back(s);
+      ++pending;
+    }
+  }
+  for (std::int64_t bucket = 0; pending > 0; ++bucket) {
+    // Relaxations from this bucket land in later ones: the list does not change while read.
+    std::vector<int>& list = ring[bucket % ring_size];
+    pending -= list.size();
+    for (const int v : list) {
+      if (done[v]) continue;  // reached again at a larger distance
+      done[v] = 1;
+      const double d = dist[v];
+      for (int k = offsets_[v]; k < offsets_[v + 1]; ++k) {
+        const int u = neighbours_[k];
+        const double nd = d + lengths_[k];
+        if (nd < dist[u] && nd <= max_distance) {
+          dist[u] = nd;
+          ring[static_cast<std::int64_t>(nd / width) % ring_size].push_back(u);
+          ++pending;
+        }
+      }
+    }
+    list.clear();
+  }
+  return dist;
+}
+
+std::vector<double> MeshGeodesics::HeapDistanceField(const std::vector<int>& sources,
+                                                     double max_distance) const {
   const int n = num_vertices();
   std::vector<double> dist(n, std::numeric_limits<double>::infinity());
   using Item = std::pair<double, int>;

@@ -94,10 +94,15 @@ class MeshGeodesics {
   double max_edge_length() const { return max_edge_length_; }
 
  private:
+  // DistanceField by Dijkstra with a binary heap (any bound).
+  std::vector<double> HeapDistanceField(const std::vector<int>& sources,
+                                        double max_distance) const;
+
   std::vector<int> offsets_;     // V + 1 (CSR)
   std::vector<int> neighbours_;  // unique neighbours per vertex
   std::vector<double> lengths_;  // edge length per neighbour entry
   double max_edge_length_ = 0.0;
+  double min_edge_length_ = std::numeric_limits<double>::infinity();
 };
 
 }  // namespace artex

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <limits>
 #include <map>
+#include <random>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 #include <vector>
@@ -246,6 +247,44 @@ TEST(TexturingTest, TermsFollowThePaper) {
   EXPECT_DOUBLE_EQ(bounded[1], 1.0);
   EXPECT_DOUBLE_EQ(bounded[3], std::sqrt(2.0));
   EXPECT_TRUE(std::isinf(bounded[2]));
+}
+
+// Bounded distance fields (bucket search) equal the unbounded ones (binary heap) bit for bit up
+// to the bound, on a jittered grid with edges from 0.2 to 1.8 units and several sources.
+TEST(TexturingTest, BoundedDistanceFieldMatchesDijkstra) {
+  constexpr int kSide = 40;
+  Eigen::MatrixX3d v(kSide * kSide, 3);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> jitter(-0.4, 0.4);
+  for (int y = 0; y < kSide; ++y)
+    for (int x = 0; x < kSide; ++x) v.row(y * kSide + x) << x + jitter(rng), y + jitter(rng), 0.0;
+  Eigen::MatrixX3i t(2 * (kSide - 1) * (kSide - 1), 3);
+  int f = 0;
+  for (int y = 0; y + 1 < kSide; ++y) {
+    for (int x = 0; x + 1 < kSide; ++x) {
+      const int a = y * kSide + x;
+      t.row(f++) << a, a + 1, a + kSide + 1;
+      t.row(f++) << a, a + kSide + 1, a + kSide;
+    }
+  }
+  const MeshGeodesics geodesics(v, t);
+  const std::vector<int> sources = {0, 17, 17, 433, 1210, 1599, -3, kSide * kSide};
+  const std::vector<double> full = geodesics.DistanceField(sources);
+  for (const double bound : {0.5, 3.0, 11.0, 1e3}) {
+    const std::vector<double> bounded = geodesics.DistanceField(sources, bound);
+    int within = 0;
+    for (int i = 0; i < v.rows(); ++i) {
+      if (full[i] <= bound) {
+        EXPECT_EQ(bounded[i], full[i]) << "vertex " << i << ", bound " << bound;
+        ++within;
+      } else {
+        EXPECT_TRUE(std::isinf(bounded[i])) << "vertex " << i << ", bound " << bound;
+      }
+    }
+    EXPECT_GT(within, bound < 1.0 ? 4 : 40);
+  }
+  EXPECT_EQ(full[17], 0.0);
+  EXPECT_TRUE(std::isfinite(full[kSide * kSide - 1]));
 }
 
 // A white square (z = 1 m) in the left half of a black image, its right border on the pixel
