@@ -307,18 +307,28 @@ MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<in
   mrf_internal::SolveRun run(problem, options_, *labels, &summary);
   std::vector<int>& x = run.local();
   const int n = problem.num_nodes();
-  const MrfAdjacency adjacency = BuildMrfAdjacency(problem);
-  const MrfLabelIndex label_index = BuildMrfLabelIndex(problem);
-
   // Parallel sweeps: two parts sweep concurrently with the separator fixed, then the separator.
   const bool parallel =
       options_.expansion_parallel_min_nodes > 0 && n >= options_.expansion_parallel_min_nodes;
+  MrfAdjacency adjacency;
+  MrfLabelIndex label_index;
   std::vector<char> part;
   MrfLabelIndex part_index[3];
   if (parallel) {
-    part = mrf_internal::BisectByLevels(problem, adjacency);
-    for (int k = 0; k < 3; ++k)
+    // The node-order passes of large problems overlap.
+    tbb::parallel_invoke(
+        [&] {
+          adjacency = BuildMrfAdjacency(problem);
+          part = mrf_internal::BisectByLevels(problem, adjacency);
+        },
+        [&] { label_index = BuildMrfLabelIndex(problem); });
+    const auto restrict_to = [&](int k) {
       part_index[k] = mrf_internal::RestrictLabelIndex(label_index, part, static_cast<char>(k));
+    };
+    tbb::parallel_invoke([&] { restrict_to(0); }, [&] { restrict_to(1); }, [&] { restrict_to(2); });
+  } else {
+    adjacency = BuildMrfAdjacency(problem);
+    label_index = BuildMrfLabelIndex(problem);
   }
   Sweeper whole(problem, adjacency, label_index);
   Sweeper sides[2] = {Sweeper(problem, adjacency, part_index[0]),

@@ -2,6 +2,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 
 #include <algorithm>
 #include <cmath>
@@ -144,8 +145,8 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
           const bool keeps = w >= 0 && w != untextured && options.terms.switch_cost > 0.0;
           for (int k = 0; k < n; ++k) {
             const int l = labels[k];
-            costs[k] =
-                l == untextured ? options.untextured_cost : column[static_cast<std::size_t>(l) * size];
+            costs[k] = l == untextured ? options.untextured_cost
+                                       : column[static_cast<std::size_t>(l) * size];
             if (keeps && l != w) costs[k] += options.terms.switch_cost;
           }
           count[f] = n;
@@ -221,87 +222,88 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
   std::vector<float> tables(table_offset[num_edges]);
   std::vector<float> fixed_tables(table_offset[num_edges + num_fixed] - table_offset[num_edges]);
 
-  // The tables over the candidates of both sides, computed in parallel.
+  // The tables over the candidates of both sides (in parallel).
   const int samples =
       slots > 0 ? static_cast<int>(pool.entry(0).edge_colors.rows() / std::max(1, e_count)) : 0;
   std::vector<const float*> slot_colors(slots);
   for (int s = 0; s < slots; ++s) slot_colors[s] = pool.entry(s).edge_colors.data();
   const std::size_t edge_floats = static_cast<std::size_t>(samples) * 3;
-  tbb::parallel_for(
-      tbb::blocked_range<int>(0, num_edges + num_fixed, 1024),
-      [&](const tbb::blocked_range<int>& range) {
-        std::vector<int> pos_in_j(stride), pos_in_i(stride);
-        for (int t = range.begin(); t < range.end(); ++t) {
-          // The colours of an edge in each pooled image are far apart in memory (one array per
-          // image): those of a later table's candidates are requested ahead of their use.
-          if (samples > 0 && t + kPrefetchTables < range.end()) {
-            const int ahead = t + kPrefetchTables;
-            const std::size_t first = static_cast<std::size_t>(table_edge[ahead]) * edge_floats;
-            for (const int g : {row_face[ahead], column_face[ahead]}) {
-              const int* labels = &cand_labels[static_cast<std::size_t>(g) * stride];
-              for (int k = 0; k + 1 < count[g]; ++k) {  // the last label is "untextured"
-                const char* at = reinterpret_cast<const char*>(slot_colors[labels[k]] + first);
-                __builtin_prefetch(at);
-                __builtin_prefetch(at + edge_floats * sizeof(float) - 1);
-              }
-            }
-          }
-          const int e = table_edge[t];
-          const int u = mesh.edges(e, 0), v = mesh.edges(e, 1);
-          double distance = inf;
-          if (!input.seam_distance.empty())
-            distance = 0.5 * (input.seam_distance[u] + input.seam_distance[v]);
-          const double psi = TemporalSeamCost(distance, options.terms);
-          const int fi = row_face[t], fj = column_face[t];
-          const int* li = &cand_labels[static_cast<std::size_t>(fi) * stride];
-          const int* lj = &cand_labels[static_cast<std::size_t>(fj) * stride];
-          float* table = t < num_edges ? &tables[table_offset[t]]
-                                       : &fixed_tables[table_offset[t] - table_offset[num_edges]];
-          const int ni = count[fi], nj = count[fj];
-          // Where each side's labels sit among the other side's (-1: absent), for reusing the
-          // symmetric V(b, a) = V(a, b).
-          for (int p = 0; p < ni; ++p) {
-            const int q = static_cast<int>(std::lower_bound(lj, lj + nj, li[p]) - lj);
-            pos_in_j[p] = q < nj && lj[q] == li[p] ? q : -1;
-          }
-          for (int q = 0; q < nj; ++q) {
-            const int p = static_cast<int>(std::lower_bound(li, li + ni, lj[q]) - li);
-            pos_in_i[q] = p < ni && li[p] == lj[q] ? p : -1;
-          }
-          for (int p = 0; p < ni; ++p) {
-            for (int q = 0; q < nj; ++q) {
-              const int a = li[p], b = lj[q];
-              float cost = 0.0f;
-              const int p2 = pos_in_i[q], q2 = pos_in_j[p];
-              if (a != b && p2 >= 0 && q2 >= 0 && p2 * nj + q2 < p * nj + q) {
-                cost = table[p2 * nj + q2];
-              } else if (a != b) {
-                double pi = options.unseen_colour_cost;
-                if (a != untextured && b != untextured && samples > 0) {
-                  const float* ca = slot_colors[a] + static_cast<std::size_t>(e) * edge_floats;
-                  const float* cb = slot_colors[b] + static_cast<std::size_t>(e) * edge_floats;
-                  double sum = 0.0;
-                  int n = 0;
-                  for (int k = 0; k < 3 * samples; k += 3) {
-                    const float d0 = ca[k] - cb[k], d1 = ca[k + 1] - cb[k + 1],
-                                d2 = ca[k + 2] - cb[k + 2];
-                    const float squared = d0 * d0 + d1 * d1 + d2 * d2;
-                    if (std::isnan(squared)) continue;  // a colour not seen in a or b
-                    sum += std::sqrt(squared);
-                    ++n;
-                  }
-                  if (n > 0) pi = sum / n;
-                }
-                cost = static_cast<float>(SeamPairCost(pi, psi, options.terms));
-              }
-              table[p * nj + q] = cost;
-            }
+  const auto compute_tables = [&](const tbb::blocked_range<int>& range) {
+    std::vector<int> pos_in_j(stride), pos_in_i(stride);
+    for (int t = range.begin(); t < range.end(); ++t) {
+      // The colours of an edge in each pooled image are far apart in memory (one array per
+      // image): those of a later table's candidates are requested ahead of their use.
+      if (samples > 0 && t + kPrefetchTables < range.end()) {
+        const int ahead = t + kPrefetchTables;
+        const std::size_t first = static_cast<std::size_t>(table_edge[ahead]) * edge_floats;
+        for (const int g : {row_face[ahead], column_face[ahead]}) {
+          const int* labels = &cand_labels[static_cast<std::size_t>(g) * stride];
+          for (int k = 0; k + 1 < count[g]; ++k) {  // the last label is "untextured"
+            const char* at = reinterpret_cast<const char*>(slot_colors[labels[k]] + first);
+            __builtin_prefetch(at);
+            __builtin_prefetch(at + edge_floats * sizeof(float) - 1);
           }
         }
-      });
+      }
+      const int e = table_edge[t];
+      const int u = mesh.edges(e, 0), v = mesh.edges(e, 1);
+      double distance = inf;
+      if (!input.seam_distance.empty())
+        distance = 0.5 * (input.seam_distance[u] + input.seam_distance[v]);
+      const double psi = TemporalSeamCost(distance, options.terms);
+      const int fi = row_face[t], fj = column_face[t];
+      const int* li = &cand_labels[static_cast<std::size_t>(fi) * stride];
+      const int* lj = &cand_labels[static_cast<std::size_t>(fj) * stride];
+      float* table = t < num_edges ? &tables[table_offset[t]]
+                                   : &fixed_tables[table_offset[t] - table_offset[num_edges]];
+      const int ni = count[fi], nj = count[fj];
+      // Where each side's labels sit among the other side's (-1: absent), for reusing the
+      // symmetric V(b, a) = V(a, b).
+      for (int p = 0; p < ni; ++p) {
+        const int q = static_cast<int>(std::lower_bound(lj, lj + nj, li[p]) - lj);
+        pos_in_j[p] = q < nj && lj[q] == li[p] ? q : -1;
+      }
+      for (int q = 0; q < nj; ++q) {
+        const int p = static_cast<int>(std::lower_bound(li, li + ni, lj[q]) - li);
+        pos_in_i[q] = p < ni && li[p] == lj[q] ? p : -1;
+      }
+      for (int p = 0; p < ni; ++p) {
+        for (int q = 0; q < nj; ++q) {
+          const int a = li[p], b = lj[q];
+          float cost = 0.0f;
+          const int p2 = pos_in_i[q], q2 = pos_in_j[p];
+          if (a != b && p2 >= 0 && q2 >= 0 && p2 * nj + q2 < p * nj + q) {
+            cost = table[p2 * nj + q2];
+          } else if (a != b) {
+            double pi = options.unseen_colour_cost;
+            if (a != untextured && b != untextured && samples > 0) {
+              const float* ca = slot_colors[a] + static_cast<std::size_t>(e) * edge_floats;
+              const float* cb = slot_colors[b] + static_cast<std::size_t>(e) * edge_floats;
+              double sum = 0.0;
+              int n = 0;
+              for (int k = 0; k < 3 * samples; k += 3) {
+                const float d0 = ca[k] - cb[k], d1 = ca[k + 1] - cb[k + 1],
+                            d2 = ca[k + 2] - cb[k + 2];
+                const float squared = d0 * d0 + d1 * d1 + d2 * d2;
+                if (std::isnan(squared)) continue;  // a colour not seen in a or b
+                sum += std::sqrt(squared);
+                ++n;
+              }
+              if (n > 0) pi = sum / n;
+            }
+            cost = static_cast<float>(SeamPairCost(pi, psi, options.terms));
+          }
+          table[p * nj + q] = cost;
+        }
+      }
+    }
+  };
+  constexpr int kTableGrain = 1024;
 
-  // The fixed sides' terms join the unaries (in the single precision the MRF stores pairwise
-  // costs in), edge by edge in ascending order.
+  // The fixed sides' tables first (few); their terms join the unaries (in the single precision
+  // the MRF stores pairwise costs in), edge by edge in ascending order.
+  tbb::parallel_for(tbb::blocked_range<int>(num_edges, num_edges + num_fixed, kTableGrain),
+                    compute_tables);
   for (int k = 0; k < num_fixed; ++k) {
     const int e = fixed_edges[k];
     const int free = row_face[num_edges + k];
@@ -311,28 +313,34 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
     for (int p = 0; p < count[free]; ++p) costs[p] += lambda * weight * table[p];
   }
 
+  // The MRF's tables, and meanwhile its nodes (their unaries are complete now).
   MrfProblem problem(slots + 1);
-  for (int f = 0; f < f_count; ++f) result.num_candidates += count[f];
-  problem.Reserve(num_free + 1, result.num_candidates, 0, 0);
-  // Candidate labels are ascending with finite costs, so the problem's local candidate order is
-  // the order of cand_labels and the tables go in as they are.
-  for (int f : triangle_of) {
-    const std::size_t base = static_cast<std::size_t>(f) * stride;
-    problem.AddNode(&cand_labels[base], &cand_costs[base], count[f]);
-  }
-  // One extra isolated node carries the fixed triangles' constant, so that every energy the
-  // solver sees (its relative stopping tests, the callback) is that of the whole labelling.
-  if (num_free < f_count) problem.AddNode({untextured}, {constant});
-  {
-    std::vector<int> first(num_edges), second(num_edges);
-    std::vector<double> weights(num_edges);
-    for (int k = 0; k < num_edges; ++k) {
-      first[k] = node_of[row_face[k]];
-      second[k] = node_of[column_face[k]];
-      weights[k] = input.edge_weight.empty() ? 1.0 : input.edge_weight[table_edge[k]];
-    }
-    problem.AddEdgeTables(first, second, weights, std::move(tables));
-  }
+  std::vector<int> first(num_edges), second(num_edges);
+  std::vector<double> weights(num_edges);
+  tbb::parallel_invoke(
+      [&] {
+        tbb::parallel_for(tbb::blocked_range<int>(0, num_edges, kTableGrain), compute_tables);
+      },
+      [&] {
+        for (int f = 0; f < f_count; ++f) result.num_candidates += count[f];
+        problem.Reserve(num_free + 1, result.num_candidates, 0, 0);
+        // Candidate labels are ascending with finite costs, so the problem's local candidate
+        // order is the order of cand_labels and the tables go in as they are.
+        for (int f : triangle_of) {
+          const std::size_t base = static_cast<std::size_t>(f) * stride;
+          problem.AddNode(&cand_labels[base], &cand_costs[base], count[f]);
+        }
+        // One extra isolated node carries the fixed triangles' constant, so that every energy
+        // the solver sees (its relative stopping tests, the callback) is that of the whole
+        // labelling.
+        if (num_free < f_count) problem.AddNode({untextured}, {constant});
+        for (int k = 0; k < num_edges; ++k) {
+          first[k] = node_of[row_face[k]];
+          second[k] = node_of[column_face[k]];
+          weights[k] = input.edge_weight.empty() ? 1.0 : input.edge_weight[table_edge[k]];
+        }
+      });
+  problem.AddEdgeTables(first, second, weights, std::move(tables));
   problem.set_smoothness(lambda);
 
   // Warm start: previous labels where still candidates, else the best unary.
