@@ -95,8 +95,7 @@ class MeshGeodesics {
 
  private:
   // DistanceField by Dijkstra with a binary heap (any bound).
-  std::vector<double> HeapDistanceField(const std::vector<int>& sources,
-                                        double max_distance) const;
+  std::vector<double> HeapDistanceField(const std::vector<int>& sources, double max_distance) const;
 
   std::vector<int> offsets_;     // V + 1 (CSR)
   std::vector<int> neighbours_;  // unique neighbours per vertex

@@ -199,9 +199,11 @@ void MrfProblem::AddEdgeTables(const std::vector<int>& first, const std::vector<
                                const std::vector<double>& weights, std::vector<float> tables) {
   const std::size_t n = first.size();
   if (second.size() != n || weights.size() != n) {
-    throw Error("MrfProblem::AddEdgeTables: expected as many second nodes and weights as first "
-                "nodes (" + std::to_string(n) + "), found " + std::to_string(second.size()) +
-                " and " + std::to_string(weights.size()));
+    throw Error(
+        "MrfProblem::AddEdgeTables: expected as many second nodes and weights as first "
+        "nodes (" +
+        std::to_string(n) + "), found " + std::to_string(second.size()) + " and " +
+        std::to_string(weights.size()));
   }
   const int e0 = num_edges();
   std::int64_t size = 0;

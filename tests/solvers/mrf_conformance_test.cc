@@ -455,7 +455,7 @@ TEST(MrfGuaranteesTest, BisectionSeparatesTheHalves) {
   std::vector<std::pair<int, int>> random_edges = RandomGraphEdges(300, 200, &rng);
   for (const auto& [i, j] : ChainEdges(12)) random_edges.emplace_back(300 + i, 300 + j);
   const std::pair<int, std::vector<std::pair<int, int>>> graphs[] = {{1200, GridEdges(30, 40)},
-                                                                      {312, random_edges}};
+                                                                     {312, random_edges}};
   for (const auto& [n, edges] : graphs) {
     const MrfProblem problem = MakeSpec(n, 3, edges, PairKind::kPotts, 0.0, 5).Build();
     const std::vector<char> part =
@@ -485,10 +485,10 @@ TEST(MrfGuaranteesTest, BisectionSeparatesTheHalves) {
 // expansion move over the whole problem lowers the energy.
 TEST(MrfGuaranteesTest, ParallelExpansionSweepsAreMonotoneDeterministicAndConverge) {
   std::mt19937_64 rng(91);
-  const Spec specs[] = {MakeSpec(1200, 5, GridEdges(30, 40), PairKind::kPotts, 0.1, 11),
-                        MakeSpec(1200, 4, GridEdges(40, 30), PairKind::kTruncatedLinear, 0.1, 12),
-                        MakeSpec(400, 4, RandomGraphEdges(400, 300, &rng), PairKind::kNonMetric,
-                                 0.1, 13)};
+  const Spec specs[] = {
+      MakeSpec(1200, 5, GridEdges(30, 40), PairKind::kPotts, 0.1, 11),
+      MakeSpec(1200, 4, GridEdges(40, 30), PairKind::kTruncatedLinear, 0.1, 12),
+      MakeSpec(400, 4, RandomGraphEdges(400, 300, &rng), PairKind::kNonMetric, 0.1, 13)};
   for (const Spec& spec : specs) {
     const MrfProblem problem = spec.Build();
     MrfSolverOptions options = Options(MrfSolverType::kAlphaExpansion);

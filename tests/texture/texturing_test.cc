@@ -8,9 +8,9 @@
 #include <cstdio>
 #include <limits>
 #include <map>
-#include <random>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
+#include <random>
 #include <vector>
 
 #include "energies/texture_terms.h"
