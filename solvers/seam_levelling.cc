@@ -4,6 +4,7 @@
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <sstream>
@@ -25,27 +26,25 @@ bool SeamLevellingOptions::IsValid(std::string* error) const {
 
 SeamLeveller::SeamLeveller(int num_vertices, const Eigen::MatrixX3i& triangles,
                            const SeamLevellingOptions& options)
-    : num_vertices_(num_vertices), triangles_(triangles), options_(options) {
+    : num_vertices_(num_vertices),
+      num_triangles_(static_cast<int>(triangles.rows())),
+      options_(options) {
   std::string why;
   if (!options_.IsValid(&why)) throw Error(why);
-  const int f_count = static_cast<int>(triangles.rows());
+  const int f_count = num_triangles_;
   if (num_vertices < 0 ||
       (f_count > 0 && (triangles.minCoeff() < 0 || triangles.maxCoeff() >= num_vertices))) {
     std::ostringstream msg;
     msg << "seam levelling: triangle indices must lie in [0, " << num_vertices << ")";
     throw Error(msg.str());
   }
-  // Corners per vertex.
+  order_.resize(num_vertices);
   corner_offsets_.assign(num_vertices + 1, 0);
-  for (int k = 0; k < 3 * f_count; ++k) ++corner_offsets_[triangles(k / 3, k % 3) + 1];
-  for (int v = 0; v < num_vertices; ++v) corner_offsets_[v + 1] += corner_offsets_[v];
-  corners_.resize(3 * static_cast<std::size_t>(f_count));
-  std::vector<int> fill(corner_offsets_.begin(), corner_offsets_.end() - 1);
-  for (int k = 0; k < 3 * f_count; ++k) corners_[fill[triangles(k / 3, k % 3)]++] = k;
+  edge_offsets_.assign(num_vertices + 1, 0);
+  edge_corner_offsets_.assign(1, 0);
+  if (num_vertices == 0) return;
   // Fill-reducing vertex order: AMD on the vertex graph (the unknowns' graph is this graph
   // with its vertices split along seams).
-  order_.resize(num_vertices);
-  if (num_vertices == 0) return;
   std::vector<Eigen::Triplet<double>> entries;
   entries.reserve(6 * static_cast<std::size_t>(f_count) + num_vertices);
   for (int v = 0; v < num_vertices; ++v) entries.emplace_back(v, v, 1.0);
@@ -60,7 +59,48 @@ SeamLeveller::SeamLeveller(int num_vertices, const Eigen::MatrixX3i& triangles,
   Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int> inverse_order;
   Eigen::AMDOrdering<int>()(graph.selfadjointView<Eigen::Lower>(), inverse_order);
   // inverse_order maps new positions to vertices (Eigen's Pinv convention).
-  for (int i = 0; i < num_vertices; ++i) order_[i] = inverse_order.indices()[i];
+  std::vector<int> position(num_vertices);
+  for (int i = 0; i < num_vertices; ++i) {
+    order_[i] = inverse_order.indices()[i];
+    position[order_[i]] = i;
+  }
+  // Corners per position. A triangle's pair (a, b) adds the smoothness weight to the diagonal
+  // of a and of b, and subtracts it at (a, b): once net when a == b, credited to a's corner.
+  for (int k = 0; k < 3 * f_count; ++k) ++corner_offsets_[position[triangles(k / 3, k % 3)] + 1];
+  for (int i = 0; i < num_vertices; ++i) corner_offsets_[i + 1] += corner_offsets_[i];
+  corners_.resize(3 * static_cast<std::size_t>(f_count));
+  corner_pairs_.resize(corners_.size());
+  std::vector<int> fill(corner_offsets_.begin(), corner_offsets_.end() - 1);
+  for (int k = 0; k < 3 * f_count; ++k) {
+    const int f = k / 3, c = k % 3;
+    const int a = triangles(f, c), next = triangles(f, (c + 1) % 3),
+              previous = triangles(f, (c + 2) % 3);
+    const int slot = fill[position[a]]++;
+    corners_[slot] = k;
+    corner_pairs_[slot] = static_cast<uint8_t>((a != next) + (a != previous) + (a == next));
+  }
+  // Edges to earlier vertices: (later position, earlier position, earlier vertex's corner).
+  std::vector<std::array<int, 3>> sides;
+  sides.reserve(3 * static_cast<std::size_t>(f_count));
+  for (int f = 0; f < f_count; ++f) {
+    for (int c = 0; c < 3; ++c) {
+      const int d = (c + 1) % 3;
+      const int pc = position[triangles(f, c)], pd = position[triangles(f, d)];
+      if (pc < pd) sides.push_back({pd, pc, 3 * f + c});
+      if (pd < pc) sides.push_back({pc, pd, 3 * f + d});
+    }
+  }
+  std::sort(sides.begin(), sides.end());
+  edge_corners_.reserve(sides.size());
+  for (std::size_t s = 0; s < sides.size(); ++s) {
+    if (s == 0 || sides[s][0] != sides[s - 1][0] || sides[s][1] != sides[s - 1][1]) {
+      if (s > 0) edge_corner_offsets_.push_back(static_cast<int>(s));
+      ++edge_offsets_[sides[s][0] + 1];
+    }
+    edge_corners_.push_back(sides[s][2]);
+  }
+  if (!sides.empty()) edge_corner_offsets_.push_back(static_cast<int>(sides.size()));
+  for (int i = 0; i < num_vertices; ++i) edge_offsets_[i + 1] += edge_offsets_[i];
 }
 
 SeamLeveller::~SeamLeveller() = default;
@@ -69,7 +109,7 @@ void SeamLeveller::Level(const std::vector<int>& labels,
                          const std::function<bool(int, int, Eigen::Vector3f*)>& colour,
                          Eigen::MatrixX3f* corrections, SeamLevellingSummary* summary) const {
   const auto start = std::chrono::steady_clock::now();
-  const int f_count = static_cast<int>(triangles_.rows());
+  const int f_count = num_triangles_;
   if (static_cast<int>(labels.size()) != f_count) {
     std::ostringstream msg;
     msg << "seam levelling: expected " << f_count << " labels, found " << labels.size();
@@ -77,45 +117,56 @@ void SeamLeveller::Level(const std::vector<int>& labels,
   }
   // Unknowns (vertex, label) numbered vertex by vertex in the elimination order, labels
   // ascending within a vertex: vertex_first[i] .. vertex_first[i + 1] for the i-th vertex.
+  // unknown_pairs: smoothness pairs on the unknown's diagonal.
   std::vector<int> corner_unknown(3 * static_cast<std::size_t>(f_count), -1);
-  std::vector<int> unknown_vertex, unknown_label;
+  std::vector<int> unknown_label, unknown_pairs;
+  unknown_label.reserve(num_vertices_);
+  unknown_pairs.reserve(num_vertices_);
   std::vector<int> vertex_first(num_vertices_ + 1, 0);
-  std::vector<int> local;
+  std::vector<int> local, corner_label;  // the vertex's distinct labels; its corners' labels
+  const int* corners = corners_.data();
   for (int i = 0; i < num_vertices_; ++i) {
-    const int v = order_[i];
+    const int begin = corner_offsets_[i], count = corner_offsets_[i + 1] - begin;
+    if (static_cast<int>(corner_label.size()) < count) corner_label.resize(count);
     local.clear();
-    for (int k = corner_offsets_[v]; k < corner_offsets_[v + 1]; ++k) {
-      const int l = labels[corners_[k] / 3];
-      if (l >= 0) local.push_back(l);
+    for (int j = 0; j < count; ++j) {
+      const int l = labels[corners[begin + j] / 3];
+      corner_label[j] = l;
+      if (l < 0 || (!local.empty() && local.back() == l)) continue;
+      bool seen = false;
+      for (int m : local) seen |= m == l;
+      if (!seen) local.push_back(l);
     }
-    std::sort(local.begin(), local.end());
-    local.erase(std::unique(local.begin(), local.end()), local.end());
-    const int base = static_cast<int>(unknown_vertex.size());
+    if (local.size() > 1) std::sort(local.begin(), local.end());
+    const int first = static_cast<int>(unknown_label.size());
     for (int l : local) {
-      unknown_vertex.push_back(v);
       unknown_label.push_back(l);
+      unknown_pairs.push_back(0);
     }
-    for (int k = corner_offsets_[v]; k < corner_offsets_[v + 1]; ++k) {
-      const int l = labels[corners_[k] / 3];
+    for (int j = 0; j < count; ++j) {
+      const int l = corner_label[j];
       if (l < 0) continue;
-      corner_unknown[corners_[k]] =
-          base + static_cast<int>(std::lower_bound(local.begin(), local.end(), l) - local.begin());
+      int u = first;
+      while (unknown_label[u] != l) ++u;
+      corner_unknown[corners[begin + j]] = u;
+      unknown_pairs[u] += corner_pairs_[begin + j];
     }
-    vertex_first[i + 1] = static_cast<int>(unknown_vertex.size());
+    vertex_first[i + 1] = static_cast<int>(unknown_label.size());
   }
-  const int n = static_cast<int>(unknown_vertex.size());
+  const int n = static_cast<int>(unknown_label.size());
+  // Colours are only needed where a vertex has two or more labels.
   std::vector<Eigen::Vector3f> f_value(n);
   std::vector<uint8_t> known(n, 0);
-  for (int u = 0; u < n; ++u) known[u] = colour(unknown_vertex[u], unknown_label[u], &f_value[u]);
+  for (int i = 0; i < num_vertices_; ++i) {
+    if (vertex_first[i + 1] - vertex_first[i] < 2) continue;
+    for (int u = vertex_first[i]; u < vertex_first[i + 1]; ++u)
+      known[u] = colour(order_[i], unknown_label[u], &f_value[u]);
+  }
 
-  // Normal equations, lower triangle only (row >= column).
-  std::vector<Eigen::Triplet<double>> triplets;
-  triplets.reserve(static_cast<std::size_t>(n) + 9 * static_cast<std::size_t>(f_count));
-  const auto add_pair = [&triplets](int a, int b, double w) {
-    triplets.emplace_back(a, a, w);
-    triplets.emplace_back(b, b, w);
-    triplets.emplace_back(std::max(a, b), std::min(a, b), -w);
-  };
+  // Normal equations: diagonal, right-hand side.
+  Eigen::VectorXd diagonal(n);
+  for (int u = 0; u < n; ++u)
+    diagonal[u] = options_.regularisation + options_.smoothness * unknown_pairs[u];
   Eigen::MatrixX3d rhs = Eigen::MatrixX3d::Zero(n, 3);
   double before = 0.0;
   int seams = 0;
@@ -125,7 +176,8 @@ void SeamLeveller::Level(const std::vector<int>& labels,
       for (int b = a + 1; b < vertex_first[i + 1]; ++b) {
         if (!known[a] || !known[b]) continue;
         const Eigen::Vector3d d = (f_value[b] - f_value[a]).cast<double>();
-        add_pair(a, b, 1.0);
+        diagonal[a] += 1.0;
+        diagonal[b] += 1.0;
         rhs.row(a) += d.transpose();
         rhs.row(b) -= d.transpose();
         before += d.squaredNorm();
@@ -133,26 +185,62 @@ void SeamLeveller::Level(const std::vector<int>& labels,
       }
     }
   }
-  // Smoothness along triangle edges inside one label.
-  for (int f = 0; f < f_count; ++f) {
-    if (labels[f] < 0) continue;
-    for (int c = 0; c < 3; ++c)
-      add_pair(corner_unknown[3 * f + c], corner_unknown[3 * f + (c + 1) % 3], options_.smoothness);
+  // Upper triangle in compressed columns, rows ascending: column u = (v, l) holds the
+  // smoothness pairs to (v', l) for earlier vertices v' (one per triangle with the edge v v'
+  // and label l), the seam pairs to v's earlier labels, then the diagonal. SimplicialLDLT reads
+  // this layout directly when it is told the order is natural (below).
+  using Matrix = Eigen::SparseMatrix<double, Eigen::ColMajor, Eigen::Index>;
+  Matrix normal(n, n);
+  normal.resizeNonZeros(n + seams + static_cast<Eigen::Index>(edge_corners_.size()));
+  Eigen::Index* outer = normal.outerIndexPtr();
+  Eigen::Index* inner = normal.innerIndexPtr();
+  double* value = normal.valuePtr();
+  int nz = 0;
+  for (int i = 0; i < num_vertices_; ++i) {
+    for (int u = vertex_first[i]; u < vertex_first[i + 1]; ++u) {
+      const int l = unknown_label[u];
+      outer[u] = nz;
+      for (int e = edge_offsets_[i]; e < edge_offsets_[i + 1]; ++e) {
+        int count = 0, row = -1;
+        for (int p = edge_corner_offsets_[e]; p < edge_corner_offsets_[e + 1]; ++p) {
+          const int corner = edge_corners_[p];
+          if (labels[corner / 3] != l) continue;
+          ++count;
+          row = corner_unknown[corner];
+        }
+        if (count == 0) continue;
+        inner[nz] = row;
+        value[nz++] = -options_.smoothness * count;
+      }
+      for (int a = vertex_first[i]; a < u; ++a) {
+        if (!known[a] || !known[u]) continue;
+        inner[nz] = a;
+        value[nz++] = -1.0;
+      }
+      inner[nz] = u;
+      value[nz++] = diagonal[u];
+    }
   }
-  for (int u = 0; u < n; ++u) triplets.emplace_back(u, u, options_.regularisation);
-  Eigen::SparseMatrix<double> normal(n, n);
-  normal.setFromTriplets(triplets.begin(), triplets.end());
+  outer[n] = nz;
+  normal.resizeNonZeros(nz);
   Eigen::MatrixX3d g = Eigen::MatrixX3d::Zero(n, 3);
   if (n > 0) {
-    // The unknowns are already in a fill-reducing order.
-    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::NaturalOrdering<int>>
-        solver(normal);
+    // The unknowns are already in a fill-reducing order. Eigen 3.4 recognises no ordering only
+    // as NaturalOrdering<Eigen::Index> (hence Eigen::Index indices): it then factorises `normal`
+    // where it lies; with NaturalOrdering<int> it would copy it twice (to a full symmetric
+    // matrix, then to an upper triangle permuted by the empty permutation).
+    Eigen::SimplicialLDLT<Matrix, Eigen::Upper, Eigen::NaturalOrdering<Eigen::Index>> solver(
+        normal);
     if (solver.info() != Eigen::Success) throw Error("seam levelling: factorisation failed");
     g = solver.solve(rhs);
   }
-  corrections->setZero(3 * f_count, 3);
+  corrections->resize(3 * f_count, 3);
   for (int k = 0; k < 3 * f_count; ++k) {
-    if (corner_unknown[k] >= 0) corrections->row(k) = g.row(corner_unknown[k]).cast<float>();
+    const int u = corner_unknown[k];
+    if (u >= 0)
+      corrections->row(k) = g.row(u).cast<float>();
+    else
+      corrections->row(k).setZero();
   }
   if (summary) {
     double after = 0.0;

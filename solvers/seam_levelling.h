@@ -8,6 +8,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <string>
@@ -32,8 +33,8 @@ struct SeamLevellingSummary {
 // Levels seams of many labellings of one mesh (e.g. one per frame). The fill-reducing order
 // of the sparse factorisation is computed once from the mesh (approximate minimum degree on the
 // vertex graph); the unknowns of a vertex are numbered consecutively in that order, so every
-// call only factorises. Throws artex::Error for invalid options or triangle indices outside
-// [0, num_vertices).
+// call writes the upper triangle of the normal equations column by column and only factorises.
+// Throws artex::Error for invalid options or triangle indices outside [0, num_vertices).
 class SeamLeveller {
  public:
   SeamLeveller(int num_vertices, const Eigen::MatrixX3i& triangles,
@@ -41,19 +42,30 @@ class SeamLeveller {
   ~SeamLeveller();
 
   // labels: F (label per triangle, < 0 = untextured, ignored); colour(v, l, &c): the colour of
-  // vertex v in label l's image, false when unknown. corrections: (3F) x 3, row 3 f + c = g at
-  // corner c of triangle f (0 for untextured triangles). summary may be null.
+  // vertex v in label l's image, false when unknown (only asked at vertices with two or more
+  // labels). corrections: (3F) x 3, row 3 f + c = g at corner c of triangle f (0 for untextured
+  // triangles). summary may be null.
   void Level(const std::vector<int>& labels,
              const std::function<bool(int, int, Eigen::Vector3f*)>& colour,
              Eigen::MatrixX3f* corrections, SeamLevellingSummary* summary) const;
 
  private:
   int num_vertices_;
-  Eigen::MatrixX3i triangles_;
+  int num_triangles_;
   SeamLevellingOptions options_;
-  std::vector<int> order_;           // vertices in elimination order
-  std::vector<int> corner_offsets_;  // V + 1: corners (3 f + c) of each vertex (CSR)
+  std::vector<int> order_;  // vertices in elimination order
+  // Per position in order_ (CSR, V + 1 offsets): the vertex's corners 3 f + c, and per corner
+  // how many smoothness pairs of its triangle add to the vertex's diagonal (2 unless the
+  // triangle repeats a vertex).
+  std::vector<int> corner_offsets_;
   std::vector<int> corners_;
+  std::vector<uint8_t> corner_pairs_;
+  // Per position in order_ (CSR, V + 1 offsets): the mesh edges to vertices earlier in the
+  // order, by their position; per edge (CSR, edges + 1 offsets) the earlier vertex's corner in
+  // each triangle with that edge (twice if the triangle has it twice by repeating a vertex).
+  std::vector<int> edge_offsets_;
+  std::vector<int> edge_corner_offsets_;
+  std::vector<int> edge_corners_;
 };
 
 // One-off levelling (builds a SeamLeveller): triangles F x 3; labels, colour, corrections and
