@@ -64,8 +64,8 @@ SeamLeveller::SeamLeveller(int num_vertices, const Eigen::MatrixX3i& triangles,
     order_[i] = inverse_order.indices()[i];
     position[order_[i]] = i;
   }
-  // Corners per position. A triangle's pair (a, b) adds the smoothness weight to the diagonal
-  // of a and of b, and subtracts it at (a, b): once net when a == b, credited to a's corner.
+  // Corners per position, with the number of the triangle's smoothness pairs (a, b) with b != a
+  // at each (a pair of equal vertices, in a triangle that repeats a vertex, is no equation).
   for (int k = 0; k < 3 * f_count; ++k) ++corner_offsets_[position[triangles(k / 3, k % 3)] + 1];
   for (int i = 0; i < num_vertices; ++i) corner_offsets_[i + 1] += corner_offsets_[i];
   corners_.resize(3 * static_cast<std::size_t>(f_count));
@@ -77,7 +77,7 @@ SeamLeveller::SeamLeveller(int num_vertices, const Eigen::MatrixX3i& triangles,
               previous = triangles(f, (c + 2) % 3);
     const int slot = fill[position[a]]++;
     corners_[slot] = k;
-    corner_pairs_[slot] = static_cast<uint8_t>((a != next) + (a != previous) + (a == next));
+    corner_pairs_[slot] = static_cast<uint8_t>((a != next) + (a != previous));
   }
   // Edges to earlier vertices: (later position, earlier position, earlier vertex's corner).
   std::vector<std::array<int, 3>> sides;

@@ -430,11 +430,13 @@ TEST(TexturingTest, SeamLevellerSolvesTheLeastSquaresProblem) {
 }
 
 // Also with fragmented labels (many vertices with three or more labels), scattered
-// untextured triangles and a duplicated triangle, on a mesh large enough for wide supernodes.
+// untextured triangles, a duplicated triangle and triangles that repeat a vertex, on a mesh
+// large enough for wide supernodes.
 TEST(TexturingTest, SeamLevellerSolvesFragmentedLabellings) {
   const Template sphere = UvSphere(12, 24, 1.0, Eigen::Vector3d::Zero());
-  Eigen::MatrixX3i triangles(sphere.num_triangles() + 1, 3);
-  triangles << sphere.triangles, sphere.triangles.row(5);
+  Eigen::MatrixX3i triangles(sphere.num_triangles() + 3, 3);
+  const int a = sphere.triangles(40, 0), b = sphere.triangles(40, 1), c = sphere.triangles(90, 2);
+  triangles << sphere.triangles, sphere.triangles.row(5), a, a, b, c, c, c;
   std::vector<int> labels(triangles.rows());
   for (int f = 0; f < static_cast<int>(labels.size()); ++f)
     labels[f] = f % 13 == 0 ? -1 : (f / 9) % 4 + 2 * (f % 3 == 0);
