@@ -205,27 +205,40 @@ void MrfProblem::AddEdgeTables(const std::vector<int>& first, const std::vector<
         std::to_string(n) + "), found " + std::to_string(second.size()) + " and " +
         std::to_string(weights.size()));
   }
-  const int e0 = num_edges();
+  // One quick pass over the edges and one over the tables (large problems); only when they
+  // find something does the detailed pass run, to name it.
+  const int nodes = num_nodes();
+  bool valid = true;
   std::int64_t size = 0;
-  for (std::size_t k = 0; k < n; ++k) {
-    CheckEdge(*this, first[k], second[k], weights[k], "AddEdgeTables");
-    const std::int64_t entries =
-        static_cast<std::int64_t>(num_candidates(first[k])) * num_candidates(second[k]);
-    if (size + entries > static_cast<std::int64_t>(tables.size())) {
-      throw Error("MrfProblem::AddEdgeTables (edge " + std::to_string(e0 + k) +
-                  "): tables: expected at least " + std::to_string(size + entries) +
-                  " entries, found " + std::to_string(tables.size()));
-    }
-    for (std::int64_t i = size; i < size + entries; ++i) {
-      if (!std::isfinite(tables[i])) {
-        throw Error("MrfProblem::AddEdgeTables (edge " + std::to_string(e0 + k) + "): table[" +
-                    std::to_string(i - size) + "]: expected finite, found " +
-                    std::to_string(tables[i]));
-      }
-    }
-    size += entries;
+  for (std::size_t k = 0; k < n && valid; ++k) {
+    const int i = first[k], j = second[k];
+    valid = i >= 0 && i < nodes && j >= 0 && j < nodes && i != j && weights[k] >= 0.0 &&
+            weights[k] <= std::numeric_limits<double>::max();
+    if (valid) size += static_cast<std::int64_t>(num_candidates(i)) * num_candidates(j);
   }
-  if (size != static_cast<std::int64_t>(tables.size())) {
+  bool finite = true;
+  for (const float t : tables) finite &= std::abs(t) <= std::numeric_limits<float>::max();
+  if (!valid || !finite || size != static_cast<std::int64_t>(tables.size())) {
+    const int e0 = num_edges();
+    size = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+      CheckEdge(*this, first[k], second[k], weights[k], "AddEdgeTables");
+      const std::int64_t entries =
+          static_cast<std::int64_t>(num_candidates(first[k])) * num_candidates(second[k]);
+      if (size + entries > static_cast<std::int64_t>(tables.size())) {
+        throw Error("MrfProblem::AddEdgeTables (edge " + std::to_string(e0 + k) +
+                    "): tables: expected at least " + std::to_string(size + entries) +
+                    " entries, found " + std::to_string(tables.size()));
+      }
+      for (std::int64_t i = size; i < size + entries; ++i) {
+        if (!std::isfinite(tables[i])) {
+          throw Error("MrfProblem::AddEdgeTables (edge " + std::to_string(e0 + k) + "): table[" +
+                      std::to_string(i - size) + "]: expected finite, found " +
+                      std::to_string(tables[i]));
+        }
+      }
+      size += entries;
+    }
     throw Error("MrfProblem::AddEdgeTables: tables: expected " + std::to_string(size) +
                 " entries, found " + std::to_string(tables.size()));
   }
@@ -234,11 +247,14 @@ void MrfProblem::AddEdgeTables(const std::vector<int>& first, const std::vector<
     tables_ = std::move(tables);
   else
     tables_.insert(tables_.end(), tables.begin(), tables.end());
-  edge_nodes_.reserve(edge_nodes_.size() + 2 * n);
-  edge_weights_.reserve(edge_weights_.size() + n);
-  table_offsets_.reserve(table_offsets_.size() + n);
+  const std::size_t base = edge_weights_.size();
+  edge_nodes_.resize(2 * (base + n));
+  edge_weights_.insert(edge_weights_.end(), weights.begin(), weights.end());
+  table_offsets_.resize(base + n);
   for (std::size_t k = 0; k < n; ++k) {
-    AppendEdge(first[k], second[k], weights[k], offset);
+    edge_nodes_[2 * (base + k)] = first[k];
+    edge_nodes_[2 * (base + k) + 1] = second[k];
+    table_offsets_[base + k] = offset;
     offset += static_cast<std::int64_t>(num_candidates(first[k])) * num_candidates(second[k]);
   }
 }

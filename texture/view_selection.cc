@@ -178,41 +178,47 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
   // and reading the tables in storage order is what keeps them fast: they do not fit in cache).
   // Edges with one fixed side: lambda w c(l, untextured) joins the free side's unaries. Edges
   // between two fixed triangles cost a constant 0 (both untextured).
-  std::vector<int> edge_start(num_free + 1, 0);
-  std::vector<int> fixed_edges;  // ascending
-  for (int e = 0; e < e_count; ++e) {
+  std::vector<int> mrf_edges, fixed_edges;  // ascending
+  mrf_edges.reserve(e_count);
+  bool by_lower_node = true;  // mrf_edges already ordered by their lower node
+  for (int e = 0, last = -1; e < e_count; ++e) {
     const int i = node_of[mesh.edge_faces(e, 0)], j = node_of[mesh.edge_faces(e, 1)];
-    if (i >= 0 && j >= 0)
-      ++edge_start[std::min(i, j) + 1];
-    else if (i >= 0 || j >= 0)
+    if (i >= 0 && j >= 0) {
+      mrf_edges.push_back(e);
+      by_lower_node &= std::min(i, j) >= last;
+      last = std::min(i, j);
+    } else if (i >= 0 || j >= 0) {
       fixed_edges.push_back(e);
+    }
   }
-  for (int i = 0; i < num_free; ++i) edge_start[i + 1] += edge_start[i];
-  const int num_edges = edge_start[num_free];
+  // The mesh's edges follow its triangle order (TextureMesh::Build), and so do the nodes: the
+  // MRF edges are then in order already; otherwise a counting sort (stable) orders them.
+  if (!by_lower_node) {
+    std::vector<int> start(num_free + 1, 0);
+    const auto lower = [&](int e) {
+      return std::min(node_of[mesh.edge_faces(e, 0)], node_of[mesh.edge_faces(e, 1)]);
+    };
+    for (int e : mrf_edges) ++start[lower(e) + 1];
+    for (int i = 0; i < num_free; ++i) start[i + 1] += start[i];
+    std::vector<int> sorted(mrf_edges.size());
+    for (int e : mrf_edges) sorted[start[lower(e)]++] = e;
+    mrf_edges.swap(sorted);
+  }
+  const int num_edges = static_cast<int>(mrf_edges.size());
   const int num_fixed = static_cast<int>(fixed_edges.size());
   // Per table (MRF edges first, then the edges with a fixed side): its mesh edge, the triangles
   // of its rows and columns (the free one first for fixed sides) and where it starts.
   std::vector<int> table_edge(num_edges + num_fixed), row_face(num_edges + num_fixed),
       column_face(num_edges + num_fixed);
-  {
-    std::vector<int> fill(edge_start.begin(), edge_start.end() - 1);
-    for (int e = 0; e < e_count; ++e) {
-      const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
-      const int i = node_of[fi], j = node_of[fj];
-      if (i < 0 || j < 0) continue;
-      const int k = fill[std::min(i, j)]++;
-      table_edge[k] = e;
-      row_face[k] = i < j ? fi : fj;
-      column_face[k] = i < j ? fj : fi;
-    }
-    for (int k = 0; k < num_fixed; ++k) {
-      const int e = fixed_edges[k];
-      const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
-      const bool first_free = node_of[fi] >= 0;
-      table_edge[num_edges + k] = e;
-      row_face[num_edges + k] = first_free ? fi : fj;
-      column_face[num_edges + k] = first_free ? fj : fi;
-    }
+  for (int k = 0; k < num_edges + num_fixed; ++k) {
+    const int e = k < num_edges ? mrf_edges[k] : fixed_edges[k - num_edges];
+    const int fi = mesh.edge_faces(e, 0), fj = mesh.edge_faces(e, 1);
+    // Rows: the lower node of an MRF edge, the free side of the others.
+    const int i = node_of[fi], j = node_of[fj];
+    const bool first_rows = k < num_edges ? i < j : i >= 0;
+    table_edge[k] = e;
+    row_face[k] = first_rows ? fi : fj;
+    column_face[k] = first_rows ? fj : fi;
   }
   std::vector<std::int64_t> table_offset(num_edges + num_fixed + 1, 0);
   for (int k = 0; k < num_edges + num_fixed; ++k)
