@@ -335,16 +335,15 @@ int ImagePool::Add(int frame_index, const cv::Mat& color_bgr, const PinholeCamer
       level[f] =
           static_cast<uint8_t>(1 + std::min(bins - 1, static_cast<int>(vis.quality[f] * bins)));
   }
+  slot_frames_.push_back(entry->frame_index);
   entries_.push_back(std::move(entry));
   levels_.push_back(std::move(level));
   return size() - 1;
 }
 
 int ImagePool::SlotOfFrame(int frame_index) const {
-  for (int s = 0; s < size(); ++s) {
-    if (entries_[s]->frame_index == frame_index) return s;
-  }
-  return -1;
+  const auto it = std::find(slot_frames_.begin(), slot_frames_.end(), frame_index);
+  return it == slot_frames_.end() ? -1 : static_cast<int>(it - slot_frames_.begin());
 }
 
 bool ImagePool::IsUniquelyBest(int slot) const {
@@ -401,12 +400,14 @@ std::vector<int> ImagePool::Prune() {
     const int s = static_cast<int>(it - keep.begin());
     dropped.push_back(entries_[s]->frame_index);
     entries_.erase(entries_.begin() + s);
+    slot_frames_.erase(slot_frames_.begin() + s);
     levels_.erase(levels_.begin() + s);
   }
   // Memory bound: beyond the hard cap the oldest go regardless.
   while (size() > options_.hard_max_images) {
     dropped.push_back(entries_.front()->frame_index);
     entries_.erase(entries_.begin());
+    slot_frames_.erase(slot_frames_.begin());
     levels_.erase(levels_.begin());
   }
   return dropped;

@@ -200,6 +200,7 @@ class ImagePool {
   ImagePoolOptions options_;
   VisibilityOptions visibility_options_;
   std::vector<std::unique_ptr<PoolEntry>> entries_;  // oldest first
+  std::vector<int> slot_frames_;                     // entries_[s]->frame_index (SlotOfFrame)
   // Per slot, per triangle: 0 where not visible, else 1 + the histogram bin of W.
   std::vector<std::vector<uint8_t>> levels_;
 };
