@@ -167,7 +167,7 @@ std::vector<char> BisectByLevels(const MrfProblem& problem, const MrfAdjacency& 
       next_level = std::max(next_level, level[i] + 1);
       for (int p = adjacency.offsets[i]; p < adjacency.offsets[i + 1]; ++p) {
         const int e = adjacency.edges[p];
-        const int j = problem.edge_first(e) == i ? problem.edge_second(e) : problem.edge_first(e);
+        const int j = problem.edge_other(e, i);
         if (level[j] < 0) {
           level[j] = level[i] + 1;
           order.push_back(j);
@@ -250,7 +250,7 @@ struct alignas(64) Sweeper {
     for (int k = 0; k < problem->num_candidates(i); ++k) dirty[problem->candidate_labels(i)[k]] = 1;
     for (int p = adjacency->offsets[i]; p < adjacency->offsets[i + 1]; ++p) {
       const int e = adjacency->edges[p];
-      const int j = problem->edge_first(e) == i ? problem->edge_second(e) : problem->edge_first(e);
+      const int j = problem->edge_other(e, i);
       for (int k = 0; k < problem->num_candidates(j); ++k)
         dirty[problem->candidate_labels(j)[k]] = 1;
     }

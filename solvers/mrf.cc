@@ -150,6 +150,17 @@ void CheckEdge(const MrfProblem& p, int i, int j, double weight, const char* fun
     fail("weight: expected finite and >= 0, found " + std::to_string(weight));
 }
 
+// Throws unless the `size` entries of edge `edge`'s table are finite.
+void CheckTable(const float* table, std::int64_t size, std::int64_t edge, const char* function) {
+  for (std::int64_t k = 0; k < size; ++k) {
+    if (!std::isfinite(table[k])) {
+      throw Error(std::string("MrfProblem::") + function + " (edge " + std::to_string(edge) +
+                  "): table[" + std::to_string(k) + "]: expected finite, found " +
+                  std::to_string(table[k]));
+    }
+  }
+}
+
 }  // namespace
 
 int MrfProblem::AddPottsEdge(int i, int j, double weight) {
@@ -184,12 +195,7 @@ int MrfProblem::AddEdge(int i, int j, double weight, const std::function<double(
 int MrfProblem::AddEdgeTable(int i, int j, double weight, const float* table) {
   CheckEdge(*this, i, j, weight, "AddEdgeTable");
   const std::int64_t size = static_cast<std::int64_t>(num_candidates(i)) * num_candidates(j);
-  for (std::int64_t k = 0; k < size; ++k) {
-    if (!std::isfinite(table[k])) {
-      throw Error("MrfProblem::AddEdgeTable (edge " + std::to_string(num_edges()) + "): table[" +
-                  std::to_string(k) + "]: expected finite, found " + std::to_string(table[k]));
-    }
-  }
+  CheckTable(table, size, num_edges(), "AddEdgeTable");
   const std::int64_t offset = static_cast<std::int64_t>(tables_.size());
   tables_.insert(tables_.end(), table, table + size);
   return AppendEdge(i, j, weight, offset);
@@ -230,13 +236,7 @@ void MrfProblem::AddEdgeTables(const std::vector<int>& first, const std::vector<
                     "): tables: expected at least " + std::to_string(size + entries) +
                     " entries, found " + std::to_string(tables.size()));
       }
-      for (std::int64_t i = size; i < size + entries; ++i) {
-        if (!std::isfinite(tables[i])) {
-          throw Error("MrfProblem::AddEdgeTables (edge " + std::to_string(e0 + k) + "): table[" +
-                      std::to_string(i - size) + "]: expected finite, found " +
-                      std::to_string(tables[i]));
-        }
-      }
+      CheckTable(tables.data() + size, entries, e0 + static_cast<std::int64_t>(k), "AddEdgeTables");
       size += entries;
     }
     throw Error("MrfProblem::AddEdgeTables: tables: expected " + std::to_string(size) +

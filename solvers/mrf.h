@@ -78,6 +78,10 @@ class MrfProblem {
 
   int edge_first(int e) const { return edge_nodes_[2 * e]; }
   int edge_second(int e) const { return edge_nodes_[2 * e + 1]; }
+  // The node at the other end of edge e from `node` (one of its two nodes).
+  int edge_other(int e, int node) const {
+    return edge_nodes_[2 * e] == node ? edge_nodes_[2 * e + 1] : edge_nodes_[2 * e];
+  }
   double edge_weight(int e) const { return edge_weights_[e]; }
   // K_first x K_second row-major table of c_e over local candidate indices; nullptr for Potts.
   const float* edge_table(int e) const {

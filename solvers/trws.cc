@@ -34,7 +34,7 @@ struct Messages {
 // out(b) = min_a h(a) + lambda w_e c_e(a, b) over the candidates a of `from` and b of `to`,
 // normalised to min 0; returns the subtracted minimum.
 double UpdateMessage(const MrfProblem& problem, int e, int from, const double* h, double* out) {
-  const int to = problem.edge_first(e) == from ? problem.edge_second(e) : problem.edge_first(e);
+  const int to = problem.edge_other(e, from);
   const int kf = problem.num_candidates(from);
   const int kt = problem.num_candidates(to);
   const double scale = problem.smoothness() * problem.edge_weight(e);
@@ -83,7 +83,7 @@ MrfSummary TrwsSolver::Solve(const MrfProblem& problem, std::vector<int>* labels
     int in = 0, out = 0;
     for (int p = adjacency.offsets[i]; p < adjacency.offsets[i + 1]; ++p) {
       const int e = adjacency.edges[p];
-      const int other = problem.edge_first(e) == i ? problem.edge_second(e) : problem.edge_first(e);
+      const int other = problem.edge_other(e, i);
       (other < i ? in : out) += 1;
     }
     gamma[i] = 1.0 / std::max(1, std::max(in, out));
@@ -117,7 +117,7 @@ MrfSummary TrwsSolver::Solve(const MrfProblem& problem, std::vector<int>* labels
     double constants = 0.0;
     for (int p = adjacency.offsets[i]; p < adjacency.offsets[i + 1]; ++p) {
       const int e = adjacency.edges[p];
-      const int other = problem.edge_first(e) == i ? problem.edge_second(e) : problem.edge_first(e);
+      const int other = problem.edge_other(e, i);
       if ((other > i) != forward) continue;
       const double* back = messages.Into(problem, e, i);
       for (int a = 0; a < k; ++a) h[a] = gamma[i] * belief[a] - back[a];

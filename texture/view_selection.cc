@@ -7,7 +7,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
-#include <iterator>
 #include <limits>
 #include <memory>
 #include <numeric>
@@ -67,10 +66,6 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
     slot_quality[s] = pool.entry(s).visibility.quality.data();
     slot_frame[s] = pool.entry(s).frame_index;
   }
-  // (frame, slot) ascending, for the warm-start slot of each triangle's previous frame.
-  std::vector<std::pair<int, int>> frame_slots(slots);
-  for (int s = 0; s < slots; ++s) frame_slots[s] = {slot_frame[s], s};
-  std::sort(frame_slots.begin(), frame_slots.end());
   // The lifetime part of D per slot (the same for every triangle of an image).
   std::vector<double> slot_age_cost(slots);
   for (int s = 0; s < slots; ++s)
@@ -103,13 +98,8 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
               warm[f] = untextured;
             } else {
               if (frame != memo_frame) {
-                // The last slot holding that frame, if any.
                 memo_frame = frame;
-                memo_slot = -1;
-                const auto it = std::upper_bound(frame_slots.begin(), frame_slots.end(),
-                                                 std::make_pair(frame, slots));
-                if (it != frame_slots.begin() && std::prev(it)->first == frame)
-                  memo_slot = std::prev(it)->second;
+                memo_slot = pool.SlotOfFrame(frame);  // -1 when no longer pooled
               }
               warm[f] = memo_slot;
             }

@@ -249,7 +249,9 @@ TEST(ImagePoolTest, TriangleOrderIsBreadthFirstOverSharedEdges) {
   int roots = 0;
   for (int f = 0; f < f_count; ++f) {
     if (earliest_neighbour[f] > position[f]) ++roots;
-    if (f < first_sphere) EXPECT_LT(position[f], first_sphere);
+    if (f < first_sphere) {
+      EXPECT_LT(position[f], first_sphere);
+    }
   }
   EXPECT_EQ(roots, 2);  // one per sphere
   EXPECT_EQ(mesh.triangle_order[0], 0);

@@ -430,8 +430,8 @@ TEST(TexturingTest, SeamLevellerSolvesTheLeastSquaresProblem) {
 }
 
 // Also with fragmented labels (many vertices with three or more labels), scattered
-// untextured triangles, a duplicated triangle and triangles that repeat a vertex, on a mesh
-// large enough for wide supernodes.
+// untextured triangles, a duplicated triangle and triangles that repeat a vertex, on a larger
+// mesh.
 TEST(TexturingTest, SeamLevellerSolvesFragmentedLabellings) {
   const Template sphere = UvSphere(12, 24, 1.0, Eigen::Vector3d::Zero());
   Eigen::MatrixX3i triangles(sphere.num_triangles() + 3, 3);
