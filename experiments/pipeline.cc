@@ -9,11 +9,11 @@
 #include <iomanip>
 #include <limits>
 #include <memory>
-#include <sstream>
-
 #include <nanoflann.hpp>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <optional>
+#include <sstream>
 
 #include "experiments/pose_csv.h"
 #include "models/error.h"
@@ -22,6 +22,8 @@
 #include "models/skinning.h"
 #include "models/template_generator.h"
 #include "models/template_io.h"
+#include "sensors/calibration.h"
+#include "sensors/scene_segmentation.h"
 #include "sensors/sequence.h"
 
 namespace artex {
@@ -30,18 +32,24 @@ namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
-double Since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+double Since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
 
 // nanoflann adaptor over an N x 3 matrix.
 struct PointCloud {
   const Eigen::MatrixX3d* points;
   size_t kdtree_get_point_count() const { return static_cast<size_t>(points->rows()); }
-  double kdtree_get_pt(size_t i, size_t d) const { return (*points)(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(d)); }
+  double kdtree_get_pt(size_t i, size_t d) const {
+    return (*points)(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(d));
+  }
   template <class Box>
-  bool kdtree_get_bbox(Box&) const { return false; }
+  bool kdtree_get_bbox(Box&) const {
+    return false;
+  }
 };
-using KdTree = nanoflann::KDTreeSingleIndexAdaptor<
-    nanoflann::L2_Simple_Adaptor<double, PointCloud>, PointCloud, 3>;
+using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointCloud>,
+                                                   PointCloud, 3>;
 
 // Distance of every tracked vertex to the ground-truth surface: to the nearest subject vertex,
 // refined to the distance to that vertex's tangent plane (never more than the vertex distance).
@@ -96,6 +104,56 @@ std::size_t TextureUpdateBytes(const Texturer& texturer) {
   return bytes.size();
 }
 
+// Rows of `points` mapped by `t`.
+Eigen::MatrixX3d TransformRows(const Eigen::Isometry3d& t, const Eigen::MatrixX3d& points) {
+  Eigen::MatrixX3d out = (points * t.linear().transpose()).rowwise() + t.translation().transpose();
+  return out;
+}
+
+// The calibration tracking uses: the sequence's, or with the world frame estimated from the
+// first readable frame (floor plane, gravity or the camera convention).
+struct FrameWorld {
+  Calibration calibration;
+  std::optional<WorldFrameEstimate> estimate;
+  Eigen::Isometry3d to_calibration_world = Eigen::Isometry3d::Identity();  // tracking -> sequence
+};
+
+FrameWorld ChooseWorldFrame(FrameSource* source, int begin, int end,
+                            const PreprocessOptions& options,
+                            const std::optional<Eigen::Vector3d>& gravity, PipelineResult* result) {
+  FrameWorld world;
+  world.calibration = source->calibration();
+  const Eigen::Isometry3d given = world.calibration.depth.world_to_camera;
+  const bool camera_frame = given.isApprox(Eigen::Isometry3d::Identity(), 1e-12);
+  if (options.world_frame == WorldFrameMode::kCalibration ||
+      (options.world_frame == WorldFrameMode::kAuto && !camera_frame)) {
+    return world;
+  }
+  Frame frame;
+  std::string warning;
+  int i = begin;
+  while (i < end && !source->ReadFrame(i, &frame, &warning)) ++i;
+  if (i >= end) return world;  // nothing readable: the frame loop reports it
+  WorldFrameOptions wo;
+  wo.planes = options.segmentation.planes;
+  wo.assumed_camera_height = options.assumed_camera_height;
+  const WorldFrameEstimate estimate =
+      EstimateWorldFrame(frame.depth, world.calibration.depth, world.calibration.depth_distortion,
+                         world.calibration.depth_scale, gravity, wo);
+  const Eigen::Isometry3d depth_to_color = world.calibration.DepthToColor();
+  world.calibration.depth.world_to_camera = estimate.world_to_camera;
+  world.calibration.color.world_to_camera = depth_to_color * estimate.world_to_camera;
+  world.to_calibration_world = given.inverse() * estimate.world_to_camera;
+  if (estimate.source == WorldFrameSource::kCameraConvention) {
+    result->warnings.push_back(
+        "no floor found in frame " + std::to_string(i) +
+        " and no gravity: the world frame assumes the camera is upright (up = -y of the "
+        "camera); set preprocess.world_frame: calibration with a calibration.yaml if it is not");
+  }
+  world.estimate = estimate;
+  return world;
+}
+
 }  // namespace
 
 PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& template_path,
@@ -105,17 +163,26 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   std::string why;
   if (!options.IsValid(&why)) throw Error(why);
   SequenceReader reader(sequence_dir);
-  const Calibration& calibration = reader.calibration();
+  const int total_frames = reader.num_frames();
+  const int begin = std::min(options.first_frame, total_frames);
+  const int end =
+      options.max_frames > 0 ? std::min(total_frames, begin + options.max_frames) : total_frames;
+  PipelineResult result;
+  const std::vector<cv::Mat> background = reader.ReadBackgroundFrames();
+  const FrameWorld world = ChooseWorldFrame(&reader, begin, end, options.preprocess,
+                                            std::optional<Eigen::Vector3d>(), &result);
+  const Calibration& calibration = world.calibration;
   const Template tmpl = template_path.empty() ? GenerateTemplate() : ReadTemplateGlb(template_path);
   std::error_code ec;
   fs::create_directories(out_dir, ec);
   if (ec) throw Error(out_dir + ": cannot create the output folder: " + ec.message());
   WriteFileAtomically(out_dir + "/config.yaml", resolved_config.ToYaml() + "\n");
+  WriteCalibration(calibration, out_dir + "/calibration.yaml");
 
   Preprocessor preprocessor(calibration, options.preprocess);
-  const std::vector<cv::Mat> background = reader.ReadBackgroundFrames();
   if (background.empty()) {
     preprocessor.TrainWithoutBackground();
+    if (world.estimate) preprocessor.SetScenePlanes(world.estimate->planes);
   } else {
     preprocessor.Train(background);
   }
@@ -125,7 +192,6 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   if (options.texture) texturer = std::make_unique<Texturer>(tmpl, options.texturing);
 
   // Ground truth: the subject's mesh and skeleton (for surface and joint errors).
-  PipelineResult result;
   result.has_ground_truth = reader.has_ground_truth() && !reader.GroundTruthSubjectPath().empty() &&
                             fs::exists(reader.GroundTruthSubjectPath());
   std::unique_ptr<Template> subject;
@@ -140,10 +206,6 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
     }
   }
 
-  const int total_frames = reader.num_frames();
-  const int begin = std::min(options.first_frame, total_frames);
-  const int end = options.max_frames > 0 ? std::min(total_frames, begin + options.max_frames)
-                                         : total_frames;
   std::vector<Pose> poses;
   std::vector<int> pose_frames;
   Frame frame;
@@ -224,11 +286,13 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
       Eigen::MatrixX3d truth_normals;
       ComputeVertexNormals(truth.vertices, subject->triangles, &truth_normals);
       double mean = 0.0, max = 0.0;
-      SurfaceErrors(posed, truth.vertices, truth_normals, &mean, &max);
+      const Eigen::MatrixX3d tracked_in_truth = TransformRows(world.to_calibration_world, posed);
+      SurfaceErrors(tracked_in_truth, truth.vertices, truth_normals, &mean, &max);
       record.mean_vertex_error_mm = 1000.0 * mean;
       record.max_vertex_error_mm = 1000.0 * max;
       Eigen::MatrixX3d ours, theirs;
       skinning.PosedJointCenters(fitter.pose(), &ours);
+      ours = TransformRows(world.to_calibration_world, ours);
       subject_skinning->PosedJointCenters(truth.pose, &theirs);
       double joint = 0.0;
       for (const auto& [a, b] : joint_pairs) joint += (ours.row(a) - theirs.row(b)).norm();
@@ -298,14 +362,16 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
                 {"termination", FrameTerminationName(r.fit.termination)},
                 {"initial_cost", r.fit.initial_cost},
                 {"final_cost", r.fit.final_cost},
-                {"flags", {{"too_few_points", r.fit.too_few_points},
-                           {"non_finite", r.fit.non_finite},
-                           {"diverged", r.fit.diverged}}},
-                {"seconds", {{"preprocess", r.preprocess_seconds},
-                             {"icp", r.fit.icp_seconds},
-                             {"estep", r.fit.estep_seconds},
-                             {"mstep", r.fit.mstep_seconds},
-                             {"total", r.fit.total_seconds}}}};
+                {"flags",
+                 {{"too_few_points", r.fit.too_few_points},
+                  {"non_finite", r.fit.non_finite},
+                  {"diverged", r.fit.diverged}}},
+                {"seconds",
+                 {{"preprocess", r.preprocess_seconds},
+                  {"icp", r.fit.icp_seconds},
+                  {"estep", r.fit.estep_seconds},
+                  {"mstep", r.fit.mstep_seconds},
+                  {"total", r.fit.total_seconds}}}};
     if (texturer) {
       f["texture"] = {{"energy", r.texture.energy},
                       {"lower_bound", std::isfinite(r.texture.lower_bound)
@@ -316,20 +382,43 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
                       {"pool_bytes", r.texture.pool_bytes},
                       {"seam_edges", r.texture.seam_edges},
                       {"changed_triangles", r.texture.changed_triangles},
-                      {"seconds", {{"pool", r.texture.seconds_pool},
-                                   {"mrf", r.texture.seconds_mrf},
-                                   {"sampling", r.texture.seconds_sampling},
-                                   {"levelling", r.texture.seconds_levelling},
-                                   {"total", r.texture.seconds_total}}}};
+                      {"seconds",
+                       {{"pool", r.texture.seconds_pool},
+                        {"mrf", r.texture.seconds_mrf},
+                        {"sampling", r.texture.seconds_sampling},
+                        {"levelling", r.texture.seconds_levelling},
+                        {"total", r.texture.seconds_total}}}};
     }
     summary_frames.push_back(f);
   }
   WriteFileAtomically(out_dir + "/frames.csv", frames_csv.str());
-  WriteJson(out_dir + "/summary.json", {{"sequence", sequence_dir},
-                                        {"template", template_path.empty() ? "default" : template_path},
-                                        {"frames", summary_frames},
-                                        {"warnings", result.warnings}});
-  const auto number = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+  nlohmann::json world_json = {{"source", "calibration"}};
+  if (world.estimate) {
+    const WorldFrameEstimate& e = *world.estimate;
+    nlohmann::json planes = nlohmann::json::array();
+    for (const ScenePlane& p : e.planes) {
+      planes.push_back({{"kind", PlaneKindName(p.kind)},
+                        {"normal", {p.normal.x(), p.normal.y(), p.normal.z()}},
+                        {"offset", p.offset},
+                        {"inlier_fraction", p.inlier_fraction},
+                        {"extent", {p.extent[0], p.extent[1]}}});
+    }
+    world_json = {{"source", WorldFrameSourceName(e.source)},
+                  {"up_camera", {e.up_camera.x(), e.up_camera.y(), e.up_camera.z()}},
+                  {"camera_height", e.camera_height},
+                  {"camera_pitch_deg", e.camera_pitch_deg},
+                  {"camera_roll_deg", e.camera_roll_deg},
+                  {"planes", planes}};
+  }
+  WriteJson(out_dir + "/summary.json",
+            {{"sequence", sequence_dir},
+             {"world_frame", world_json},
+             {"template", template_path.empty() ? "default" : template_path},
+             {"frames", summary_frames},
+             {"warnings", result.warnings}});
+  const auto number = [](double v) {
+    return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
+  };
   WriteJson(out_dir + "/metrics.json",
             {{"frames", static_cast<int>(result.frames.size())},
              {"skipped_frames", result.skipped_frames},
