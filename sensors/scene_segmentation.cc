@@ -478,6 +478,9 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
         Union(parent_, i, i + w);
     }
   }
+  // Flatten: parent_[i] is the root of every candidate pixel.
+  for (int i = 0; i < n; ++i)
+    if (z_[i] != 0.0f) parent_[i] = Find(parent_, i);
   // Component statistics.
   std::vector<int> slot(n, -1);
   std::vector<Component> components;
@@ -487,7 +490,7 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
     for (int u = 0; u < w; ++u) {
       const int i = v * w + u;
       if (z_[i] == 0.0f) continue;
-      const int r = Find(parent_, i);
+      const int r = parent_[i];
       if (slot[r] < 0) {
         slot[r] = static_cast<int>(components.size());
         components.emplace_back();
@@ -518,13 +521,15 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
   }
   if (!sized.empty()) {
     std::vector<double> radius(components.size(), 0.0);
+    std::vector<uint8_t> in_sized(components.size(), 0);
+    for (int k : sized) in_sized[k] = 1;
     for (int v = 0; v < h; ++v) {
       const cv::Vec2f* ray = rays_.ptr<cv::Vec2f>(v);
       for (int u = 0; u < w; ++u) {
         const int i = v * w + u;
         if (z_[i] == 0.0f) continue;
-        const int k = slot[Find(parent_, i)];
-        if (components[k].pixels < options_.min_pixels) continue;
+        const int k = slot[parent_[i]];
+        if (!in_sized[k]) continue;
         const double z = z_[i];
         Eigen::Vector3d d =
             Eigen::Vector3d(ray[u][0] * z, ray[u][1] * z, z) - components[k].centroid();
@@ -597,7 +602,7 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
       uint8_t* out = mask->ptr<uint8_t>(v);
       for (int u = 0; u < w; ++u) {
         const int i = v * w + u;
-        if (z_[i] != 0.0f && Find(parent_, i) == root) out[u] = 255;
+        if (z_[i] != 0.0f && parent_[i] == root) out[u] = 255;
       }
     }
   }
