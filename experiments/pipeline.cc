@@ -15,6 +15,7 @@
 #include <optional>
 #include <sstream>
 
+#include "experiments/pipeline_output.h"
 #include "experiments/pose_csv.h"
 #include "models/error.h"
 #include "models/mesh_export.h"
@@ -75,16 +76,6 @@ void SurfaceErrors(const Eigen::MatrixX3d& tracked, const Eigen::MatrixX3d& trut
   *max = worst;
 }
 
-std::string Fixed(double v, int digits = 6) {
-  if (!std::isfinite(v)) return "nan";
-  std::ostringstream s;
-  s << std::setprecision(digits) << v;
-  return s.str();
-}
-
-void WriteJson(const std::string& path, const nlohmann::json& j) {
-  WriteFileAtomically(path, j.dump(2) + "\n");
-}
 
 // Writes `image` as a PNG and returns the encoded bytes.
 std::vector<unsigned char> WritePng(const std::string& path, const cv::Mat& image) {
@@ -214,7 +205,9 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   std::size_t stream_bytes = 0;
   const auto start = Clock::now();
   double fit_seconds = 0.0, texture_seconds = 0.0, iterations = 0.0;
-  int lost = 0, evaluated = 0;
+  double init_seconds = 0.0, quality_seconds = 0.0;
+  int lost = 0, evaluated = 0, tracked_frames = 0;
+  bool need_init = true;
   double error_sum = 0.0, joint_sum = 0.0;
   if (options.export_meshes) {
     fs::create_directories(out_dir + "/meshes", ec);
@@ -237,15 +230,56 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
     record.preprocess_seconds = Since(t_pre);
     record.scan_points = scan.size();
 
-    record.fit = fitter.FitFrame(scan);
-    fit_seconds += record.fit.total_seconds;
-    iterations += record.fit.iterations;
-    skinning.Apply(fitter.pose(), &posed);
-    poses.push_back(fitter.pose());
-    pose_frames.push_back(i);
-    stream_bytes += sizeof(float) * fitter.pose().num_parameters();
+    record.segmentation = stats.segmentation;
 
-    if (texturer) {
+    // Fit: the multi-hypothesis initialisation on the first frame and after a lost one.
+    if (need_init && scan.size() >= options.fitting.min_scan_points) {
+      const InitResult init =
+          InitializeFit(&fitter, scan, calibration.depth, options.initializer);
+      record.fit = init.fit;
+      record.reinitialised = true;
+      record.init_seconds = init.total_seconds;
+      record.init_report = init.BriefReport();
+      ++result.initialisations;
+      init_seconds += init.total_seconds;
+    } else {
+      record.fit = fitter.FitFrame(scan);
+      fit_seconds += record.fit.total_seconds;
+      ++tracked_frames;
+    }
+    iterations += record.fit.iterations;
+    const Pose frame_pose = fitter.pose();
+    skinning.Apply(frame_pose, &posed);
+    poses.push_back(frame_pose);
+    pose_frames.push_back(i);
+    stream_bytes += sizeof(float) * frame_pose.num_parameters();
+    if (record.fit.ok()) {
+      record.quality =
+          EvaluateFitQuality(posed, tmpl.triangles, scan, calibration.depth, options.quality);
+    } else {
+      record.quality = FitQuality();  // a failed fit is lost, whatever its kept pose shows
+      record.quality.label = FitQualityLabel::kLost;
+      ++result.failed_frames;
+    }
+    quality_seconds += record.quality.seconds;
+    switch (record.quality.label) {
+      case FitQualityLabel::kGood:
+        ++result.good_frames;
+        break;
+      case FitQualityLabel::kDoubtful:
+        ++result.doubtful_frames;
+        break;
+      case FitQualityLabel::kLost:
+        ++result.lost_frames;
+        break;
+    }
+    const bool lost_frame = record.quality.label == FitQualityLabel::kLost;
+    // A lost frame's pose is not texture: it would paint the room onto the body.
+    const bool texture_frame =
+        !lost_frame && (options.texture_doubtful_frames ||
+                        record.quality.label == FitQualityLabel::kGood);
+
+    if (texturer && texture_frame) {
       record.texture = texturer->AddFrame(i, frame.color, calibration.color, posed);
       texture_seconds += record.texture.seconds_total;
       stream_bytes += TextureUpdateBytes(*texturer);
@@ -291,7 +325,7 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
       record.mean_vertex_error_mm = 1000.0 * mean;
       record.max_vertex_error_mm = 1000.0 * max;
       Eigen::MatrixX3d ours, theirs;
-      skinning.PosedJointCenters(fitter.pose(), &ours);
+      skinning.PosedJointCenters(frame_pose, &ours);
       ours = TransformRows(world.to_calibration_world, ours);
       subject_skinning->PosedJointCenters(truth.pose, &theirs);
       double joint = 0.0;
@@ -300,11 +334,21 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
       error_sum += record.mean_vertex_error_mm;
       joint_sum += record.mean_joint_error_mm;
       result.max_vertex_error_mm = std::max(result.max_vertex_error_mm, record.max_vertex_error_mm);
-      lost += record.mean_vertex_error_mm > options.lost_threshold_mm;
+      // Lost: too far from the truth, or a failed fit (its kept pose is no measurement).
+      lost += record.mean_vertex_error_mm > options.lost_threshold_mm || !record.fit.ok();
       ++evaluated;
     } else {
       record.mean_vertex_error_mm = record.max_vertex_error_mm = record.mean_joint_error_mm =
           std::numeric_limits<double>::quiet_NaN();
+    }
+    if (lost_frame) {
+      // Re-initialise on the next frame with enough points; the scale estimate and the
+      // texture survive (the same person), the tracked subject component does not.
+      need_init = true;
+      fitter.Reset(/*keep_scale=*/true);
+      preprocessor.ResetSubject();
+    } else {
+      need_init = false;
     }
     result.frames.push_back(record);
     if (progress) {
@@ -319,7 +363,16 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   const int fitted = static_cast<int>(poses.size());
   if (fitted == 0) throw Error(sequence_dir + ": no usable frame in the sequence");
   result.mean_em_iterations = iterations / fitted;
-  result.fit_ms_per_frame = 1000.0 * fit_seconds / fitted;
+  result.fit_ms_per_frame = tracked_frames ? 1000.0 * fit_seconds / tracked_frames : 0.0;
+  result.init_ms_per_initialisation =
+      result.initialisations ? 1000.0 * init_seconds / result.initialisations : 0.0;
+  result.quality_ms_per_frame = 1000.0 * quality_seconds / fitted;
+  if (result.lost_frames > fitted / 2) {
+    std::ostringstream w;
+    w << "most frames are lost (" << result.lost_frames << " of " << fitted
+      << "): the template does not explain the scan; check the foreground (docs/real-data.md)";
+    result.warnings.push_back(w.str());
+  }
   result.texture_ms_per_frame = 1000.0 * texture_seconds / fitted;
   result.stream_kbit_per_s = 8.0 * stream_bytes / fitted * calibration.frame_rate / 1000.0;
   if (evaluated > 0) {
@@ -333,104 +386,14 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
 
   WritePoseCsv(out_dir + "/poses.csv", tmpl, pose_frames, poses);
 
-  // frames.csv: per-frame metrics and per-stage timings.
-  std::ostringstream frames_csv;
-  frames_csv << "frame,skipped,scan_points,em_iterations,termination,initial_cost,final_cost,"
-                "too_few_points,non_finite,diverged,scale,preprocess_ms,estep_ms,mstep_ms,fit_ms,"
-                "texture_ms,texture_mrf_ms,texture_energy,texture_lower_bound,pool_size,"
-                "seam_edges,changed_triangles,seam_rms_before,seam_rms_after,"
-                "mean_vertex_error_mm,max_vertex_error_mm,mean_joint_error_mm\n";
-  nlohmann::json summary_frames = nlohmann::json::array();
-  for (const FrameRecord& r : result.frames) {
-    frames_csv << r.frame << "," << r.skipped << "," << r.scan_points << "," << r.fit.iterations
-               << "," << FrameTerminationName(r.fit.termination) << "," << Fixed(r.fit.initial_cost)
-               << "," << Fixed(r.fit.final_cost) << "," << r.fit.too_few_points << ","
-               << r.fit.non_finite << "," << r.fit.diverged << "," << Fixed(r.fit.scale) << ","
-               << Fixed(1000 * r.preprocess_seconds) << "," << Fixed(1000 * r.fit.estep_seconds)
-               << "," << Fixed(1000 * r.fit.mstep_seconds) << ","
-               << Fixed(1000 * r.fit.total_seconds) << "," << Fixed(1000 * r.texture.seconds_total)
-               << "," << Fixed(1000 * r.texture.seconds_mrf) << "," << Fixed(r.texture.energy)
-               << "," << Fixed(r.texture.lower_bound) << "," << r.texture.pool_size << ","
-               << r.texture.seam_edges << "," << r.texture.changed_triangles << ","
-               << Fixed(r.texture.seam_rms_before) << "," << Fixed(r.texture.seam_rms_after) << ","
-               << Fixed(r.mean_vertex_error_mm) << "," << Fixed(r.max_vertex_error_mm) << ","
-               << Fixed(r.mean_joint_error_mm) << "\n";
-    nlohmann::json f;
-    f["frame"] = r.frame;
-    f["skipped"] = r.skipped;
-    f["fit"] = {{"iterations", r.fit.iterations},
-                {"termination", FrameTerminationName(r.fit.termination)},
-                {"initial_cost", r.fit.initial_cost},
-                {"final_cost", r.fit.final_cost},
-                {"flags",
-                 {{"too_few_points", r.fit.too_few_points},
-                  {"non_finite", r.fit.non_finite},
-                  {"diverged", r.fit.diverged}}},
-                {"seconds",
-                 {{"preprocess", r.preprocess_seconds},
-                  {"icp", r.fit.icp_seconds},
-                  {"estep", r.fit.estep_seconds},
-                  {"mstep", r.fit.mstep_seconds},
-                  {"total", r.fit.total_seconds}}}};
-    if (texturer) {
-      f["texture"] = {{"energy", r.texture.energy},
-                      {"lower_bound", std::isfinite(r.texture.lower_bound)
-                                          ? nlohmann::json(r.texture.lower_bound)
-                                          : nlohmann::json(nullptr)},
-                      {"mrf_iterations", r.texture.mrf_iterations},
-                      {"pool_size", r.texture.pool_size},
-                      {"pool_bytes", r.texture.pool_bytes},
-                      {"seam_edges", r.texture.seam_edges},
-                      {"changed_triangles", r.texture.changed_triangles},
-                      {"seconds",
-                       {{"pool", r.texture.seconds_pool},
-                        {"mrf", r.texture.seconds_mrf},
-                        {"sampling", r.texture.seconds_sampling},
-                        {"levelling", r.texture.seconds_levelling},
-                        {"total", r.texture.seconds_total}}}};
-    }
-    summary_frames.push_back(f);
-  }
-  WriteFileAtomically(out_dir + "/frames.csv", frames_csv.str());
-  nlohmann::json world_json = {{"source", "calibration"}};
-  if (world.estimate) {
-    const WorldFrameEstimate& e = *world.estimate;
-    nlohmann::json planes = nlohmann::json::array();
-    for (const ScenePlane& p : e.planes) {
-      planes.push_back({{"kind", PlaneKindName(p.kind)},
-                        {"normal", {p.normal.x(), p.normal.y(), p.normal.z()}},
-                        {"offset", p.offset},
-                        {"inlier_fraction", p.inlier_fraction},
-                        {"extent", {p.extent[0], p.extent[1]}}});
-    }
-    world_json = {{"source", WorldFrameSourceName(e.source)},
-                  {"up_camera", {e.up_camera.x(), e.up_camera.y(), e.up_camera.z()}},
-                  {"camera_height", e.camera_height},
-                  {"camera_pitch_deg", e.camera_pitch_deg},
-                  {"camera_roll_deg", e.camera_roll_deg},
-                  {"planes", planes}};
-  }
-  WriteJson(out_dir + "/summary.json",
-            {{"sequence", sequence_dir},
-             {"world_frame", world_json},
-             {"template", template_path.empty() ? "default" : template_path},
-             {"frames", summary_frames},
-             {"warnings", result.warnings}});
-  const auto number = [](double v) {
-    return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
-  };
-  WriteJson(out_dir + "/metrics.json",
-            {{"frames", static_cast<int>(result.frames.size())},
-             {"skipped_frames", result.skipped_frames},
-             {"has_ground_truth", result.has_ground_truth},
-             {"mean_vertex_error_mm", number(result.mean_vertex_error_mm)},
-             {"max_vertex_error_mm", number(result.max_vertex_error_mm)},
-             {"mean_joint_error_mm", number(result.mean_joint_error_mm)},
-             {"lost_fraction", number(result.lost_fraction)},
-             {"mean_em_iterations", result.mean_em_iterations},
-             {"fit_ms_per_frame", result.fit_ms_per_frame},
-             {"texture_ms_per_frame", result.texture_ms_per_frame},
-             {"stream_kbit_per_s", result.stream_kbit_per_s}});
+  PipelineOutputInfo info;
+  info.sequence = sequence_dir;
+  info.template_name = template_path.empty() ? "default" : template_path;
+  info.texture = texturer != nullptr;
+  info.world = world.estimate ? &*world.estimate : nullptr;
+  WriteFramesCsv(out_dir + "/frames.csv", result, info);
+  WriteSummaryJson(out_dir + "/summary.json", result, info);
+  WriteMetricsJson(out_dir + "/metrics.json", result);
   if (texturer) {
     GlbTexture texture;
     texture.png = WritePng(out_dir + "/texture.png", texturer->Atlas());

@@ -264,6 +264,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("export_meshes", &o->export_meshes);
   c.Get("export_glb", &o->export_glb);
   c.Get("lost_threshold_mm", &o->lost_threshold_mm);
+  c.Get("texture_doubtful_frames", &o->texture_doubtful_frames);
 }
 
 }  // namespace
