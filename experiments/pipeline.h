@@ -10,6 +10,8 @@
 #include "experiments/config.h"
 #include "sensors/preprocess.h"
 #include "solvers/em_fitter.h"
+#include "solvers/fit_quality.h"
+#include "solvers/initializer.h"
 #include "texture/texturer.h"
 
 namespace artex {
@@ -17,6 +19,8 @@ namespace artex {
 struct PipelineOptions {
   PreprocessOptions preprocess;
   EMFitterOptions fitting;
+  InitializerOptions initializer;  // fitting.init: multi-hypothesis first frame / re-init
+  FitQualityOptions quality;       // fitting.quality: per-frame labels (also initializer.quality)
   TexturingOptions texturing;
   bool texture = true;            // on-the-fly texturing on/off
   bool colour_term = true;        // feed the texture's colours back into the E-step
