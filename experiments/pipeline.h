@@ -19,6 +19,8 @@ namespace artex {
 struct PipelineOptions {
   PreprocessOptions preprocess;
   EMFitterOptions fitting;
+  InitializerOptions initializer;  // fitting.init: multi-hypothesis first frame / re-init
+  FitQualityOptions quality;       // fitting.quality: per-frame labels (also initializer.quality)
   TexturingOptions texturing;
   bool texture = true;            // on-the-fly texturing on/off
   bool colour_term = true;        // feed the texture's colours back into the E-step

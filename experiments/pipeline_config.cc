@@ -95,48 +95,64 @@ void BindPreprocess(const Config& c, PreprocessOptions* o) {
   m.Get("drop_isolated_points", &o->mesh.drop_isolated_points);
 }
 
+void BindIcpInit(const Config& c, IcpInitOptions* o) {
+  c.CheckKeys({"coarse_alignment", "facing_camera", "estimate_scale", "scale_from_extent",
+               "max_iterations", "max_distance", "min_normal_dot", "max_scan_points", "tolerance",
+               "extent_quantile"});
+  c.Get("coarse_alignment", &o->coarse_alignment);
+  c.Get("facing_camera", &o->facing_camera);
+  c.Get("estimate_scale", &o->estimate_scale);
+  c.Get("scale_from_extent", &o->scale_from_extent);
+  c.Get("max_iterations", &o->max_iterations);
+  c.Get("max_distance", &o->max_distance);
+  c.Get("min_normal_dot", &o->min_normal_dot);
+  c.Get("max_scan_points", &o->max_scan_points);
+  c.Get("tolerance", &o->tolerance);
+  c.Get("extent_quantile", &o->extent_quantile);
+}
+
+void BindQuality(const Config& c, FitQualityOptions* o) {
+  c.CheckKeys({"inlier_distance", "max_scan_points", "raster_subsample", "support_tolerance",
+               "depth_truncation", "good_min_inlier_fraction", "good_min_support_fraction",
+               "good_max_depth_residual", "lost_min_inlier_fraction", "lost_min_support_fraction",
+               "lost_max_depth_residual"});
+  c.Get("inlier_distance", &o->inlier_distance);
+  c.Get("max_scan_points", &o->max_scan_points);
+  c.Get("raster_subsample", &o->raster_subsample);
+  c.Get("support_tolerance", &o->support_tolerance);
+  c.Get("depth_truncation", &o->depth_truncation);
+  c.Get("good_min_inlier_fraction", &o->good_min_inlier_fraction);
+  c.Get("good_min_support_fraction", &o->good_min_support_fraction);
+  c.Get("good_max_depth_residual", &o->good_max_depth_residual);
+  c.Get("lost_min_inlier_fraction", &o->lost_min_inlier_fraction);
+  c.Get("lost_min_support_fraction", &o->lost_min_support_fraction);
+  c.Get("lost_max_depth_residual", &o->lost_max_depth_residual);
+}
+
+void BindInitializer(const Config& c, InitializerOptions* o) {
+  c.CheckKeys({"yaws_deg", "arm_angles_deg", "coarse_iterations", "em_candidates",
+               "ranking_iterations", "icp"});
+  c.Get("yaws_deg", &o->yaws_deg);
+  c.Get("arm_angles_deg", &o->arm_angles_deg);
+  c.Get("coarse_iterations", &o->coarse_iterations);
+  c.Get("em_candidates", &o->em_candidates);
+  c.Get("ranking_iterations", &o->ranking_iterations);
+  BindIcpInit(c.Section("icp"), &o->icp);
+}
+
 void BindFitting(const Config& c, EMFitterOptions* o) {
-  c.CheckKeys({"correspondence",
-               "solver",
-               "estep",
-               "k",
-               "voxel_fraction",
-               "epsilon",
-               "lambda_color",
-               "use_color",
-               "normalize_per_scan_point",
-               "icp_metric",
-               "icp_max_distance",
-               "icp_min_normal_dot",
-               "first_frame_radii",
-               "tracking_radii",
-               "first_frame_iterations_per_stage",
-               "tracking_iterations_per_stage",
-               "max_iterations",
-               "over_relaxation",
-               "relative_cost_tolerance",
-               "parameter_tolerance",
-               "normalize_data_term",
-               "tikhonov",
-               "temporal",
-               "smoothness",
-               "joint_limit_weight",
-               "scale_mode",
-               "scale_estimation_frames",
-               "scale_max_radius",
-               "scale_prior_weight",
-               "icp_first_frame",
-               "constant_velocity_prediction",
-               "max_fit_vertices",
-               "min_scan_points",
-               "max_mean_motion",
-               "max_scale_change",
-               "ceres_max_iterations",
-               "solver_threads",
-               "candidate_margin",
-               "normal_refresh_iterations",
-               "tracking_tikhonov",
-               "fit_vertex_selection"});
+  c.CheckKeys({"correspondence", "solver", "estep", "k", "voxel_fraction", "epsilon",
+               "lambda_color", "use_color", "normalize_per_scan_point", "icp_metric",
+               "icp_max_distance", "icp_min_normal_dot", "first_frame_radii", "tracking_radii",
+               "first_frame_iterations_per_stage", "tracking_iterations_per_stage",
+               "max_iterations", "over_relaxation", "relative_cost_tolerance",
+               "parameter_tolerance", "normalize_data_term", "tikhonov", "temporal",
+               "smoothness", "joint_limit_weight", "scale_mode", "scale_estimation_frames",
+               "scale_max_radius", "scale_prior_weight", "icp_first_frame",
+               "constant_velocity_prediction", "max_fit_vertices", "min_scan_points",
+               "max_mean_motion", "max_scale_change", "ceres_max_iterations", "solver_threads",
+               "candidate_margin", "normal_refresh_iterations", "tracking_tikhonov",
+               "fit_vertex_selection", "icp_init", "init", "quality"});
   c.GetEnum("correspondence", CorrespondenceModelNames(), &o->correspondence);
   c.GetEnum("solver", FitSolverTypeNames(), &o->solver.type);
   c.GetEnum("estep",
@@ -186,6 +202,7 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   c.Get("normal_refresh_iterations", &o->normal_refresh_iterations);
   BindWeights(c.Section("tracking_tikhonov"), &o->tracking_update);
   c.GetEnum("fit_vertex_selection", FitVertexSelectionNames(), &o->fit_vertex_selection);
+  BindIcpInit(c.Section("icp_init"), &o->icp);
 }
 
 void BindTexture(const Config& c, TexturingOptions* o) {
@@ -271,6 +288,15 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
 
 bool PipelineOptions::IsValid(std::string* error) const {
   if (!preprocess.IsValid(error) || !fitting.IsValid(error)) return false;
+  std::string inner;
+  if (!initializer.IsValid(&inner)) {
+    if (error) *error = "fitting.init." + inner;
+    return false;
+  }
+  if (!quality.IsValid(&inner)) {
+    if (error) *error = "fitting.quality." + inner;
+    return false;
+  }
   if (texture && !texturing.IsValid(error)) return false;
   std::ostringstream msg;
   if (first_frame < 0)
@@ -289,6 +315,9 @@ PipelineOptions LoadPipelineOptions(const Config& config) {
   PipelineOptions o;
   BindPreprocess(config.Section("preprocess"), &o.preprocess);
   BindFitting(config.Section("fitting"), &o.fitting);
+  BindInitializer(config.Section("fitting").Section("init"), &o.initializer);
+  BindQuality(config.Section("fitting").Section("quality"), &o.quality);
+  o.initializer.quality = o.quality;  // the initialiser ranks and labels with the same options
   BindTexture(config.Section("texture"), &o.texturing);
   BindPipeline(config.Section("pipeline"), &o);
   std::string why;
