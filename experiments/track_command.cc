@@ -1,10 +1,9 @@
 // artex track SEQUENCE --config FILE -o OUT/: preprocessing, EM fitting and on-the-fly
 // texturing of every frame (experiments/pipeline.h), with a progress line on stderr.
+#include <CLI/CLI.hpp>
 #include <cstdio>
 #include <string>
 #include <vector>
-
-#include <CLI/CLI.hpp>
 
 #include "experiments/commands.h"
 #include "experiments/config.h"
@@ -26,12 +25,15 @@ void RegisterTrackCommand(CLI::App* app) {
   CLI::App* cmd = app->add_subcommand(
       "track", "Fit the template to every frame of a sequence and texture it on the fly");
   cmd->add_option("sequence", args->sequence, "artex sequence folder")->required();
-  cmd->add_option("-c,--config", args->config, "configuration file (YAML); default: built-in defaults");
+  cmd->add_option("-c,--config", args->config,
+                  "configuration file (YAML); default: built-in defaults");
   cmd->add_option("-o,--output", args->out, "output folder")->required();
   cmd->add_option("-t,--template", args->template_path,
                   "tracking template (.glb); default: the generated default template");
-  cmd->add_option("-s,--set", args->overrides, "override an option: key=value (e.g. texture.lambda=0)");
-  cmd->add_flag("--export-meshes", args->export_meshes, "write the posed mesh of every frame (PLY)");
+  cmd->add_option("-s,--set", args->overrides,
+                  "override an option: key=value (e.g. texture.lambda=0)");
+  cmd->add_flag("--export-meshes", args->export_meshes,
+                "write the posed mesh of every frame (PLY)");
   cmd->add_flag("--no-texture", args->no_texture, "fitting only");
   cmd->add_option("--max-frames", args->max_frames, "process at most this many frames (0: all)");
   cmd->add_flag("-q,--quiet", args->quiet, "no progress line");
@@ -77,9 +79,10 @@ void RegisterTrackCommand(CLI::App* app) {
                 result.texture_ms_per_frame);
     std::printf("stream: %.1f kbit/s (pose + texture updates)\n", result.stream_kbit_per_s);
     if (result.has_ground_truth) {
-      std::printf("mean vertex error: %.2f mm (max %.2f mm), mean joint error: %.2f mm, lost: %.1f%%\n",
-                  result.mean_vertex_error_mm, result.max_vertex_error_mm,
-                  result.mean_joint_error_mm, 100.0 * result.lost_fraction);
+      std::printf(
+          "mean vertex error: %.2f mm (max %.2f mm), mean joint error: %.2f mm, lost: %.1f%%\n",
+          result.mean_vertex_error_mm, result.max_vertex_error_mm, result.mean_joint_error_mm,
+          100.0 * result.lost_fraction);
     }
     std::printf("results in %s\n", args->out.c_str());
   });
