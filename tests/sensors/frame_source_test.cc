@@ -113,7 +113,7 @@ TEST(FrameSourceTest, NeitherLayoutNamesTheFolderAndTheFiles) {
   const std::string empty = Folder("neither");
   std::ofstream(empty + "/notes.txt") << "hello\n";
   const std::string msg = ErrorOf([&] { OpenFrameSource(empty); });
-  for (const std::string part : {empty, std::string("calibration.yaml"), std::string("frames.csv"),
+  for (const std::string& part : {empty, std::string("calibration.yaml"), std::string("frames.csv"),
                                  std::string("rgb.txt"), std::string("depth.txt")}) {
     EXPECT_NE(msg.find(part), std::string::npos) << part << " in: " << msg;
   }
