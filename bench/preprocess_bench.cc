@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "sensors/preprocess.h"
+#include "sensors/scene_segmentation.h"
 
 namespace artex {
 namespace {
@@ -112,6 +113,59 @@ void BM_PreprocessFrame(benchmark::State& state) {
   state.counters["triangles"] = stats.mesh.triangles;
 }
 BENCHMARK(BM_PreprocessFrame)->Unit(benchmark::kMillisecond);
+
+// The same frame without empty-scene frames: floor and wall removed (planes detected on the
+// first frame, then reused), the subject's 3-D connected component kept.
+void BM_PreprocessFrameSegmented(benchmark::State& state) {
+  const Scene& scene = GetScene();
+  Preprocessor pre(scene.calibration);
+  pre.TrainWithoutBackground();
+  Scan scan;
+  PreprocessStats stats;
+  pre.Process(scene.frame, &scan, &stats);  // detects the planes
+  for (auto _ : state) {
+    pre.Process(scene.frame, &scan, &stats);
+    benchmark::DoNotOptimize(scan.points.data());
+  }
+  state.counters["foreground_fraction"] =
+      static_cast<double>(stats.foreground_pixels) / (scene.frame.depth.total());
+  state.counters["vertices"] = stats.mesh.vertices;
+}
+BENCHMARK(BM_PreprocessFrameSegmented)->Unit(benchmark::kMillisecond);
+
+// Plane removal and components alone (the part that replaces BM_BackgroundClassify).
+void BM_SegmentSubject(benchmark::State& state) {
+  const Scene& scene = GetScene();
+  const Eigen::Vector3d up =
+      scene.calibration.depth.world_to_camera.linear() * Eigen::Vector3d::UnitY();
+  SubjectSegmenter seg(scene.calibration.depth, Distortion(), scene.calibration.depth_scale, up,
+                       SubjectSegmentationOptions());
+  cv::Mat mask;
+  SegmentationStats stats;
+  seg.Segment(scene.frame.depth, &mask, &stats);
+  for (auto _ : state) {
+    seg.Segment(scene.frame.depth, &mask, &stats);
+    benchmark::DoNotOptimize(mask.data);
+  }
+  state.counters["components"] = stats.components;
+  state.counters["subject_pixels"] = stats.subject_pixels;
+}
+BENCHMARK(BM_SegmentSubject)->Unit(benchmark::kMillisecond);
+
+// RANSAC floor and walls of one frame (first frame and re-initialisations only).
+void BM_DetectScenePlanes(benchmark::State& state) {
+  const Scene& scene = GetScene();
+  const Eigen::Vector3d up =
+      scene.calibration.depth.world_to_camera.linear() * Eigen::Vector3d::UnitY();
+  std::vector<ScenePlane> planes;
+  for (auto _ : state) {
+    planes = DetectScenePlanes(scene.frame.depth, scene.calibration.depth, Distortion(),
+                               scene.calibration.depth_scale, up, PlaneDetectionOptions());
+    benchmark::DoNotOptimize(planes.data());
+  }
+  state.counters["planes"] = static_cast<double>(planes.size());
+}
+BENCHMARK(BM_DetectScenePlanes)->Unit(benchmark::kMillisecond);
 
 void BM_BackgroundClassify(benchmark::State& state) {
   const Scene& scene = GetScene();

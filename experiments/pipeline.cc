@@ -9,12 +9,13 @@
 #include <iomanip>
 #include <limits>
 #include <memory>
-#include <sstream>
-
 #include <nanoflann.hpp>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <optional>
+#include <sstream>
 
+#include "experiments/pipeline_output.h"
 #include "experiments/pose_csv.h"
 #include "models/error.h"
 #include "models/mesh_export.h"
@@ -22,7 +23,9 @@
 #include "models/skinning.h"
 #include "models/template_generator.h"
 #include "models/template_io.h"
+#include "sensors/calibration.h"
 #include "sensors/frame_source.h"
+#include "sensors/scene_segmentation.h"
 #include "sensors/sequence.h"
 
 namespace artex {
@@ -31,18 +34,24 @@ namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
-double Since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+double Since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
 
 // nanoflann adaptor over an N x 3 matrix.
 struct PointCloud {
   const Eigen::MatrixX3d* points;
   size_t kdtree_get_point_count() const { return static_cast<size_t>(points->rows()); }
-  double kdtree_get_pt(size_t i, size_t d) const { return (*points)(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(d)); }
+  double kdtree_get_pt(size_t i, size_t d) const {
+    return (*points)(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(d));
+  }
   template <class Box>
-  bool kdtree_get_bbox(Box&) const { return false; }
+  bool kdtree_get_bbox(Box&) const {
+    return false;
+  }
 };
-using KdTree = nanoflann::KDTreeSingleIndexAdaptor<
-    nanoflann::L2_Simple_Adaptor<double, PointCloud>, PointCloud, 3>;
+using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointCloud>,
+                                                   PointCloud, 3>;
 
 // Distance of every tracked vertex to the ground-truth surface: to the nearest subject vertex,
 // refined to the distance to that vertex's tangent plane (never more than the vertex distance).
@@ -68,16 +77,6 @@ void SurfaceErrors(const Eigen::MatrixX3d& tracked, const Eigen::MatrixX3d& trut
   *max = worst;
 }
 
-std::string Fixed(double v, int digits = 6) {
-  if (!std::isfinite(v)) return "nan";
-  std::ostringstream s;
-  s << std::setprecision(digits) << v;
-  return s.str();
-}
-
-void WriteJson(const std::string& path, const nlohmann::json& j) {
-  WriteFileAtomically(path, j.dump(2) + "\n");
-}
 
 // Writes `image` as a PNG and returns the encoded bytes.
 std::vector<unsigned char> WritePng(const std::string& path, const cv::Mat& image) {
@@ -97,6 +96,56 @@ std::size_t TextureUpdateBytes(const Texturer& texturer) {
   return bytes.size();
 }
 
+// Rows of `points` mapped by `t`.
+Eigen::MatrixX3d TransformRows(const Eigen::Isometry3d& t, const Eigen::MatrixX3d& points) {
+  Eigen::MatrixX3d out = (points * t.linear().transpose()).rowwise() + t.translation().transpose();
+  return out;
+}
+
+// The calibration tracking uses: the sequence's, or with the world frame estimated from the
+// first readable frame (floor plane, gravity or the camera convention).
+struct FrameWorld {
+  Calibration calibration;
+  std::optional<WorldFrameEstimate> estimate;
+  Eigen::Isometry3d to_calibration_world = Eigen::Isometry3d::Identity();  // tracking -> sequence
+};
+
+FrameWorld ChooseWorldFrame(FrameSource* source, int begin, int end,
+                            const PreprocessOptions& options,
+                            const std::optional<Eigen::Vector3d>& gravity, PipelineResult* result) {
+  FrameWorld world;
+  world.calibration = source->calibration();
+  const Eigen::Isometry3d given = world.calibration.depth.world_to_camera;
+  const bool camera_frame = given.isApprox(Eigen::Isometry3d::Identity(), 1e-12);
+  if (options.world_frame == WorldFrameMode::kCalibration ||
+      (options.world_frame == WorldFrameMode::kAuto && !camera_frame)) {
+    return world;
+  }
+  Frame frame;
+  std::string warning;
+  int i = begin;
+  while (i < end && !source->ReadFrame(i, &frame, &warning)) ++i;
+  if (i >= end) return world;  // nothing readable: the frame loop reports it
+  WorldFrameOptions wo;
+  wo.planes = options.segmentation.planes;
+  wo.assumed_camera_height = options.assumed_camera_height;
+  const WorldFrameEstimate estimate =
+      EstimateWorldFrame(frame.depth, world.calibration.depth, world.calibration.depth_distortion,
+                         world.calibration.depth_scale, gravity, wo);
+  const Eigen::Isometry3d depth_to_color = world.calibration.DepthToColor();
+  world.calibration.depth.world_to_camera = estimate.world_to_camera;
+  world.calibration.color.world_to_camera = depth_to_color * estimate.world_to_camera;
+  world.to_calibration_world = given.inverse() * estimate.world_to_camera;
+  if (estimate.source == WorldFrameSource::kCameraConvention) {
+    result->warnings.push_back(
+        "no floor found in frame " + std::to_string(i) +
+        " and no gravity: the world frame assumes the camera is upright (up = -y of the "
+        "camera); set preprocess.world_frame: calibration with a calibration.yaml if it is not");
+  }
+  world.estimate = estimate;
+  return world;
+}
+
 }  // namespace
 
 PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& template_path,
@@ -109,17 +158,26 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   FrameSource& reader = *source;
   // Ground truth exists only in artex sequences.
   const SequenceReader* sequence = dynamic_cast<const SequenceReader*>(source.get());
-  const Calibration& calibration = reader.calibration();
+  const int total_frames = reader.num_frames();
+  const int begin = std::min(options.first_frame, total_frames);
+  const int end =
+      options.max_frames > 0 ? std::min(total_frames, begin + options.max_frames) : total_frames;
+  PipelineResult result;
+  const std::vector<cv::Mat> background = reader.ReadBackgroundFrames();
+  const FrameWorld world =
+      ChooseWorldFrame(&reader, begin, end, options.preprocess, reader.gravity(), &result);
+  const Calibration& calibration = world.calibration;
   const Template tmpl = template_path.empty() ? GenerateTemplate() : ReadTemplateGlb(template_path);
   std::error_code ec;
   fs::create_directories(out_dir, ec);
   if (ec) throw Error(out_dir + ": cannot create the output folder: " + ec.message());
   WriteFileAtomically(out_dir + "/config.yaml", resolved_config.ToYaml() + "\n");
+  WriteCalibration(calibration, out_dir + "/calibration.yaml");
 
   Preprocessor preprocessor(calibration, options.preprocess);
-  const std::vector<cv::Mat> background = reader.ReadBackgroundFrames();
   if (background.empty()) {
     preprocessor.TrainWithoutBackground();
+    if (world.estimate) preprocessor.SetScenePlanes(world.estimate->planes);
   } else {
     preprocessor.Train(background);
   }
@@ -129,7 +187,6 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   if (options.texture) texturer = std::make_unique<Texturer>(tmpl, options.texturing);
 
   // Ground truth: the subject's mesh and skeleton (for surface and joint errors).
-  PipelineResult result;
   result.has_ground_truth = sequence && sequence->has_ground_truth() &&
                             !sequence->GroundTruthSubjectPath().empty() &&
                             fs::exists(sequence->GroundTruthSubjectPath());
@@ -145,10 +202,6 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
     }
   }
 
-  const int total_frames = reader.num_frames();
-  const int begin = std::min(options.first_frame, total_frames);
-  const int end = options.max_frames > 0 ? std::min(total_frames, begin + options.max_frames)
-                                         : total_frames;
   std::vector<Pose> poses;
   std::vector<int> pose_frames;
   Frame frame;
@@ -157,7 +210,9 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   std::size_t stream_bytes = 0;
   const auto start = Clock::now();
   double fit_seconds = 0.0, texture_seconds = 0.0, iterations = 0.0;
-  int lost = 0, evaluated = 0;
+  double init_seconds = 0.0, quality_seconds = 0.0;
+  int lost = 0, evaluated = 0, tracked_frames = 0;
+  bool need_init = true;
   double error_sum = 0.0, joint_sum = 0.0;
   if (options.export_meshes) {
     fs::create_directories(out_dir + "/meshes", ec);
@@ -180,15 +235,56 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
     record.preprocess_seconds = Since(t_pre);
     record.scan_points = scan.size();
 
-    record.fit = fitter.FitFrame(scan);
-    fit_seconds += record.fit.total_seconds;
-    iterations += record.fit.iterations;
-    skinning.Apply(fitter.pose(), &posed);
-    poses.push_back(fitter.pose());
-    pose_frames.push_back(i);
-    stream_bytes += sizeof(float) * fitter.pose().num_parameters();
+    record.segmentation = stats.segmentation;
 
-    if (texturer) {
+    // Fit: the multi-hypothesis initialisation on the first frame and after a lost one.
+    if (need_init && scan.size() >= options.fitting.min_scan_points) {
+      const InitResult init =
+          InitializeFit(&fitter, scan, calibration.depth, options.initializer);
+      record.fit = init.fit;
+      record.reinitialised = true;
+      record.init_seconds = init.total_seconds;
+      record.init_report = init.BriefReport();
+      ++result.initialisations;
+      init_seconds += init.total_seconds;
+    } else {
+      record.fit = fitter.FitFrame(scan);
+      fit_seconds += record.fit.total_seconds;
+      ++tracked_frames;
+    }
+    iterations += record.fit.iterations;
+    const Pose frame_pose = fitter.pose();
+    skinning.Apply(frame_pose, &posed);
+    poses.push_back(frame_pose);
+    pose_frames.push_back(i);
+    stream_bytes += sizeof(float) * frame_pose.num_parameters();
+    if (record.fit.ok()) {
+      record.quality =
+          EvaluateFitQuality(posed, tmpl.triangles, scan, calibration.depth, options.quality);
+    } else {
+      record.quality = FitQuality();  // a failed fit is lost, whatever its kept pose shows
+      record.quality.label = FitQualityLabel::kLost;
+      ++result.failed_frames;
+    }
+    quality_seconds += record.quality.seconds;
+    switch (record.quality.label) {
+      case FitQualityLabel::kGood:
+        ++result.good_frames;
+        break;
+      case FitQualityLabel::kDoubtful:
+        ++result.doubtful_frames;
+        break;
+      case FitQualityLabel::kLost:
+        ++result.lost_frames;
+        break;
+    }
+    const bool lost_frame = record.quality.label == FitQualityLabel::kLost;
+    // A lost frame's pose is not texture: it would paint the room onto the body.
+    const bool texture_frame =
+        !lost_frame && (options.texture_doubtful_frames ||
+                        record.quality.label == FitQualityLabel::kGood);
+
+    if (texturer && texture_frame) {
       record.texture = texturer->AddFrame(i, frame.color, calibration.color, posed);
       texture_seconds += record.texture.seconds_total;
       stream_bytes += TextureUpdateBytes(*texturer);
@@ -229,11 +325,13 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
       Eigen::MatrixX3d truth_normals;
       ComputeVertexNormals(truth.vertices, subject->triangles, &truth_normals);
       double mean = 0.0, max = 0.0;
-      SurfaceErrors(posed, truth.vertices, truth_normals, &mean, &max);
+      const Eigen::MatrixX3d tracked_in_truth = TransformRows(world.to_calibration_world, posed);
+      SurfaceErrors(tracked_in_truth, truth.vertices, truth_normals, &mean, &max);
       record.mean_vertex_error_mm = 1000.0 * mean;
       record.max_vertex_error_mm = 1000.0 * max;
       Eigen::MatrixX3d ours, theirs;
-      skinning.PosedJointCenters(fitter.pose(), &ours);
+      skinning.PosedJointCenters(frame_pose, &ours);
+      ours = TransformRows(world.to_calibration_world, ours);
       subject_skinning->PosedJointCenters(truth.pose, &theirs);
       double joint = 0.0;
       for (const auto& [a, b] : joint_pairs) joint += (ours.row(a) - theirs.row(b)).norm();
@@ -241,11 +339,21 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
       error_sum += record.mean_vertex_error_mm;
       joint_sum += record.mean_joint_error_mm;
       result.max_vertex_error_mm = std::max(result.max_vertex_error_mm, record.max_vertex_error_mm);
-      lost += record.mean_vertex_error_mm > options.lost_threshold_mm;
+      // Lost: too far from the truth, or a failed fit (its kept pose is no measurement).
+      lost += record.mean_vertex_error_mm > options.lost_threshold_mm || !record.fit.ok();
       ++evaluated;
     } else {
       record.mean_vertex_error_mm = record.max_vertex_error_mm = record.mean_joint_error_mm =
           std::numeric_limits<double>::quiet_NaN();
+    }
+    if (lost_frame) {
+      // Re-initialise on the next frame with enough points; the scale estimate and the
+      // texture survive (the same person), the tracked subject component does not.
+      need_init = true;
+      fitter.Reset(/*keep_scale=*/true);
+      preprocessor.ResetSubject();
+    } else {
+      need_init = false;
     }
     result.frames.push_back(record);
     if (progress) {
@@ -260,7 +368,16 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   const int fitted = static_cast<int>(poses.size());
   if (fitted == 0) throw Error(sequence_dir + ": no usable frame in the sequence");
   result.mean_em_iterations = iterations / fitted;
-  result.fit_ms_per_frame = 1000.0 * fit_seconds / fitted;
+  result.fit_ms_per_frame = tracked_frames ? 1000.0 * fit_seconds / tracked_frames : 0.0;
+  result.init_ms_per_initialisation =
+      result.initialisations ? 1000.0 * init_seconds / result.initialisations : 0.0;
+  result.quality_ms_per_frame = 1000.0 * quality_seconds / fitted;
+  if (result.lost_frames > fitted / 2) {
+    std::ostringstream w;
+    w << "most frames are lost (" << result.lost_frames << " of " << fitted
+      << "): the template does not explain the scan; check the foreground (docs/real-data.md)";
+    result.warnings.push_back(w.str());
+  }
   result.texture_ms_per_frame = 1000.0 * texture_seconds / fitted;
   result.stream_kbit_per_s = 8.0 * stream_bytes / fitted * calibration.frame_rate / 1000.0;
   if (evaluated > 0) {
@@ -274,79 +391,14 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
 
   WritePoseCsv(out_dir + "/poses.csv", tmpl, pose_frames, poses);
 
-  // frames.csv: per-frame metrics and per-stage timings.
-  std::ostringstream frames_csv;
-  frames_csv << "frame,skipped,scan_points,em_iterations,termination,initial_cost,final_cost,"
-                "too_few_points,non_finite,diverged,scale,preprocess_ms,estep_ms,mstep_ms,fit_ms,"
-                "texture_ms,texture_mrf_ms,texture_energy,texture_lower_bound,pool_size,"
-                "seam_edges,changed_triangles,seam_rms_before,seam_rms_after,"
-                "mean_vertex_error_mm,max_vertex_error_mm,mean_joint_error_mm\n";
-  nlohmann::json summary_frames = nlohmann::json::array();
-  for (const FrameRecord& r : result.frames) {
-    frames_csv << r.frame << "," << r.skipped << "," << r.scan_points << "," << r.fit.iterations
-               << "," << FrameTerminationName(r.fit.termination) << "," << Fixed(r.fit.initial_cost)
-               << "," << Fixed(r.fit.final_cost) << "," << r.fit.too_few_points << ","
-               << r.fit.non_finite << "," << r.fit.diverged << "," << Fixed(r.fit.scale) << ","
-               << Fixed(1000 * r.preprocess_seconds) << "," << Fixed(1000 * r.fit.estep_seconds)
-               << "," << Fixed(1000 * r.fit.mstep_seconds) << ","
-               << Fixed(1000 * r.fit.total_seconds) << "," << Fixed(1000 * r.texture.seconds_total)
-               << "," << Fixed(1000 * r.texture.seconds_mrf) << "," << Fixed(r.texture.energy)
-               << "," << Fixed(r.texture.lower_bound) << "," << r.texture.pool_size << ","
-               << r.texture.seam_edges << "," << r.texture.changed_triangles << ","
-               << Fixed(r.texture.seam_rms_before) << "," << Fixed(r.texture.seam_rms_after) << ","
-               << Fixed(r.mean_vertex_error_mm) << "," << Fixed(r.max_vertex_error_mm) << ","
-               << Fixed(r.mean_joint_error_mm) << "\n";
-    nlohmann::json f;
-    f["frame"] = r.frame;
-    f["skipped"] = r.skipped;
-    f["fit"] = {{"iterations", r.fit.iterations},
-                {"termination", FrameTerminationName(r.fit.termination)},
-                {"initial_cost", r.fit.initial_cost},
-                {"final_cost", r.fit.final_cost},
-                {"flags", {{"too_few_points", r.fit.too_few_points},
-                           {"non_finite", r.fit.non_finite},
-                           {"diverged", r.fit.diverged}}},
-                {"seconds", {{"preprocess", r.preprocess_seconds},
-                             {"icp", r.fit.icp_seconds},
-                             {"estep", r.fit.estep_seconds},
-                             {"mstep", r.fit.mstep_seconds},
-                             {"total", r.fit.total_seconds}}}};
-    if (texturer) {
-      f["texture"] = {{"energy", r.texture.energy},
-                      {"lower_bound", std::isfinite(r.texture.lower_bound)
-                                          ? nlohmann::json(r.texture.lower_bound)
-                                          : nlohmann::json(nullptr)},
-                      {"mrf_iterations", r.texture.mrf_iterations},
-                      {"pool_size", r.texture.pool_size},
-                      {"pool_bytes", r.texture.pool_bytes},
-                      {"seam_edges", r.texture.seam_edges},
-                      {"changed_triangles", r.texture.changed_triangles},
-                      {"seconds", {{"pool", r.texture.seconds_pool},
-                                   {"mrf", r.texture.seconds_mrf},
-                                   {"sampling", r.texture.seconds_sampling},
-                                   {"levelling", r.texture.seconds_levelling},
-                                   {"total", r.texture.seconds_total}}}};
-    }
-    summary_frames.push_back(f);
-  }
-  WriteFileAtomically(out_dir + "/frames.csv", frames_csv.str());
-  WriteJson(out_dir + "/summary.json", {{"sequence", sequence_dir},
-                                        {"template", template_path.empty() ? "default" : template_path},
-                                        {"frames", summary_frames},
-                                        {"warnings", result.warnings}});
-  const auto number = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
-  WriteJson(out_dir + "/metrics.json",
-            {{"frames", static_cast<int>(result.frames.size())},
-             {"skipped_frames", result.skipped_frames},
-             {"has_ground_truth", result.has_ground_truth},
-             {"mean_vertex_error_mm", number(result.mean_vertex_error_mm)},
-             {"max_vertex_error_mm", number(result.max_vertex_error_mm)},
-             {"mean_joint_error_mm", number(result.mean_joint_error_mm)},
-             {"lost_fraction", number(result.lost_fraction)},
-             {"mean_em_iterations", result.mean_em_iterations},
-             {"fit_ms_per_frame", result.fit_ms_per_frame},
-             {"texture_ms_per_frame", result.texture_ms_per_frame},
-             {"stream_kbit_per_s", result.stream_kbit_per_s}});
+  PipelineOutputInfo info;
+  info.sequence = sequence_dir;
+  info.template_name = template_path.empty() ? "default" : template_path;
+  info.texture = texturer != nullptr;
+  info.world = world.estimate ? &*world.estimate : nullptr;
+  WriteFramesCsv(out_dir + "/frames.csv", result, info);
+  WriteSummaryJson(out_dir + "/summary.json", result, info);
+  WriteMetricsJson(out_dir + "/metrics.json", result);
   if (texturer) {
     GlbTexture texture;
     texture.png = WritePng(out_dir + "/texture.png", texturer->Atlas());

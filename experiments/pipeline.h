@@ -11,6 +11,8 @@
 #include "sensors/frame_source.h"
 #include "sensors/preprocess.h"
 #include "solvers/em_fitter.h"
+#include "solvers/fit_quality.h"
+#include "solvers/initializer.h"
 #include "texture/texturer.h"
 
 namespace artex {
@@ -19,6 +21,8 @@ struct PipelineOptions {
   FrameSourceOptions input;  // how recordings are read (TUM association, intrinsics)
   PreprocessOptions preprocess;
   EMFitterOptions fitting;
+  InitializerOptions initializer;  // fitting.init: multi-hypothesis first frame / re-init
+  FitQualityOptions quality;       // fitting.quality: per-frame labels (also initializer.quality)
   TexturingOptions texturing;
   bool texture = true;            // on-the-fly texturing on/off
   bool colour_term = true;        // feed the texture's colours back into the E-step
@@ -28,6 +32,8 @@ struct PipelineOptions {
   bool export_glb = true;         // animated, textured tracked.glb at the end
   std::vector<int> atlas_frames;  // also write the atlas after these frames
   double lost_threshold_mm = 50.0;  // a frame is lost when its mean vertex error exceeds this
+  // Texture doubtful frames too (lost frames never are).
+  bool texture_doubtful_frames = true;
 
   bool IsValid(std::string* error) const;
 };
@@ -40,6 +46,11 @@ struct FrameRecord {
   int frame = 0;
   bool skipped = false;          // unreadable input frame (counted, not fitted)
   FitSummary fit;
+  FitQuality quality;            // without ground truth; failed fits are kLost
+  bool reinitialised = false;    // fitted by the multi-hypothesis initialisation
+  double init_seconds = 0.0;
+  std::string init_report;       // the initialisation's hypotheses and choice
+  SegmentationStats segmentation;  // foreground segmentation (no background frames)
   TextureFrameSummary texture;
   double preprocess_seconds = 0.0;
   int scan_points = 0;
@@ -52,13 +63,19 @@ struct FrameRecord {
 struct PipelineResult {
   std::vector<FrameRecord> frames;
   int skipped_frames = 0;
+  // Fit quality labels of the fitted frames (solvers/fit_quality.h); failed fits (too few
+  // points, non-finite, diverged) count as lost and also as failed.
+  int good_frames = 0, doubtful_frames = 0, lost_frames = 0, failed_frames = 0;
+  int initialisations = 0;  // first frame and re-initialisations after lost frames
+  double init_ms_per_initialisation = 0.0;
+  double quality_ms_per_frame = 0.0;
   bool has_ground_truth = false;
   double mean_vertex_error_mm = 0.0;
   double max_vertex_error_mm = 0.0;
   double mean_joint_error_mm = 0.0;
   double lost_fraction = 0.0;
   double mean_em_iterations = 0.0;
-  double fit_ms_per_frame = 0.0;
+  double fit_ms_per_frame = 0.0;  // tracking frames (initialisations apart)
   double texture_ms_per_frame = 0.0;
   double stream_kbit_per_s = 0.0;  // pose + texture updates, compressed, at the frame rate
   std::vector<std::string> warnings;

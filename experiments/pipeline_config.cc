@@ -17,8 +17,63 @@ void BindWeights(const Config& c, PoseGroupWeights* w) {
   c.Get("joints", &w->joints);
 }
 
+void BindPlanes(const Config& c, PlaneDetectionOptions* o) {
+  c.CheckKeys({"sample_stride", "ransac_iterations", "score_points", "inlier_distance",
+               "inlier_growth", "merge_angle_deg", "merge_distance", "max_planes",
+               "min_inlier_fraction", "min_extent", "floor_max_angle_deg", "wall_max_angle_deg",
+               "min_depth", "max_depth", "seed"});
+  c.Get("sample_stride", &o->sample_stride);
+  c.Get("ransac_iterations", &o->ransac_iterations);
+  c.Get("score_points", &o->score_points);
+  c.Get("inlier_distance", &o->inlier_distance);
+  c.Get("inlier_growth", &o->inlier_growth);
+  c.Get("merge_angle_deg", &o->merge_angle_deg);
+  c.Get("merge_distance", &o->merge_distance);
+  c.Get("max_planes", &o->max_planes);
+  c.Get("min_inlier_fraction", &o->min_inlier_fraction);
+  c.Get("min_extent", &o->min_extent);
+  c.Get("floor_max_angle_deg", &o->floor_max_angle_deg);
+  c.Get("wall_max_angle_deg", &o->wall_max_angle_deg);
+  c.Get("min_depth", &o->min_depth);
+  c.Get("max_depth", &o->max_depth);
+  int seed = static_cast<int>(o->seed);
+  c.Get("seed", &seed);
+  o->seed = static_cast<uint64_t>(seed);
+}
+
+void BindSegmentation(const Config& c, SubjectSegmentationOptions* o) {
+  c.CheckKeys({"min_depth", "max_depth", "plane_margin", "plane_margin_growth", "connect_distance",
+               "connect_relative", "min_pixels", "min_height", "max_height", "max_width", "subject",
+               "pixel", "track_max_distance"});
+  c.Get("min_depth", &o->min_depth);
+  c.Get("max_depth", &o->max_depth);
+  c.Get("plane_margin", &o->plane_margin);
+  c.Get("plane_margin_growth", &o->plane_margin_growth);
+  c.Get("connect_distance", &o->connect_distance);
+  c.Get("connect_relative", &o->connect_relative);
+  c.Get("min_pixels", &o->min_pixels);
+  c.Get("min_height", &o->min_height);
+  c.Get("max_height", &o->max_height);
+  c.Get("max_width", &o->max_width);
+  c.GetEnum("subject", SubjectChoiceNames(), &o->choice);
+  if (c.Has("pixel")) {
+    std::vector<double> pixel;
+    c.Get("pixel", &pixel);
+    if (pixel.size() != 2 || pixel[0] < 0 || pixel[1] < 0)
+      throw Error("preprocess.segmentation.pixel: expected [column, row] >= 0");
+    o->pixel = Eigen::Vector2i(static_cast<int>(pixel[0]), static_cast<int>(pixel[1]));
+  }
+  c.Get("track_max_distance", &o->track_max_distance);
+}
+
 void BindPreprocess(const Config& c, PreprocessOptions* o) {
-  c.CheckKeys({"background", "mesh"});
+  c.CheckKeys({"foreground", "world_frame", "assumed_camera_height", "planes", "segmentation",
+               "background", "mesh"});
+  c.GetEnum("foreground", ForegroundModeNames(), &o->foreground);
+  c.GetEnum("world_frame", WorldFrameModeNames(), &o->world_frame);
+  c.Get("assumed_camera_height", &o->assumed_camera_height);
+  BindPlanes(c.Section("planes"), &o->segmentation.planes);
+  BindSegmentation(c.Section("segmentation"), &o->segmentation);
   const Config b = c.Section("background");
   b.CheckKeys({"min_valid_samples", "noise_sigma_at_1m", "use_mad", "threshold_sigmas",
                "min_foreground_distance", "min_depth", "max_depth", "opening_radius",
@@ -40,6 +95,51 @@ void BindPreprocess(const Config& c, PreprocessOptions* o) {
   m.Get("drop_isolated_points", &o->mesh.drop_isolated_points);
 }
 
+void BindIcpInit(const Config& c, IcpInitOptions* o) {
+  c.CheckKeys({"coarse_alignment", "facing_camera", "estimate_scale", "scale_from_extent",
+               "max_iterations", "max_distance", "min_normal_dot", "max_scan_points", "tolerance",
+               "extent_quantile"});
+  c.Get("coarse_alignment", &o->coarse_alignment);
+  c.Get("facing_camera", &o->facing_camera);
+  c.Get("estimate_scale", &o->estimate_scale);
+  c.Get("scale_from_extent", &o->scale_from_extent);
+  c.Get("max_iterations", &o->max_iterations);
+  c.Get("max_distance", &o->max_distance);
+  c.Get("min_normal_dot", &o->min_normal_dot);
+  c.Get("max_scan_points", &o->max_scan_points);
+  c.Get("tolerance", &o->tolerance);
+  c.Get("extent_quantile", &o->extent_quantile);
+}
+
+void BindQuality(const Config& c, FitQualityOptions* o) {
+  c.CheckKeys({"inlier_distance", "max_scan_points", "raster_subsample", "support_tolerance",
+               "depth_truncation", "good_min_inlier_fraction", "good_min_support_fraction",
+               "good_max_depth_residual", "lost_min_inlier_fraction", "lost_min_support_fraction",
+               "lost_max_depth_residual"});
+  c.Get("inlier_distance", &o->inlier_distance);
+  c.Get("max_scan_points", &o->max_scan_points);
+  c.Get("raster_subsample", &o->raster_subsample);
+  c.Get("support_tolerance", &o->support_tolerance);
+  c.Get("depth_truncation", &o->depth_truncation);
+  c.Get("good_min_inlier_fraction", &o->good_min_inlier_fraction);
+  c.Get("good_min_support_fraction", &o->good_min_support_fraction);
+  c.Get("good_max_depth_residual", &o->good_max_depth_residual);
+  c.Get("lost_min_inlier_fraction", &o->lost_min_inlier_fraction);
+  c.Get("lost_min_support_fraction", &o->lost_min_support_fraction);
+  c.Get("lost_max_depth_residual", &o->lost_max_depth_residual);
+}
+
+void BindInitializer(const Config& c, InitializerOptions* o) {
+  c.CheckKeys({"yaws_deg", "arm_angles_deg", "coarse_iterations", "em_candidates",
+               "ranking_iterations", "icp"});
+  c.Get("yaws_deg", &o->yaws_deg);
+  c.Get("arm_angles_deg", &o->arm_angles_deg);
+  c.Get("coarse_iterations", &o->coarse_iterations);
+  c.Get("em_candidates", &o->em_candidates);
+  c.Get("ranking_iterations", &o->ranking_iterations);
+  BindIcpInit(c.Section("icp"), &o->icp);
+}
+
 void BindFitting(const Config& c, EMFitterOptions* o) {
   c.CheckKeys({"correspondence", "solver", "estep", "k", "voxel_fraction", "epsilon",
                "lambda_color", "use_color", "normalize_per_scan_point", "icp_metric",
@@ -52,13 +152,14 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
                "constant_velocity_prediction", "max_fit_vertices", "min_scan_points",
                "max_mean_motion", "max_scale_change", "ceres_max_iterations", "solver_threads",
                "candidate_margin", "normal_refresh_iterations", "tracking_tikhonov",
-               "fit_vertex_selection"});
+               "fit_vertex_selection", "icp_init", "init", "quality"});
   c.GetEnum("correspondence", CorrespondenceModelNames(), &o->correspondence);
   c.GetEnum("solver", FitSolverTypeNames(), &o->solver.type);
-  c.GetEnum("estep", std::map<std::string, EStepMode>{{"dense", EStepMode::kDense},
-                                                      {"truncated", EStepMode::kRadius},
-                                                      {"radius", EStepMode::kRadius},
-                                                      {"knn", EStepMode::kKNearest}},
+  c.GetEnum("estep",
+            std::map<std::string, EStepMode>{{"dense", EStepMode::kDense},
+                                             {"truncated", EStepMode::kRadius},
+                                             {"radius", EStepMode::kRadius},
+                                             {"knn", EStepMode::kKNearest}},
             &o->estep.mode);
   c.Get("k", &o->estep.k);
   c.Get("voxel_fraction", &o->estep.voxel_fraction);
@@ -66,8 +167,9 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   c.Get("lambda_color", &o->estep.weights.lambda_color);
   c.Get("use_color", &o->estep.weights.use_color);
   c.Get("normalize_per_scan_point", &o->estep.weights.normalize_per_scan_point);
-  c.GetEnum("icp_metric", std::map<std::string, IcpMetric>{{"point_to_point", IcpMetric::kPointToPoint},
-                                                           {"point_to_plane", IcpMetric::kPointToPlane}},
+  c.GetEnum("icp_metric",
+            std::map<std::string, IcpMetric>{{"point_to_point", IcpMetric::kPointToPoint},
+                                             {"point_to_plane", IcpMetric::kPointToPlane}},
             &o->one_to_one.metric);
   c.Get("icp_max_distance", &o->one_to_one.max_distance);
   c.Get("icp_min_normal_dot", &o->one_to_one.min_normal_dot);
@@ -100,15 +202,36 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   c.Get("normal_refresh_iterations", &o->normal_refresh_iterations);
   BindWeights(c.Section("tracking_tikhonov"), &o->tracking_update);
   c.GetEnum("fit_vertex_selection", FitVertexSelectionNames(), &o->fit_vertex_selection);
+  BindIcpInit(c.Section("icp_init"), &o->icp);
 }
 
 void BindTexture(const Config& c, TexturingOptions* o) {
-  c.CheckKeys({"beta", "t_max", "alpha", "lambda", "seam_distance_scale", "min_quality",
-               "untextured_cost", "max_candidates", "solver", "mrf_max_iterations",
-               "mrf_parallel_min_nodes", "trws_max_iterations", "warm_start", "max_images",
-               "hard_max_images", "histogram_bins", "edge_samples", "atlas_size", "padding_texels",
-               "seam_levelling", "levelling_smoothness", "add_every", "depth_tolerance",
-               "switch_cost", "raster_scale", "surface_aware_sampling",
+  c.CheckKeys({"beta",
+               "t_max",
+               "alpha",
+               "lambda",
+               "seam_distance_scale",
+               "min_quality",
+               "untextured_cost",
+               "max_candidates",
+               "solver",
+               "mrf_max_iterations",
+               "mrf_parallel_min_nodes",
+               "trws_max_iterations",
+               "warm_start",
+               "max_images",
+               "hard_max_images",
+               "histogram_bins",
+               "edge_samples",
+               "atlas_size",
+               "padding_texels",
+               "seam_levelling",
+               "levelling_smoothness",
+               "add_every",
+               "depth_tolerance",
+               "switch_cost",
+               "raster_scale",
+               "surface_aware_sampling",
                "vertex_colors_need_full_ring"});
   TextureTermOptions& t = o->selection.terms;
   c.Get("beta", &t.beta);
@@ -163,8 +286,8 @@ void BindInput(const Config& c, FrameSourceOptions* o) {
 }
 
 void BindPipeline(const Config& c, PipelineOptions* o) {
-  c.CheckKeys({"texture", "colour_term", "first_frame", "max_frames", "export_meshes",
-               "export_glb", "lost_threshold_mm"});
+  c.CheckKeys({"texture", "colour_term", "first_frame", "max_frames", "export_meshes", "export_glb",
+               "lost_threshold_mm"});
   c.Get("texture", &o->texture);
   c.Get("colour_term", &o->colour_term);
   c.Get("first_frame", &o->first_frame);
@@ -172,16 +295,28 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("export_meshes", &o->export_meshes);
   c.Get("export_glb", &o->export_glb);
   c.Get("lost_threshold_mm", &o->lost_threshold_mm);
+  c.Get("texture_doubtful_frames", &o->texture_doubtful_frames);
 }
 
 }  // namespace
 
 bool PipelineOptions::IsValid(std::string* error) const {
   if (!input.IsValid(error) || !preprocess.IsValid(error) || !fitting.IsValid(error)) return false;
+  std::string inner;
+  if (!initializer.IsValid(&inner)) {
+    if (error) *error = "fitting.init." + inner;
+    return false;
+  }
+  if (!quality.IsValid(&inner)) {
+    if (error) *error = "fitting.quality." + inner;
+    return false;
+  }
   if (texture && !texturing.IsValid(error)) return false;
   std::ostringstream msg;
-  if (first_frame < 0) msg << "pipeline.first_frame: expected >= 0, found " << first_frame;
-  else if (max_frames < 0) msg << "pipeline.max_frames: expected >= 0, found " << max_frames;
+  if (first_frame < 0)
+    msg << "pipeline.first_frame: expected >= 0, found " << first_frame;
+  else if (max_frames < 0)
+    msg << "pipeline.max_frames: expected >= 0, found " << max_frames;
   else if (!(lost_threshold_mm > 0))
     msg << "pipeline.lost_threshold_mm: expected > 0, found " << lost_threshold_mm;
   if (msg.str().empty()) return true;
@@ -195,6 +330,9 @@ PipelineOptions LoadPipelineOptions(const Config& config) {
   BindInput(config.Section("input"), &o.input);
   BindPreprocess(config.Section("preprocess"), &o.preprocess);
   BindFitting(config.Section("fitting"), &o.fitting);
+  BindInitializer(config.Section("fitting").Section("init"), &o.initializer);
+  BindQuality(config.Section("fitting").Section("quality"), &o.quality);
+  o.initializer.quality = o.quality;  // the initialiser ranks and labels with the same options
   BindTexture(config.Section("texture"), &o.texturing);
   BindPipeline(config.Section("pipeline"), &o);
   std::string why;

@@ -14,6 +14,7 @@
 #include "render/rasterizer.h"
 #include "sensors/preprocess.h"
 #include "sensors/sequence.h"
+#include "sensors/synth_conditions.h"
 #include "sensors/virtual_kinect.h"
 
 namespace artex {
@@ -37,6 +38,19 @@ struct SynthCliOptions {
   bool no_glb = false;
   BodyShapeOptions shape = DefaultSubjectShape();
   double yaw_deg = 0.0;
+  // Conditions (docs/synthesis.md "Conditions"); explicit flags override a --condition.
+  std::vector<std::string> conditions;
+  std::string framing = "full";
+  CameraPlacement camera;  // used when a --camera-height/-distance/-azimuth/-target-height
+  double camera_pitch_deg = 0.0;
+  double camera_roll_deg = 0.0;
+  std::string world_frame = "scene";
+  int boxes = 0;
+  bool second_person = false;
+  std::string second_person_motion = "walk";
+  double second_person_behind_m = 1.2;
+  double second_person_start_m = -1.6;
+  double second_person_speed = 0.8;
 };
 
 // Depth image -> TURBO colour map over its valid range (near = red); missing pixels black.
@@ -110,26 +124,32 @@ void WritePreview(const SynthOptions& options, int frame_index, const std::strin
     throw Error("--preview-frame: expected a frame in [0, " + std::to_string(s.poses.size()) +
                 "), found " + std::to_string(frame_index));
   }
-  VirtualKinectOptions kinect_options = options.kinect;
-  kinect_options.frame_rate = options.motion.frame_rate;
-  const VirtualKinect kinect(kinect_options, s.subject, s.texture_bgr);
+  const VirtualKinectOptions kinect_options = ResolveKinectOptions(options);
+  const VirtualKinect kinect(kinect_options, s.subject, s.texture_bgr, s.others);
   const Skinning skinning(s.subject);
   Eigen::MatrixX3d posed;
   skinning.Apply(s.poses[frame_index], &posed);
+  std::vector<Eigen::MatrixX3d> others(s.others.size());
+  for (size_t k = 0; k < others.size(); ++k) {
+    Skinning(s.others[k].body).Apply(s.other_poses[k][frame_index], &others[k]);
+  }
   const std::vector<ColorConditions> conditions =
       GenerateColorConditions(kinect_options.color_model, kinect_options.seed, frame_index + 1);
   Frame frame;
-  kinect.RenderFrame(frame_index, &posed, conditions[frame_index], &frame);
+  kinect.RenderFrame(frame_index, &posed, others, conditions[frame_index], &frame);
 
-  // Foreground depth mesh through the preprocessing pipeline (background model from
-  // empty-scene frames, as in a real recording).
+  // Foreground depth mesh through the preprocessing pipeline (background model from the
+  // sequence's empty-scene frames, as in a real recording; none: every valid depth in range).
   std::vector<cv::Mat> background;
-  const int num_background = std::max(5, options.background_frames);
-  for (int b = 0; b < num_background; ++b) {
+  for (int b = 0; b < options.background_frames; ++b) {
     background.push_back(kinect.RenderBackgroundDepth(b));
   }
   Preprocessor preprocessor(kinect.calibration());
-  preprocessor.Train(background);
+  if (background.empty()) {
+    preprocessor.TrainWithoutBackground();
+  } else {
+    preprocessor.Train(background);
+  }
   Scan scan;
   preprocessor.Process(frame, &scan);
 
@@ -148,7 +168,10 @@ void WritePreview(const SynthOptions& options, int frame_index, const std::strin
   WriteImageAtomic(path, composite);
 }
 
-void Run(const SynthCliOptions& cli) {
+// Flags given explicitly on the command line (they override a --condition).
+bool Given(const CLI::App& app, const char* flag) { return app.count(flag) > 0; }
+
+void Run(const SynthCliOptions& cli, const CLI::App& app) {
   if (cli.output.empty() && cli.preview.empty()) {
     throw Error("-o/--output: an output folder is required (or --preview PNG)");
   }
@@ -178,9 +201,57 @@ void Run(const SynthCliOptions& cli) {
   options.texture.size = cli.texture_size;
   options.subject_shape = cli.shape;
   options.subject_shape.resolution = cli.resolution;
-  options.subject_yaw_deg = cli.yaw_deg;
   options.background_frames = cli.background_frames;
   options.write_subject_glb = !cli.no_glb;
+  // Conditions first (in the given order), then explicit flags.
+  for (const std::string& name : cli.conditions) {
+    try {
+      ApplySynthCondition(ParseSynthCondition(name), &options);
+    } catch (const Error& e) {
+      throw Error(std::string("--condition: ") + e.what());
+    }
+  }
+  if (cli.framing == "upper_body") {
+    options.camera_placement = UpperBodyCameraPlacement(options.subject_shape.height);
+  } else if (cli.framing != "full") {
+    throw Error("--framing: expected one of full, upper_body; found '" + cli.framing + "'");
+  }
+  if (Given(app, "--subject-yaw")) options.subject_yaw_deg = cli.yaw_deg;
+  if (Given(app, "--background-frames")) options.background_frames = cli.background_frames;
+  if (Given(app, "--camera-height") || Given(app, "--camera-distance") ||
+      Given(app, "--camera-azimuth") || Given(app, "--camera-target-height")) {
+    CameraPlacement c = options.camera_placement.value_or(CameraPlacement());
+    if (Given(app, "--camera-height")) c.height_m = cli.camera.height_m;
+    if (Given(app, "--camera-distance")) c.distance_m = cli.camera.distance_m;
+    if (Given(app, "--camera-azimuth")) c.azimuth_deg = cli.camera.azimuth_deg;
+    if (Given(app, "--camera-target-height")) c.target_height_m = cli.camera.target_height_m;
+    options.camera_placement = c;
+  }
+  if (Given(app, "--camera-pitch")) options.kinect.depth_pitch_deg = cli.camera_pitch_deg;
+  if (Given(app, "--camera-roll")) options.kinect.depth_roll_deg = cli.camera_roll_deg;
+  if (Given(app, "--world-frame")) {
+    try {
+      options.world_frame = ParseWorldFrame(cli.world_frame);
+    } catch (const Error& e) {
+      throw Error(std::string("--world-frame: ") + e.what());
+    }
+  }
+  if (Given(app, "--boxes")) options.random_boxes = cli.boxes;
+  SecondPersonOptions& person = options.second_person;
+  if (cli.second_person) person.enabled = true;
+  person.shape.resolution = options.subject_shape.resolution;
+  person.texture.size = options.texture.size;
+  person.texture.seed = options.texture.seed + 1;
+  if (Given(app, "--second-person-motion")) {
+    try {
+      person.motion.type = ParseMotionType(cli.second_person_motion);
+    } catch (const Error& e) {
+      throw Error(std::string("--second-person-motion: ") + e.what());
+    }
+  }
+  if (Given(app, "--second-person-behind")) person.behind_m = cli.second_person_behind_m;
+  if (Given(app, "--second-person-start")) person.start_across_m = cli.second_person_start_m;
+  if (Given(app, "--second-person-speed")) person.speed_m_s = cli.second_person_speed;
   std::string why;
   if (!options.IsValid(&why)) throw Error("invalid synthesis options: " + why);
 
@@ -273,15 +344,75 @@ void RegisterSynthCommand(CLI::App* app) {
   sub->add_option("--subject-leg-length", cli->shape.leg_length, "Leg length factor")
       ->capture_default_str()
       ->check(CLI::Range(0.8, 1.2));
-  sub->add_option("--subject-yaw", cli->yaw_deg, "Subject rotation about +Y (degrees)")
+  sub->add_option("--subject-yaw,--yaw", cli->yaw_deg,
+                  "Subject rotation about +Y (degrees; 180: facing away from the camera)")
       ->capture_default_str()
       ->check(CLI::Range(-180.0, 180.0));
+  std::string condition_help =
+      "Recording condition preset(s), comma-separated, applied in order "
+      "before the other flags:";
+  for (const std::string& name : SynthConditionNames()) condition_help += " " + name;
+  sub->add_option("--condition", cli->conditions, condition_help)->delimiter(',');
+  sub->add_option("--framing", cli->framing,
+                  "full (default camera) or upper_body (close camera at chest height: the "
+                  "image border cuts the body at the hips)")
+      ->capture_default_str();
+  sub->add_option("--camera-height", cli->camera.height_m,
+                  "Depth camera height above the floor y = 0 (m)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.05, 10.0));
+  sub->add_option("--camera-distance", cli->camera.distance_m,
+                  "Horizontal distance of the depth camera from the subject's start (m)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.1, 20.0));
+  sub->add_option("--camera-azimuth", cli->camera.azimuth_deg,
+                  "Direction of the camera from the subject about +Y (degrees; 0 = +Z)")
+      ->capture_default_str()
+      ->check(CLI::Range(-360.0, 360.0));
+  sub->add_option("--camera-target-height", cli->camera.target_height_m,
+                  "Height of the look-at point above the subject's start (m)")
+      ->capture_default_str()
+      ->check(CLI::Range(-5.0, 10.0));
+  sub->add_option("--camera-pitch", cli->camera_pitch_deg,
+                  "Extra pitch about the camera's x axis after the look-at (degrees, + = down)")
+      ->capture_default_str()
+      ->check(CLI::Range(-89.0, 89.0));
+  sub->add_option("--camera-roll", cli->camera_roll_deg,
+                  "Roll about the optical axis (degrees, + = camera turned clockwise as seen "
+                  "from behind it)")
+      ->capture_default_str()
+      ->check(CLI::Range(-180.0, 180.0));
+  sub->add_option("--world-frame", cli->world_frame,
+                  "Frame of calibration.yaml and ground truth: scene (Y up, floor y = 0) or "
+                  "camera (depth camera = identity)")
+      ->capture_default_str();
+  sub->add_option("--boxes", cli->boxes,
+                  "Furniture-like boxes beside/behind the subject (from --seed)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 32));
+  sub->add_flag("--second-person", cli->second_person,
+                "Add a second person (not in the ground truth) walking across behind the subject");
+  sub->add_option("--second-person-motion", cli->second_person_motion,
+                  "Motion of the second person: walk, arm_raise, turn, bend, still")
+      ->capture_default_str();
+  sub->add_option("--second-person-behind", cli->second_person_behind_m,
+                  "How much further from the camera than the subject it starts (m)")
+      ->capture_default_str()
+      ->check(CLI::Range(-10.0, 10.0));
+  sub->add_option("--second-person-start", cli->second_person_start_m,
+                  "Start offset along the camera's right axis (m; negative = left)")
+      ->capture_default_str()
+      ->check(CLI::Range(-10.0, 10.0));
+  sub->add_option("--second-person-speed", cli->second_person_speed,
+                  "Walking speed along the camera's right axis (m/s; 0 = stands facing the camera)")
+      ->capture_default_str()
+      ->check(CLI::Range(-5.0, 5.0));
   sub->add_flag("--no-glb", cli->no_glb, "Do not write groundtruth/subject.glb");
   sub->add_option("--preview", cli->preview,
                   "Write a PNG of one frame: colour | depth | foreground depth mesh");
   sub->add_option("--preview-frame", cli->preview_frame, "Frame shown by --preview (-1: middle)")
       ->capture_default_str();
-  sub->callback([cli]() { Run(*cli); });
+  sub->callback([cli, sub]() { Run(*cli, *sub); });
 }
 
 }  // namespace artex

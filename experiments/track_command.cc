@@ -95,6 +95,12 @@ void RegisterTrackCommand(CLI::App* app) {
           if (quiet) return;
           std::fprintf(stderr, "\rtrack: frame %d/%d  %.1f frames/s  EM iterations %d", p.done,
                        p.total, p.frames_per_second, p.last ? p.last->fit.iterations : 0);
+          if (p.last && !p.last->skipped) {
+            const FitQuality& q = p.last->quality;
+            std::fprintf(stderr, "  %s%s (inliers %.2f, support %.2f, residual %.0f mm)",
+                         FitQualityLabelName(q.label), p.last->reinitialised ? ", initialised" : "",
+                         q.inlier_fraction, q.support_fraction, 1000 * q.depth_residual_m);
+          }
           if (p.last && p.last->mean_vertex_error_mm == p.last->mean_vertex_error_mm)
             std::fprintf(stderr, "  error %.1f mm", p.last->mean_vertex_error_mm);
           std::fprintf(stderr, "   ");
@@ -102,7 +108,11 @@ void RegisterTrackCommand(CLI::App* app) {
         });
     if (!quiet) std::fprintf(stderr, "\n");
     for (const auto& w : result.warnings) std::fprintf(stderr, "track: warning: %s\n", w.c_str());
-    std::printf("frames: %zu (%d skipped)\n", result.frames.size(), result.skipped_frames);
+    std::printf("frames: %zu: %d good, %d doubtful, %d lost (%d failed fits), %d skipped\n",
+                result.frames.size(), result.good_frames, result.doubtful_frames,
+                result.lost_frames, result.failed_frames, result.skipped_frames);
+    std::printf("initialisations: %d (%.0f ms each)\n", result.initialisations,
+                result.init_ms_per_initialisation);
     std::printf("EM iterations per frame: %.1f\n", result.mean_em_iterations);
     std::printf("fitting: %.1f ms/frame, texturing: %.1f ms/frame\n", result.fit_ms_per_frame,
                 result.texture_ms_per_frame);

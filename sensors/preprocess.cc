@@ -22,8 +22,25 @@ const PreprocessOptions& Checked(const PreprocessOptions& options) {
 
 }  // namespace
 
+const std::map<std::string, ForegroundMode>& ForegroundModeNames() {
+  static const std::map<std::string, ForegroundMode> names = {
+      {"auto", ForegroundMode::kAuto},
+      {"background", ForegroundMode::kBackground},
+      {"segment", ForegroundMode::kSegment}};
+  return names;
+}
+
 bool PreprocessOptions::IsValid(std::string* error) const {
-  return background.IsValid(error) && mesh.IsValid(error);
+  if (!background.IsValid(error) || !mesh.IsValid(error)) return false;
+  if (!(assumed_camera_height >= 0 && std::isfinite(assumed_camera_height))) {
+    if (error) *error = "assumed_camera_height: expected a finite value >= 0 (m)";
+    return false;
+  }
+  if (!segmentation.IsValid(error)) {
+    if (error) *error = "segmentation." + *error;
+    return false;
+  }
+  return true;
 }
 
 int SampleScanColors(const PinholeCamera& cam, const Distortion& distortion,
@@ -111,6 +128,11 @@ Preprocessor::Preprocessor(const Calibration& calibration, const PreprocessOptio
 }
 
 void Preprocessor::Train(const std::vector<cv::Mat>& background_depth) {
+  if (options_.foreground == ForegroundMode::kSegment) {
+    TrainWithoutBackground();
+    return;
+  }
+  segmenter_.reset();
   for (size_t i = 0; i < background_depth.size(); ++i) {
     const cv::Mat& f = background_depth[i];
     if (f.cols != calibration_.depth.width || f.rows != calibration_.depth.height) {
@@ -124,8 +146,24 @@ void Preprocessor::Train(const std::vector<cv::Mat>& background_depth) {
 }
 
 void Preprocessor::TrainWithoutBackground() {
+  if (options_.foreground != ForegroundMode::kBackground) {
+    const Eigen::Vector3d up =
+        calibration_.depth.world_to_camera.linear() * Eigen::Vector3d::UnitY();
+    segmenter_ =
+        std::make_unique<SubjectSegmenter>(calibration_.depth, calibration_.depth_distortion,
+                                           calibration_.depth_scale, up, options_.segmentation);
+    return;
+  }
   background_.TrainEmpty(calibration_.depth.width, calibration_.depth.height,
                          calibration_.depth_scale);
+}
+
+void Preprocessor::SetScenePlanes(const std::vector<ScenePlane>& planes) {
+  if (segmenter_) segmenter_->SetPlanes(planes);
+}
+
+void Preprocessor::ResetSubject() {
+  if (segmenter_) segmenter_->ResetTracking();
 }
 
 void Preprocessor::Process(const Frame& frame, Scan* scan, PreprocessStats* stats) {
@@ -135,7 +173,12 @@ void Preprocessor::Process(const Frame& frame, Scan* scan, PreprocessStats* stat
         "depth frames, or TrainWithoutBackground)");
   }
   const auto t0 = std::chrono::steady_clock::now();
-  background_.Classify(frame.depth, &mask_);
+  SegmentationStats segmentation;
+  if (segmenter_) {
+    segmenter_->Segment(frame.depth, &mask_, &segmentation);
+  } else {
+    background_.Classify(frame.depth, &mask_);
+  }
   const auto t1 = std::chrono::steady_clock::now();
   DepthMeshStats mesh_stats;
   mesher_.Build(frame.depth, calibration_.depth_scale, mask_, scan, &mesh_stats);
@@ -146,6 +189,7 @@ void Preprocessor::Process(const Frame& frame, Scan* scan, PreprocessStats* stat
   if (stats) {
     stats->valid_depth_pixels = cv::countNonZero(frame.depth);
     stats->foreground_pixels = cv::countNonZero(mask_);
+    stats->segmentation = segmentation;
     stats->mesh = mesh_stats;
     stats->color_invalid = invalid;
     stats->background_seconds = Seconds(t0, t1);

@@ -4,6 +4,8 @@
 // n(v_s), rgb(v_s) of the fitting energy (eq. 4).
 #pragma once
 
+#include <map>
+#include <memory>
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
@@ -12,19 +14,34 @@
 #include "sensors/calibration.h"
 #include "sensors/depth_mesh.h"
 #include "sensors/scan.h"
+#include "sensors/scene_segmentation.h"
 #include "sensors/sequence.h"
 
 namespace artex {
 
+// How the foreground is found. kAuto: the background model when empty-scene frames exist,
+// else kSegment. kBackground: the background model (without frames: every valid depth in its
+// range). kSegment: floor and walls removed, the subject's 3-D connected component tracked
+// (sensors/scene_segmentation.h).
+enum class ForegroundMode { kAuto, kBackground, kSegment };
+const std::map<std::string, ForegroundMode>& ForegroundModeNames();  // auto, background, segment
+
 struct PreprocessOptions {
+  ForegroundMode foreground = ForegroundMode::kAuto;
+  // The world frame (used by the pipeline before the Preprocessor is built, see
+  // sensors/scene_segmentation.h); planes: segmentation.planes.
+  WorldFrameMode world_frame = WorldFrameMode::kAuto;
+  double assumed_camera_height = 1.2;  // m, world frame without a floor
   BackgroundModelOptions background;
+  SubjectSegmentationOptions segmentation;
   DepthMeshOptions mesh;
   bool IsValid(std::string* error) const;
 };
 
 struct PreprocessStats {
-  int valid_depth_pixels = 0;  // depth != 0
-  int foreground_pixels = 0;   // after morphology / component selection
+  int valid_depth_pixels = 0;      // depth != 0
+  int foreground_pixels = 0;       // after morphology / component selection
+  SegmentationStats segmentation;  // kSegment only
   DepthMeshStats mesh;
   int color_invalid = 0;  // vertices projecting outside the colour image
   double background_seconds = 0, mesh_seconds = 0, color_seconds = 0, total_seconds = 0;
@@ -46,9 +63,17 @@ class Preprocessor {
 
   // Trains the background model on empty-scene depth frames (CV_16UC1, depth camera size).
   void Train(const std::vector<cv::Mat>& background_depth);
-  // No background frames: every valid depth within [min_depth, max_depth] is foreground.
+  // No background frames: kAuto and kSegment segment the subject (floor and walls are
+  // detected on the first processed frame unless SetScenePlanes gave them); kBackground takes
+  // every valid depth within [min_depth, max_depth].
   void TrainWithoutBackground();
-  bool trained() const { return background_.trained(); }
+  bool trained() const { return segmenter_ != nullptr || background_.trained(); }
+  bool segmenting() const { return segmenter_ != nullptr; }
+  // kSegment: the floor and walls to remove (e.g. those of the world frame estimate).
+  void SetScenePlanes(const std::vector<ScenePlane>& planes);
+  // kSegment: forget the tracked subject (after a lost frame).
+  void ResetSubject();
+  const SubjectSegmenter* segmenter() const { return segmenter_.get(); }
 
   // Fills *scan (world frame) from one frame; buffers are reused across calls. Throws
   // artex::Error when untrained or for wrong image types/sizes.
@@ -64,6 +89,7 @@ class Preprocessor {
   PreprocessOptions options_;
   BackgroundModel background_;
   DepthMesher mesher_;
+  std::unique_ptr<SubjectSegmenter> segmenter_;
   cv::Mat mask_;
 };
 

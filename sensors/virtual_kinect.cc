@@ -18,7 +18,7 @@
 #include "models/skinning.h"
 #include "models/template_io.h"
 #include "render/rasterizer.h"
-#include "sensors/bvh.h"
+#include "sensors/synth_random.h"
 
 namespace artex {
 namespace {
@@ -26,26 +26,11 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kDegToRad = kPi / 180.0;
 
-// Independent noise streams (mixed into the per-row generator seeds).
-constexpr uint64_t kStreamFrameDepth = 1;
-constexpr uint64_t kStreamBackgroundDepth = 2;
-constexpr uint64_t kStreamColor = 3;
-constexpr uint64_t kStreamColorWalk = 4;
-constexpr uint64_t kStreamScene = 5;
-
-uint64_t SplitMix(uint64_t x) {
-  x += 0x9E3779B97F4A7C15ull;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
-  return x ^ (x >> 31);
-}
-uint64_t MixSeed(uint64_t seed, uint64_t stream, uint64_t frame, uint64_t row) {
-  return SplitMix(SplitMix(SplitMix(SplitMix(seed) ^ stream) ^ frame) ^ row);
-}
-double Hash01(uint64_t a, uint64_t b, uint64_t c) {
-  return (MixSeed(a, kStreamScene, b, c) >> 11) * (1.0 / 9007199254740992.0);
-}
-double Frac(double x) { return x - std::floor(x); }
+using synth_random::kStreamBackgroundDepth;
+using synth_random::kStreamColor;
+using synth_random::kStreamColorWalk;
+using synth_random::kStreamFrameDepth;
+using synth_random::MixSeed;
 
 bool Fail(std::string* error, const std::string& message) {
   if (error) *error = message;
@@ -155,17 +140,6 @@ bool ColorModelOptions::IsValid(std::string* error) const {
   return true;
 }
 
-bool SceneOptions::IsValid(std::string* error) const {
-  if (!(half_width_m > 0 && wall_height_m > 0))
-    return Fail(error, "scene.half_width_m and scene.wall_height_m must be > 0");
-  if (!(floor_front_z_m > wall_z_m))
-    return Fail(error, "scene.floor_front_z_m must exceed scene.wall_z_m, found " +
-                           Str(floor_front_z_m) + " <= " + Str(wall_z_m));
-  if (!(cell_m > 0.01)) return Fail(error, "scene.cell_m must be > 0.01, found " + Str(cell_m));
-  if (!(pattern_m > 0)) return Fail(error, "scene.pattern_m must be > 0, found " + Str(pattern_m));
-  return true;
-}
-
 bool VirtualKinectOptions::IsValid(std::string* error) const {
   const PinholeCamera& d = depth_intrinsics;
   if (d.width <= 0 || d.height <= 0 || !(d.fx > 0) || !(d.fy > 0))
@@ -181,6 +155,18 @@ bool VirtualKinectOptions::IsValid(std::string* error) const {
   if (!depth_eye.allFinite() || !depth_target.allFinite() ||
       (depth_eye - depth_target).norm() < 1e-6)
     return Fail(error, "depth_eye and depth_target must be finite and distinct");
+  const Eigen::Vector3d view = (depth_target - depth_eye).normalized();
+  if (std::abs(view.y()) > 0.9999)
+    return Fail(error,
+                "depth_eye -> depth_target: expected a view direction not parallel to the "
+                "world up +Y (look-at), found (" +
+                    Str(view.x()) + ", " + Str(view.y()) + ", " + Str(view.z()) + ")");
+  if (!(std::abs(depth_pitch_deg) < 90))
+    return Fail(error, "depth_pitch_deg (--camera-pitch) must be in (-90, 90), found " +
+                           Str(depth_pitch_deg));
+  if (!(std::abs(depth_roll_deg) <= 180))
+    return Fail(error, "depth_roll_deg (--camera-roll) must be in [-180, 180], found " +
+                           Str(depth_roll_deg));
   if (!color_offset_m.allFinite() || !std::isfinite(color_yaw_deg) ||
       !std::isfinite(color_pitch_deg))
     return Fail(error, "color camera offset / yaw / pitch must be finite");
@@ -233,34 +219,6 @@ void VirtualKinectOptions::SetNoiseLevel(NoiseLevel level) {
   color_model = c;
 }
 
-BodyShapeOptions DefaultSubjectShape() {
-  BodyShapeOptions s;
-  s.height = 1.72;
-  s.girth = 1.08;
-  s.shoulder_width = 1.05;
-  s.hip_width = 1.04;
-  s.arm_length = 0.98;
-  s.leg_length = 1.02;
-  return s;
-}
-
-bool SynthOptions::IsValid(std::string* error) const {
-  if (!kinect.IsValid(error)) return false;
-  std::string why;
-  if (!subject_shape.IsValid(&why)) return Fail(error, "subject shape: " + why);
-  if (!texture.IsValid(&why)) return Fail(error, "subject texture: " + why);
-  if (bvh_path.empty() ? motion.frames < 1 : motion.frames < 0)
-    return Fail(error,
-                "motion.frames must be >= 1 (>= 0 with a BVH file), found " + Str(motion.frames));
-  if (!(motion.frame_rate > 0))
-    return Fail(error, "motion.frame_rate must be > 0, found " + Str(motion.frame_rate));
-  if (background_frames < 0)
-    return Fail(error, "background_frames must be >= 0, found " + Str(background_frames));
-  if (!subject_position_m.allFinite() || !std::isfinite(subject_yaw_deg))
-    return Fail(error, "subject placement must be finite");
-  return true;
-}
-
 // ---------------------------------------------------------------------------------------------
 // Colour conditions
 
@@ -293,19 +251,36 @@ std::vector<ColorConditions> GenerateColorConditions(const ColorModelOptions& op
 // VirtualKinect
 
 VirtualKinect::VirtualKinect(const VirtualKinectOptions& options, const Template& subject,
-                             const cv::Mat& subject_texture_bgr)
-    : options_(options), subject_(subject), texture_(subject_texture_bgr) {
+                             const cv::Mat& subject_texture_bgr,
+                             const std::vector<ScenePerson>& others)
+    : options_(options), subject_(subject), texture_(subject_texture_bgr), others_(others) {
   std::string why;
   if (!options.IsValid(&why)) throw Error("virtual Kinect options: " + why);
-  if (!subject.IsValid(&why)) throw Error("virtual Kinect subject: " + why);
-  if (!subject.has_uvs()) throw Error("virtual Kinect subject: the template has no UV atlas");
-  if (subject_texture_bgr.empty() || subject_texture_bgr.type() != CV_8UC3) {
-    throw Error("virtual Kinect subject texture: expected a non-empty CV_8UC3 image, found type " +
-                Str(subject_texture_bgr.type()));
+  for (int p = 0; p <= num_others(); ++p) {
+    const std::string what =
+        p == 0 ? std::string("virtual Kinect subject") : "virtual Kinect person " + Str(p - 1);
+    const Template& body = PersonBody(p);
+    const cv::Mat& texture = PersonTexture(p);
+    if (!body.IsValid(&why)) throw Error(what + ": " + why);
+    if (!body.has_uvs()) throw Error(what + ": the template has no UV atlas");
+    if (texture.empty() || texture.type() != CV_8UC3) {
+      throw Error(what + " texture: expected a non-empty CV_8UC3 image, found type " +
+                  Str(texture.type()));
+    }
   }
-  // Depth camera.
+  person_offset_.assign(1, 0);
+  for (int p = 0; p <= num_others(); ++p) {
+    person_offset_.push_back(person_offset_.back() + PersonBody(p).num_triangles());
+  }
+  // Depth camera: look-at, then pitch about its x and roll about its z axis.
   calibration_.depth = options.depth_intrinsics;
+  Eigen::Isometry3d tilt = Eigen::Isometry3d::Identity();
+  tilt.linear() =
+      (Eigen::AngleAxisd(-options.depth_roll_deg * kDegToRad, Eigen::Vector3d::UnitZ()) *
+       Eigen::AngleAxisd(options.depth_pitch_deg * kDegToRad, Eigen::Vector3d::UnitX()))
+          .toRotationMatrix();
   calibration_.depth.world_to_camera =
+      tilt *
       PinholeCamera::LookAt(options.depth_eye, options.depth_target, Eigen::Vector3d::UnitY());
   // Colour camera: offset and small rotation relative to the depth camera.
   PinholeCamera& color = calibration_.color;
@@ -334,17 +309,17 @@ VirtualKinect::VirtualKinect(const VirtualKinectOptions& options, const Template
   projector_.cy += m;
   projector_.world_to_camera =
       Translation(-options.depth_noise.projector_offset_m) * calibration_.depth.world_to_camera;
-  BuildScene();
+  scene_ = BuildSceneMesh(options.scene);
 
   // Scene-only buffers of the three views, and the scene's shaded albedo in the colour view.
   RasterOptions raster_options;
   raster_options.near_plane = options.near_plane_m;
-  Rasterize(scene_vertices_, scene_triangles_, calibration_.depth, raster_options, &depth_scene_);
+  Rasterize(scene_.vertices, scene_.triangles, calibration_.depth, raster_options, &depth_scene_);
   if (options.depth_noise.projector_shadow) {
-    Rasterize(scene_vertices_, scene_triangles_, projector_, raster_options, &projector_scene_);
+    Rasterize(scene_.vertices, scene_.triangles, projector_, raster_options, &projector_scene_);
   }
-  Rasterize(scene_vertices_, scene_triangles_, calibration_.color, raster_options, &color_scene_);
-  ComputeTriangleNormals(scene_vertices_, scene_triangles_, &scene_normals_);
+  Rasterize(scene_.vertices, scene_.triangles, calibration_.color, raster_options, &color_scene_);
+  ComputeTriangleNormals(scene_.vertices, scene_.triangles, &scene_normals_);
   const ColorModelOptions& c = options.color_model;
   const Eigen::Vector3d light = c.light_direction.normalized();
   color_scene_radiance_.resize(color_scene_.depth.size());
@@ -356,151 +331,124 @@ VirtualKinect::VirtualKinect(const VirtualKinectOptions& options, const Template
     }
     const double b1 = color_scene_.barycentric[i].x(), b2 = color_scene_.barycentric[i].y();
     const Eigen::Vector3d p =
-        (1 - b1 - b2) * scene_vertices_.row(scene_triangles_(f, 0)).transpose() +
-        b1 * scene_vertices_.row(scene_triangles_(f, 1)).transpose() +
-        b2 * scene_vertices_.row(scene_triangles_(f, 2)).transpose();
+        (1 - b1 - b2) * scene_.vertices.row(scene_.triangles(f, 0)).transpose() +
+        b1 * scene_.vertices.row(scene_.triangles(f, 1)).transpose() +
+        b2 * scene_.vertices.row(scene_.triangles(f, 2)).transpose();
     const double shade =
         c.ambient + (1 - c.ambient) * std::max(0.0, scene_normals_.row(f).dot(light));
-    color_scene_radiance_[i] = (SceneAlbedo(p) * shade).cast<float>();
+    color_scene_radiance_[i] =
+        (SceneAlbedo(options.scene, options.seed, scene_.part[f], p) * shade).cast<float>();
   });
 }
 
-void VirtualKinect::BuildScene() {
-  const SceneOptions& s = options_.scene;
-  std::vector<Eigen::Vector3d> v;
-  std::vector<Eigen::Vector3i> t;
-  auto grid = [&](int nu, int nv, const std::function<Eigen::Vector3d(double, double)>& at) {
-    const int base = static_cast<int>(v.size());
-    for (int j = 0; j <= nv; ++j) {
-      for (int i = 0; i <= nu; ++i)
-        v.push_back(at(static_cast<double>(i) / nu, static_cast<double>(j) / nv));
-    }
-    for (int j = 0; j < nv; ++j) {
-      for (int i = 0; i < nu; ++i) {
-        const int a = base + j * (nu + 1) + i, b = a + 1, c = a + nu + 1, d = c + 1;
-        // Counter-clockwise in (u, v): the normal is du x dv.
-        t.emplace_back(a, b, d);
-        t.emplace_back(a, d, c);
-      }
-    }
-  };
-  const double w = s.half_width_m;
-  const int nx = std::max(1, static_cast<int>(std::ceil(2 * w / s.cell_m)));
-  if (s.floor) {
-    // u: x from -w to w, v: z from front to wall; du x dv = (+x) x (-z) = +y (up).
-    const int nz =
-        std::max(1, static_cast<int>(std::ceil((s.floor_front_z_m - s.wall_z_m) / s.cell_m)));
-    grid(nx, nz, [&](double a, double b) {
-      return Eigen::Vector3d(-w + 2 * w * a, 0.0,
-                             s.floor_front_z_m + (s.wall_z_m - s.floor_front_z_m) * b);
-    });
+VirtualKinect::PosedPeople VirtualKinect::People(
+    const Eigen::MatrixX3d* subject, const std::vector<Eigen::MatrixX3d>& others) const {
+  if (!others.empty() && static_cast<int>(others.size()) != num_others()) {
+    throw Error("VirtualKinect: others_posed: expected " + Str(num_others()) +
+                " posed people (or none), found " + Str(others.size()));
   }
-  if (s.back_wall) {
-    // u: x from -w to w, v: y upwards; du x dv = +z (towards the subject and the cameras).
-    const int ny = std::max(1, static_cast<int>(std::ceil(s.wall_height_m / s.cell_m)));
-    grid(nx, ny, [&](double a, double b) {
-      return Eigen::Vector3d(-w + 2 * w * a, s.wall_height_m * b, s.wall_z_m);
-    });
+  PosedPeople people(1 + num_others(), nullptr);
+  people[0] = subject;
+  for (size_t k = 0; k < others.size(); ++k) people[k + 1] = &others[k];
+  for (int p = 0; p < static_cast<int>(people.size()); ++p) {
+    if (people[p] && people[p]->rows() != PersonBody(p).num_vertices()) {
+      throw Error("VirtualKinect: posed vertices of " +
+                  (p == 0 ? std::string("the subject") : "person " + Str(p - 1)) + ": expected " +
+                  Str(PersonBody(p).num_vertices()) + " rows, found " + Str(people[p]->rows()));
+    }
   }
-  scene_vertices_.resize(static_cast<int>(v.size()), 3);
-  for (size_t i = 0; i < v.size(); ++i) scene_vertices_.row(i) = v[i].transpose();
-  scene_triangles_.resize(static_cast<int>(t.size()), 3);
-  for (size_t i = 0; i < t.size(); ++i) scene_triangles_.row(i) = t[i].transpose();
+  return people;
+}
+
+int VirtualKinect::PersonOfTriangle(int id) const {
+  for (int p = 0; p + 1 < static_cast<int>(person_offset_.size()); ++p) {
+    if (id < person_offset_[p + 1]) return p;
+  }
+  return -1;
 }
 
 void VirtualKinect::RenderView(const PinholeCamera& camera, const RasterBuffers& scene,
-                               const Eigen::MatrixX3d* posed, RasterBuffers* out) const {
-  const int32_t offset = subject_.num_triangles();
-  if (posed) {
-    RasterOptions raster_options;
-    raster_options.near_plane = options_.near_plane_m;
-    Rasterize(*posed, subject_.triangles, camera, raster_options, out);
-  } else {
+                               const PosedPeople& people, RasterBuffers* out) const {
+  RasterOptions raster_options;
+  raster_options.near_plane = options_.near_plane_m;
+  bool first = true;
+  RasterBuffers person;
+  for (int p = 0; p < static_cast<int>(people.size()); ++p) {
+    if (!people[p]) continue;
+    const int32_t offset = person_offset_[p];
+    RasterBuffers* target = first ? out : &person;
+    Rasterize(*people[p], PersonBody(p).triangles, camera, raster_options, target);
+    if (first) {
+      if (offset != 0) {
+        for (int32_t& id : out->triangle_id) id = id >= 0 ? id + offset : -1;
+      }
+      first = false;
+      continue;
+    }
+    // Earlier people win ties.
+    tbb::parallel_for(size_t{0}, person.depth.size(), [&](size_t i) {
+      if (person.triangle_id[i] < 0) return;
+      if (out->triangle_id[i] >= 0 && out->depth[i] <= person.depth[i]) return;
+      out->depth[i] = person.depth[i];
+      out->triangle_id[i] = person.triangle_id[i] + offset;
+      out->barycentric[i] = person.barycentric[i];
+    });
+  }
+  if (first) {
     out->width = scene.width;
     out->height = scene.height;
     out->depth.assign(scene.depth.size(), std::numeric_limits<float>::infinity());
     out->triangle_id.assign(scene.depth.size(), -1);
     out->barycentric.resize(scene.depth.size());
   }
-  // The subject wins ties, as when rasterising subject triangles before scene triangles.
+  // People win ties, as when rasterising their triangles before the scene's.
+  const int32_t scene_offset = person_offset_.back();
   tbb::parallel_for(size_t{0}, scene.depth.size(), [&](size_t i) {
     if (out->triangle_id[i] >= 0 && out->depth[i] <= scene.depth[i]) return;
     out->depth[i] = scene.depth[i];
-    out->triangle_id[i] = scene.triangle_id[i] >= 0 ? scene.triangle_id[i] + offset : -1;
+    out->triangle_id[i] = scene.triangle_id[i] >= 0 ? scene.triangle_id[i] + scene_offset : -1;
     out->barycentric[i] = scene.barycentric[i];
   });
 }
 
-Eigen::Vector3d VirtualKinect::SceneAlbedo(const Eigen::Vector3d& x) const {
-  const SceneOptions& s = options_.scene;
-  const uint64_t seed = options_.seed;
-  const double p = s.pattern_m;
-  if (std::abs(x.y()) < 1e-6 && x.z() > s.wall_z_m + 1e-6) {
-    // Floor: planks along z (width p / 2, length 4 p, staggered), grain and dark joints.
-    const double plank_w = 0.5 * p, plank_l = 4 * p;
-    const double fx = x.x() / plank_w;
-    const int64_t i = static_cast<int64_t>(std::floor(fx));
-    const double fz = x.z() / plank_l + Hash01(seed, 11, i);
-    const int64_t k = static_cast<int64_t>(std::floor(fz));
-    const double tone = 0.75 + 0.5 * Hash01(seed, 13 + i, k);
-    const double grain =
-        1.0 + 0.08 * std::sin(2 * kPi * (x.z() / (0.03 * p) + 7 * Hash01(seed, 17 + i, k)));
-    Eigen::Vector3d c = Eigen::Vector3d(0.55, 0.38, 0.22) * tone * grain;
-    if (Frac(fx) < 0.03 || Frac(fz) < 0.008) c *= 0.35;
-    return c;
-  }
-  // Wall: wallpaper of diamonds, a few posters, a skirting board.
-  if (x.y() < 0.1) return Eigen::Vector3d(0.9, 0.9, 0.88);
-  const int num_posters = 4;
-  for (int k = 0; k < num_posters; ++k) {
-    const double px = -s.half_width_m + 0.5 + (2 * s.half_width_m - 1.0) * Hash01(seed, 19, k);
-    const double py = 0.9 + 1.2 * Hash01(seed, 23, k);
-    const double hw = 0.25 + 0.2 * Hash01(seed, 29, k), hh = 0.3 + 0.2 * Hash01(seed, 31, k);
-    const double u = (x.x() - px) / hw, v = (x.y() - py) / hh;
-    if (std::abs(u) < 1 && std::abs(v) < 1) {
-      const Eigen::Vector3d a(Hash01(seed, 37, k), Hash01(seed, 41, k), Hash01(seed, 43, k));
-      const Eigen::Vector3d b = Eigen::Vector3d::Ones() - a;
-      const bool band = Frac(3 * v + 2 * u) < 0.5;
-      return (std::abs(u) > 0.92 || std::abs(v) > 0.94) ? Eigen::Vector3d(0.05, 0.05, 0.05)
-                                                        : (band ? a : b);
-    }
-  }
-  const double du = Frac((x.x() + x.y()) / p), dv = Frac((x.x() - x.y()) / p);
-  const bool diamond = (du < 0.5) != (dv < 0.5);
-  return diamond ? Eigen::Vector3d(0.78, 0.74, 0.66) : Eigen::Vector3d(0.66, 0.70, 0.74);
+cv::Mat VirtualKinect::RenderDepth(int frame_index, const Eigen::MatrixX3d* posed,
+                                   DepthDiagnostics* diagnostics) const {
+  return RenderDepthStream(frame_index, People(posed, {}), kStreamFrameDepth, diagnostics);
 }
 
 cv::Mat VirtualKinect::RenderDepth(int frame_index, const Eigen::MatrixX3d* posed,
+                                   const std::vector<Eigen::MatrixX3d>& others_posed,
                                    DepthDiagnostics* diagnostics) const {
-  return RenderDepthStream(frame_index, posed, kStreamFrameDepth, diagnostics);
+  return RenderDepthStream(frame_index, People(posed, others_posed), kStreamFrameDepth,
+                           diagnostics);
 }
 
 cv::Mat VirtualKinect::RenderBackgroundDepth(int index, DepthDiagnostics* diagnostics) const {
-  return RenderDepthStream(index, nullptr, kStreamBackgroundDepth, diagnostics);
+  return RenderDepthStream(index, People(nullptr, {}), kStreamBackgroundDepth, diagnostics);
 }
 
-cv::Mat VirtualKinect::RenderDepthStream(int frame_index, const Eigen::MatrixX3d* posed,
+cv::Mat VirtualKinect::RenderDepthStream(int frame_index, const PosedPeople& people,
                                          uint64_t stream, DepthDiagnostics* diagnostics) const {
-  if (posed && posed->rows() != subject_.num_vertices()) {
-    throw Error("VirtualKinect: posed vertices: expected " + Str(subject_.num_vertices()) +
-                " rows, found " + Str(posed->rows()));
-  }
   const DepthNoiseOptions& o = options_.depth_noise;
   const PinholeCamera& cam = calibration_.depth;
   const int subject_triangles = subject_.num_triangles();
+  const int scene_offset = person_offset_.back();
   RasterBuffers view, light;
-  RenderView(cam, depth_scene_, posed, &view);
-  if (o.projector_shadow) RenderView(projector_, projector_scene_, posed, &light);
-  Eigen::MatrixX3d subject_normals;
-  if (posed) ComputeTriangleNormals(*posed, subject_.triangles, &subject_normals);
+  RenderView(cam, depth_scene_, people, &view);
+  if (o.projector_shadow) RenderView(projector_, projector_scene_, people, &light);
+  std::vector<Eigen::MatrixX3d> normals(people.size());
+  for (size_t p = 0; p < people.size(); ++p) {
+    if (people[p]) ComputeTriangleNormals(*people[p], PersonBody(p).triangles, &normals[p]);
+  }
 
   const int w = cam.width, h = cam.height;
   cv::Mat depth(h, w, CV_16UC1, cv::Scalar(0));
-  cv::Mat true_depth, status, mask;
+  cv::Mat true_depth, status, mask, surface;
   if (diagnostics) {
     true_depth.create(h, w, CV_32FC1);
     status.create(h, w, CV_8UC1);
     mask.create(h, w, CV_8UC1);
+    surface.create(h, w, CV_8UC1);
   }
   const Eigen::Matrix3d rotation = cam.world_to_camera.linear();
   const double bf = o.baseline_m * cam.fx;
@@ -526,9 +474,10 @@ cv::Mat VirtualKinect::RenderDepthStream(int frame_index, const Eigen::MatrixX3d
         s = DepthStatus::kOutOfRange;
       } else {
         const Eigen::Vector3d xc((x - cam.cx) / cam.fx * z, (y - cam.cy) / cam.fy * z, z);
-        const Eigen::Vector3d normal =
-            f < subject_triangles ? Eigen::Vector3d(subject_normals.row(f))
-                                  : Eigen::Vector3d(scene_normals_.row(f - subject_triangles));
+        const int p = PersonOfTriangle(f);
+        const Eigen::Vector3d normal = p >= 0
+                                           ? Eigen::Vector3d(normals[p].row(f - person_offset_[p]))
+                                           : Eigen::Vector3d(scene_normals_.row(f - scene_offset));
         if (std::abs((rotation * normal).dot(xc.normalized())) < cos_grazing) {
           s = DepthStatus::kGrazing;
         }
@@ -581,6 +530,17 @@ cv::Mat VirtualKinect::RenderDepthStream(int frame_index, const Eigen::MatrixX3d
         true_depth.at<float>(y, x) = f >= 0 ? z : 0.0f;
         status.at<uint8_t>(y, x) = static_cast<uint8_t>(s);
         mask.at<uint8_t>(y, x) = (f >= 0 && f < subject_triangles) ? 255 : 0;
+        SurfaceKind kind = SurfaceKind::kNone;
+        if (f >= 0 && f < subject_triangles) {
+          kind = SurfaceKind::kSubject;
+        } else if (f >= 0 && f < scene_offset) {
+          kind = SurfaceKind::kPerson;
+        } else if (f >= 0) {
+          kind = scene_.part[f - scene_offset] >= static_cast<int>(ScenePart::kBox)
+                     ? SurfaceKind::kBox
+                     : SurfaceKind::kRoom;
+        }
+        surface.at<uint8_t>(y, x) = static_cast<uint8_t>(kind);
       }
     }
   });
@@ -588,23 +548,32 @@ cv::Mat VirtualKinect::RenderDepthStream(int frame_index, const Eigen::MatrixX3d
     diagnostics->true_depth = true_depth;
     diagnostics->status = status;
     diagnostics->subject_mask = mask;
+    diagnostics->surface = surface;
   }
   return depth;
 }
 
 cv::Mat VirtualKinect::RenderColor(int frame_index, const Eigen::MatrixX3d* posed,
                                    const ColorConditions& conditions) const {
-  if (posed && posed->rows() != subject_.num_vertices()) {
-    throw Error("VirtualKinect: posed vertices: expected " + Str(subject_.num_vertices()) +
-                " rows, found " + Str(posed->rows()));
-  }
+  return RenderColorPeople(frame_index, People(posed, {}), conditions);
+}
+
+cv::Mat VirtualKinect::RenderColor(int frame_index, const Eigen::MatrixX3d* posed,
+                                   const std::vector<Eigen::MatrixX3d>& others_posed,
+                                   const ColorConditions& conditions) const {
+  return RenderColorPeople(frame_index, People(posed, others_posed), conditions);
+}
+
+cv::Mat VirtualKinect::RenderColorPeople(int frame_index, const PosedPeople& people,
+                                         const ColorConditions& conditions) const {
   const ColorModelOptions& o = options_.color_model;
   const PinholeCamera& cam = calibration_.color;
-  const int subject_triangles = subject_.num_triangles();
   RasterBuffers view;
-  RenderView(cam, color_scene_, posed, &view);
-  Eigen::MatrixX3d vertex_normals;
-  if (posed) ComputeVertexNormals(*posed, subject_.triangles, &vertex_normals);
+  RenderView(cam, color_scene_, people, &view);
+  std::vector<Eigen::MatrixX3d> vertex_normals(people.size());
+  for (size_t p = 0; p < people.size(); ++p) {
+    if (people[p]) ComputeVertexNormals(*people[p], PersonBody(p).triangles, &vertex_normals[p]);
+  }
   const Eigen::Vector3d light = o.light_direction.normalized();
 
   const int w = cam.width, h = cam.height;
@@ -616,17 +585,21 @@ cv::Mat VirtualKinect::RenderColor(int frame_index, const Eigen::MatrixX3d* pose
       const int i = view.index(x, y);
       const int f = view.triangle_id[i];
       Eigen::Vector3d rgb;
-      if (f >= 0 && f < subject_triangles) {
+      const int p = f >= 0 ? PersonOfTriangle(f) : -1;
+      if (p >= 0) {
+        const Template& body = PersonBody(p);
+        const Eigen::MatrixX3d& vn = vertex_normals[p];
+        const int t = f - person_offset_[p];
         const double b1 = view.barycentric[i].x(), b2 = view.barycentric[i].y(), b0 = 1 - b1 - b2;
-        const Eigen::Vector2d uv = b0 * subject_.uvs.row(subject_.uv_triangles(f, 0)).transpose() +
-                                   b1 * subject_.uvs.row(subject_.uv_triangles(f, 1)).transpose() +
-                                   b2 * subject_.uvs.row(subject_.uv_triangles(f, 2)).transpose();
-        Eigen::Vector3d n = b0 * vertex_normals.row(subject_.triangles(f, 0)).transpose() +
-                            b1 * vertex_normals.row(subject_.triangles(f, 1)).transpose() +
-                            b2 * vertex_normals.row(subject_.triangles(f, 2)).transpose();
+        const Eigen::Vector2d uv = b0 * body.uvs.row(body.uv_triangles(t, 0)).transpose() +
+                                   b1 * body.uvs.row(body.uv_triangles(t, 1)).transpose() +
+                                   b2 * body.uvs.row(body.uv_triangles(t, 2)).transpose();
+        Eigen::Vector3d n = b0 * vn.row(body.triangles(t, 0)).transpose() +
+                            b1 * vn.row(body.triangles(t, 1)).transpose() +
+                            b2 * vn.row(body.triangles(t, 2)).transpose();
         if (n.norm() > 0) n.normalize();
         const double shade = o.ambient + (1 - o.ambient) * std::max(0.0, n.dot(light));
-        rgb = SampleTextureBilinear(texture_, uv) * shade;
+        rgb = SampleTextureBilinear(PersonTexture(p), uv) * shade;
       } else {
         rgb = color_scene_radiance_[i].cast<double>();  // the same scene point as when cached
       }
@@ -650,157 +623,16 @@ void VirtualKinect::RenderFrame(int frame_index, const Eigen::MatrixX3d* posed,
   frame->color = RenderColor(frame_index, posed, conditions);
 }
 
-// ---------------------------------------------------------------------------------------------
-// Sequence synthesis
-
-SynthSubject PrepareSynthSubject(const SynthOptions& options) {
-  std::string why;
-  if (!options.IsValid(&why)) throw Error("synthesis options: " + why);
-  SynthSubject s;
-  s.subject = GenerateTemplate(options.subject_shape);
-  s.texture_bgr = GenerateSubjectTexture(s.subject, options.texture);
-  if (!options.bvh_path.empty()) {
-    BvhRetargetOptions retarget;
-    retarget.frame_rate = options.motion.frame_rate;
-    s.poses = LoadBvhMotion(options.bvh_path, s.subject, retarget);
-    if (options.motion.frames > 0 && static_cast<int>(s.poses.size()) > options.motion.frames) {
-      s.poses.resize(options.motion.frames);
-    }
-    if (s.poses.empty()) throw Error("BVH file '" + options.bvh_path + "': no frames");
-  } else {
-    s.poses = GenerateMotion(s.subject, options.motion);
-  }
-  const Eigen::Matrix3d yaw =
-      Eigen::AngleAxisd(options.subject_yaw_deg * kDegToRad, Eigen::Vector3d::UnitY())
-          .toRotationMatrix();
-  for (Pose& p : s.poses) {
-    p.rotation = yaw * p.rotation;
-    p.translation = yaw * p.translation + options.subject_position_m;
-  }
-  return s;
-}
-
-SynthSummary SynthesizeSequence(const SynthOptions& options, const std::string& out_folder,
-                                const std::function<void(const SynthProgress&)>& progress) {
-  if (progress) {
-    SynthProgress p;
-    progress(p);  // kSetup, 0 of 1: the subject is being generated
-  }
-  const auto start = std::chrono::steady_clock::now();
-  const SynthSubject subject = PrepareSynthSubject(options);
-  SynthSummary summary = SynthesizeSequence(options, subject, out_folder, progress);
-  const double setup =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() -
-      summary.total_seconds;
-  summary.setup_seconds += setup;
-  summary.total_seconds += setup;
-  return summary;
-}
-
-SynthSummary SynthesizeSequence(const SynthOptions& options, const SynthSubject& s,
-                                const std::string& out_folder,
-                                const std::function<void(const SynthProgress&)>& progress) {
-  using Clock = std::chrono::steady_clock;
-  auto seconds = [](Clock::time_point a, Clock::time_point b) {
-    return std::chrono::duration<double>(b - a).count();
-  };
-  auto report = [&](SynthProgress::Stage stage, int done, int total) {
-    if (!progress) return;
-    SynthProgress p;
-    p.stage = stage;
-    p.done = done;
-    p.total = total;
-    progress(p);
-  };
-  const Clock::time_point start = Clock::now();
-  SynthSummary summary;
-  std::string why;
-  if (!options.IsValid(&why)) throw Error("synthesis options: " + why);
-  if (s.poses.empty()) throw Error("SynthesizeSequence: the prepared subject has no poses");
-  VirtualKinectOptions kinect_options = options.kinect;
-  kinect_options.frame_rate = options.motion.frame_rate;
-  const VirtualKinect kinect(kinect_options, s.subject, s.texture_bgr);
-  const Skinning skinning(s.subject);
-  const int frames = static_cast<int>(s.poses.size());
-  const std::vector<ColorConditions> conditions =
-      GenerateColorConditions(kinect_options.color_model, kinect_options.seed, frames);
-  SequenceWriter writer(out_folder, kinect.calibration());
-  summary.setup_seconds = seconds(start, Clock::now());
-  report(SynthProgress::Stage::kSetup, 1, 1);
-
-  for (int b = 0; b < options.background_frames; ++b) {
-    const Clock::time_point t0 = Clock::now();
-    const cv::Mat depth = kinect.RenderBackgroundDepth(b);
-    const Clock::time_point t1 = Clock::now();
-    writer.AddBackgroundFrame(depth);
-    summary.render_seconds += seconds(t0, t1);
-    summary.write_seconds += seconds(t1, Clock::now());
-    report(SynthProgress::Stage::kBackground, b + 1, options.background_frames);
-  }
-  summary.background_frames = options.background_frames;
-
-  // Rendering frame f + 1 overlaps writing frame f (two serial, in-order stages: the files
-  // are the same as a sequential loop's).
-  struct Item {
-    int index = 0;
-    Frame frame;
-    GroundTruthFrame truth;
-  };
-  const Clock::time_point frames_start = Clock::now();
-  int next = 0;
-  tbb::parallel_pipeline(
-      /*max_number_of_live_tokens=*/2,
-      tbb::make_filter<void, std::shared_ptr<Item>>(
-          tbb::filter_mode::serial_in_order,
-          [&](tbb::flow_control& control) -> std::shared_ptr<Item> {
-            if (next >= frames) {
-              control.stop();
-              return nullptr;
-            }
-            const Clock::time_point t0 = Clock::now();
-            auto item = std::make_shared<Item>();
-            item->index = next++;
-            item->truth.pose = s.poses[item->index];
-            skinning.Apply(item->truth.pose, &item->truth.vertices);
-            kinect.RenderFrame(item->index, &item->truth.vertices, conditions[item->index],
-                               &item->frame);
-            summary.render_seconds += seconds(t0, Clock::now());
-            return item;
-          }) &
-          tbb::make_filter<std::shared_ptr<Item>, void>(
-              tbb::filter_mode::serial_in_order, [&](const std::shared_ptr<Item>& item) {
-                const Clock::time_point t0 = Clock::now();
-                writer.AddFrame(item->frame);
-                writer.AddGroundTruth(item->index, item->truth);
-                summary.write_seconds += seconds(t0, Clock::now());
-                report(SynthProgress::Stage::kFrames, item->index + 1, frames);
-              }));
-  summary.frames_seconds = seconds(frames_start, Clock::now());
-  summary.frames = frames;
-
-  report(SynthProgress::Stage::kFinish, 0, 1);
-  const Clock::time_point t0 = Clock::now();
-  writer.SetGroundTruthTexture(s.texture_bgr);
-  if (options.write_subject_glb) {
-    GlbTexture texture;
-    texture.width = s.texture_bgr.cols;
-    texture.height = s.texture_bgr.rows;
-    texture.rgb.resize(static_cast<size_t>(texture.width) * texture.height * 3);
-    for (int y = 0; y < texture.height; ++y) {
-      const auto* row = s.texture_bgr.ptr<cv::Vec3b>(y);
-      for (int x = 0; x < texture.width; ++x) {
-        for (int c = 0; c < 3; ++c) {
-          texture.rgb[(static_cast<size_t>(y) * texture.width + x) * 3 + c] = row[x][2 - c];
-        }
-      }
-    }
-    WriteTemplateGlb(writer.subject_path(), s.subject, &texture);
-  }
-  writer.Finish();
-  summary.write_seconds += seconds(t0, Clock::now());
-  summary.total_seconds = seconds(start, Clock::now());
-  report(SynthProgress::Stage::kFinish, 1, 1);
-  return summary;
+void VirtualKinect::RenderFrame(int frame_index, const Eigen::MatrixX3d* posed,
+                                const std::vector<Eigen::MatrixX3d>& others_posed,
+                                const ColorConditions& conditions, Frame* frame,
+                                DepthDiagnostics* diagnostics) const {
+  const PosedPeople people = People(posed, others_posed);
+  frame->index = frame_index;
+  frame->depth_timestamp = frame_index / options_.frame_rate;
+  frame->color_timestamp = frame->depth_timestamp;
+  frame->depth = RenderDepthStream(frame_index, people, kStreamFrameDepth, diagnostics);
+  frame->color = RenderColorPeople(frame_index, people, conditions);
 }
 
 }  // namespace artex

@@ -1,5 +1,6 @@
 // The synthetic "virtual Kinect" (DESIGN.md "Ground truth"): renders a textured, articulated
-// subject in a static scene (floor, back wall) into a Kinect-like depth camera (disparity
+// subject in a static scene (floor, back wall, boxes; sensors/virtual_scene.h), optionally
+// with a second person, into a Kinect-like depth camera (disparity
 // quantisation and noise, drop-outs at depth discontinuities and grazing angles, the IR
 // projector's shadow) and a separate colour camera (Lambert shading, per-frame exposure and
 // white-balance drift, sensor noise), and writes an artex sequence with ground truth
@@ -11,6 +12,7 @@
 #include <cstdint>
 #include <functional>
 #include <opencv2/core.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -22,6 +24,7 @@
 #include "sensors/motion.h"
 #include "sensors/sequence.h"
 #include "sensors/subject_texture.h"
+#include "sensors/virtual_scene.h"
 
 namespace artex {
 
@@ -78,29 +81,20 @@ struct ColorModelOptions {
   bool IsValid(std::string* error) const;
 };
 
-// The static scene: floor y = 0 and a back wall z = wall_z behind the subject, both
-// procedurally textured (floor planks, patterned wall), tessellated into cells (the
-// rasteriser rejects triangles crossing the near plane).
-struct SceneOptions {
-  bool floor = true;
-  bool back_wall = true;
-  double wall_z_m = -1.5;     // back wall plane (m); the subject stands near z = 0
-  double half_width_m = 3.5;  // both planes span x in [-w, w]
-  double wall_height_m = 3.0;
-  double floor_front_z_m = 3.5;  // the floor reaches from the wall to this z
-  double cell_m = 0.25;          // tessellation cell size
-  double pattern_m = 0.3;        // size of the floor planks / wall pattern
-
-  bool IsValid(std::string* error) const;
-};
-
 struct VirtualKinectOptions {
   uint64_t seed = 1;  // noise streams and colour drift
   // Depth (IR) camera: intrinsics (width, height, fx, fy, cx, cy; its pose is ignored) placed
-  // at depth_eye looking at depth_target, world up +Y.
+  // at depth_eye looking at depth_target, world up +Y, then rotated about its own axes (camera
+  // frame x right, y down, z forward): first depth_pitch_deg about x (positive = looking
+  // further down), then depth_roll_deg about the optical axis (positive = the camera turns
+  // clockwise as seen from behind it, looking along its view, so the scene appears turned
+  // anticlockwise in the image). world_to_camera = Rz(-roll) Rx(pitch) LookAt(eye, target).
+  // A pitch or roll makes the floor y = 0 non-level in the camera frame.
   PinholeCamera depth_intrinsics;  // 640 x 480, f = 525
   Eigen::Vector3d depth_eye = Eigen::Vector3d(0.3, 1.2, 2.5);
   Eigen::Vector3d depth_target = Eigen::Vector3d(0.0, 1.0, 0.0);
+  double depth_pitch_deg = 0.0;  // (-90, 90)
+  double depth_roll_deg = 0.0;   // [-180, 180]
   // Colour camera: own resolution (default: half of 1600 x 2032, same aspect), vertical field
   // of view, principal point at the centre; pose = depth camera pose followed by
   // color_offset_m (in the depth camera frame) and a small yaw / pitch (degrees).
@@ -143,19 +137,36 @@ enum class DepthStatus : uint8_t {
   kDropout = 6,
 };
 
+// What the visible surface of a pixel belongs to.
+enum class SurfaceKind : uint8_t {
+  kNone = 0,
+  kSubject = 1,  // the ground-truth subject
+  kPerson = 2,   // another person (not in the ground truth)
+  kRoom = 3,     // floor or back wall
+  kBox = 4,      // a scene box
+};
+
 // Per-pixel internals of one depth rendering, for tests, previews and evaluation.
 struct DepthDiagnostics {
   cv::Mat true_depth;    // CV_32FC1, exact camera depth (m) of the visible surface, 0 = none
   cv::Mat status;        // CV_8UC1, DepthStatus
   cv::Mat subject_mask;  // CV_8UC1, 255 where the visible surface is the subject
+  cv::Mat surface;       // CV_8UC1, SurfaceKind
+};
+
+// A textured body rendered besides the subject (e.g. a second person); not ground truth.
+struct ScenePerson {
+  Template body;        // with UVs
+  cv::Mat texture_bgr;  // CV_8UC3 atlas over body's UVs
 };
 
 class VirtualKinect {
  public:
-  // subject: the template being rendered (must have UVs); texture: its CV_8UC3 BGR atlas.
+  // subject: the template being rendered (must have UVs); texture: its CV_8UC3 BGR atlas;
+  // others: further people that may appear in frames (see the `others_posed` overloads).
   // Throws artex::Error for invalid options, a template without UVs or a bad texture.
   VirtualKinect(const VirtualKinectOptions& options, const Template& subject,
-                const cv::Mat& subject_texture_bgr);
+                const cv::Mat& subject_texture_bgr, const std::vector<ScenePerson>& others = {});
 
   const Calibration& calibration() const { return calibration_; }
   const VirtualKinectOptions& options() const { return options_; }
@@ -173,29 +184,55 @@ class VirtualKinect {
   cv::Mat RenderBackgroundDepth(int index, DepthDiagnostics* diagnostics = nullptr) const;
   cv::Mat RenderColor(int frame_index, const Eigen::MatrixX3d* posed_vertices,
                       const ColorConditions& conditions) const;
+  // The same with the other people of the constructor posed at others_posed (one V_k x 3
+  // world matrix per person, in constructor order; an empty vector: none in this frame).
+  // Throws artex::Error for a wrong number of people or vertices.
+  void RenderFrame(int frame_index, const Eigen::MatrixX3d* posed_vertices,
+                   const std::vector<Eigen::MatrixX3d>& others_posed,
+                   const ColorConditions& conditions, Frame* frame,
+                   DepthDiagnostics* diagnostics = nullptr) const;
+  cv::Mat RenderDepth(int frame_index, const Eigen::MatrixX3d* posed_vertices,
+                      const std::vector<Eigen::MatrixX3d>& others_posed,
+                      DepthDiagnostics* diagnostics = nullptr) const;
+  cv::Mat RenderColor(int frame_index, const Eigen::MatrixX3d* posed_vertices,
+                      const std::vector<Eigen::MatrixX3d>& others_posed,
+                      const ColorConditions& conditions) const;
 
-  // The scene's static geometry (floor and wall), world frame.
-  const Eigen::MatrixX3d& scene_vertices() const { return scene_vertices_; }
-  const Eigen::MatrixX3i& scene_triangles() const { return scene_triangles_; }
+  // The scene's static geometry (floor, wall, boxes), world frame.
+  const Eigen::MatrixX3d& scene_vertices() const { return scene_.vertices; }
+  const Eigen::MatrixX3i& scene_triangles() const { return scene_.triangles; }
+  int num_others() const { return static_cast<int>(others_.size()); }
 
  private:
-  void BuildScene();
-  cv::Mat RenderDepthStream(int frame_index, const Eigen::MatrixX3d* posed, uint64_t stream,
+  // Posed people of one frame: [0] the subject, [1 + k] other person k; nullptr = absent.
+  using PosedPeople = std::vector<const Eigen::MatrixX3d*>;
+  PosedPeople People(const Eigen::MatrixX3d* subject,
+                     const std::vector<Eigen::MatrixX3d>& others) const;
+  const Template& PersonBody(int p) const { return p == 0 ? subject_ : others_[p - 1].body; }
+  const cv::Mat& PersonTexture(int p) const {
+    return p == 0 ? texture_ : others_[p - 1].texture_bgr;
+  }
+  int PersonOfTriangle(int id) const;  // -1: a scene triangle
+  cv::Mat RenderDepthStream(int frame_index, const PosedPeople& people, uint64_t stream,
                             DepthDiagnostics* diagnostics) const;
-  // Subject and scene seen by `camera`: the subject is rasterised and z-composited over the
-  // cached scene-only buffers (equal to rasterising both together). Triangle ids below
-  // subject_.num_triangles() are the subject's; scene triangle s has id num_triangles() + s.
+  cv::Mat RenderColorPeople(int frame_index, const PosedPeople& people,
+                            const ColorConditions& conditions) const;
+  // People and scene seen by `camera`: each present person is rasterised and z-composited
+  // (earlier people win ties), then over the cached scene-only buffers (equal to rasterising
+  // everything together). Person p's triangle t has id person_offset_[p] + t; scene triangle
+  // s has id person_offset_.back() + s.
   void RenderView(const PinholeCamera& camera, const RasterBuffers& scene,
-                  const Eigen::MatrixX3d* posed, RasterBuffers* out) const;
-  Eigen::Vector3d SceneAlbedo(const Eigen::Vector3d& world) const;
+                  const PosedPeople& people, RasterBuffers* out) const;
 
   VirtualKinectOptions options_;
   Template subject_;
   cv::Mat texture_;
+  std::vector<ScenePerson> others_;
+  std::vector<int> person_offset_;  // 1 + others: first triangle id of each person, then the
+                                    // scene's
   Calibration calibration_;
   PinholeCamera projector_;
-  Eigen::MatrixX3d scene_vertices_;
-  Eigen::MatrixX3i scene_triangles_;
+  SceneMesh scene_;
   Eigen::MatrixX3d scene_normals_;  // per scene triangle
   // The static scene is rendered once per camera.
   RasterBuffers depth_scene_, projector_scene_, color_scene_;
@@ -205,8 +242,20 @@ class VirtualKinect {
 // Default subject body: different from the default tracking template (BodyShapeOptions()).
 BodyShapeOptions DefaultSubjectShape();
 
+// The frame of calibration.yaml and of all ground truth written by SynthesizeSequence.
+// kScene: the synthetic world (Y up, floor y = 0). kDepthCamera: the depth camera's frame
+// (x right, y down, z forward): calibration.yaml has depth world_to_camera = identity and
+// colour world_to_camera = the depth -> colour extrinsic, and poses (global rotation and
+// translation) and vertices are expressed in that frame, as in a single-camera recording.
+enum class WorldFrame { kScene, kDepthCamera };
+// "scene", "camera"; throws artex::Error listing the valid names otherwise.
+WorldFrame ParseWorldFrame(const std::string& name);
+const char* WorldFrameName(WorldFrame frame);
+
 struct SynthOptions {
-  VirtualKinectOptions kinect;  // its frame_rate is replaced by motion.frame_rate
+  // Its frame_rate is replaced by motion.frame_rate; camera_placement and random_boxes are
+  // applied to it (ResolveKinectOptions).
+  VirtualKinectOptions kinect;
   BodyShapeOptions subject_shape = DefaultSubjectShape();
   SubjectTextureOptions texture;
   MotionOptions motion;
@@ -217,11 +266,26 @@ struct SynthOptions {
   // shifted by subject_position_m (the ground-truth poses include this transform).
   Eigen::Vector3d subject_position_m = Eigen::Vector3d::Zero();
   double subject_yaw_deg = 0.0;
-  int background_frames = 10;     // empty-scene depth frames for the background model
+  // Empty-scene depth frames for the background model (static scene incl. boxes, no
+  // people); 0 = none: the sequence then has no background/ folder and no background.csv.
+  int background_frames = 10;
   bool write_subject_glb = true;  // groundtruth/subject.glb (textured)
+  // Set: kinect.depth_eye / depth_target are replaced by this placement relative to
+  // subject_position_m (pitch and roll stay kinect.depth_pitch_deg / depth_roll_deg).
+  std::optional<CameraPlacement> camera_placement;
+  WorldFrame world_frame = WorldFrame::kScene;
+  // Boxes generated from kinect.seed (GenerateSceneBoxes around subject_position_m, layout
+  // box_layout) and added to kinect.scene.boxes; [0, 32].
+  int random_boxes = 0;
+  BoxLayoutOptions box_layout;
+  SecondPersonOptions second_person;  // disabled by default
 
   bool IsValid(std::string* error) const;
 };
+
+// options.kinect with the frame rate, camera placement and random boxes of `options` applied:
+// the virtual Kinect SynthesizeSequence renders with. Throws artex::Error on invalid options.
+VirtualKinectOptions ResolveKinectOptions(const SynthOptions& options);
 
 struct SynthProgress {
   enum class Stage { kSetup, kBackground, kFrames, kFinish } stage = Stage::kSetup;
@@ -244,7 +308,10 @@ struct SynthSummary {
 struct SynthSubject {
   Template subject;
   cv::Mat texture_bgr;
-  std::vector<Pose> poses;  // world poses (placement applied)
+  std::vector<Pose> poses;  // world poses (placement applied), scene frame
+  // Other people (second_person), each with one scene-frame pose per frame of `poses`.
+  std::vector<ScenePerson> others;
+  std::vector<std::vector<Pose>> other_poses;
 };
 // Throws artex::Error on invalid options, an unknown/unreadable BVH file or a failing
 // generator.
@@ -256,7 +323,8 @@ SynthSubject PrepareSynthSubject(const SynthOptions& options);
 SynthSummary SynthesizeSequence(const SynthOptions& options, const std::string& out_folder,
                                 const std::function<void(const SynthProgress&)>& progress = {});
 // As above with a prepared subject (PrepareSynthSubject(options), e.g. reused across noise
-// settings); options.subject_shape, texture, motion and placement are then not consulted.
+// settings); options.subject_shape, texture, motion, placement and second_person are then
+// not consulted (the subject's `others` are rendered).
 SynthSummary SynthesizeSequence(const SynthOptions& options, const SynthSubject& subject,
                                 const std::string& out_folder,
                                 const std::function<void(const SynthProgress&)>& progress = {});

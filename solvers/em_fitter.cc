@@ -117,6 +117,12 @@ const std::map<std::string, ScaleMode>& ScaleModeNames() {
   return kNames;
 }
 
+const std::map<std::string, ScaleEstimator>& ScaleEstimatorNames() {
+  static const std::map<std::string, ScaleEstimator> kNames = {{"icp", ScaleEstimator::kIcp},
+                                                               {"em", ScaleEstimator::kEm}};
+  return kNames;
+}
+
 const char* FrameTerminationName(FrameTermination termination) {
   switch (termination) {
     case FrameTermination::kConverged:
@@ -171,6 +177,9 @@ bool EMFitterOptions::IsValid(std::string* error) const {
     msg << "scale_estimation_frames: expected >= 1, found " << scale_estimation_frames;
   } else if (!(std::isfinite(scale_prior_weight) && scale_prior_weight >= 0.0)) {
     msg << "scale_prior_weight: expected a finite value >= 0, found " << scale_prior_weight;
+  } else if (!(std::isfinite(scale_sample_max_distance) && scale_sample_max_distance > 0.0)) {
+    msg << "scale_sample_max_distance: expected a finite value > 0 (m), found "
+        << scale_sample_max_distance;
   } else if (!(std::isfinite(scale_max_radius) && scale_max_radius > 0.0)) {
     msg << "scale_max_radius: expected a finite value > 0 (m), found " << scale_max_radius;
   } else if (normal_refresh_iterations < 0) {
@@ -293,11 +302,14 @@ void EMFitter::SetTemplateColors(const Eigen::MatrixX3d& colors) {
   template_colors_ = colors;
 }
 
-void EMFitter::Reset() {
+void EMFitter::Reset(bool keep_scale) {
   history_.clear();
   frame_ = 0;
   accepted_frames_ = 0;
-  scale_estimate_ = 1.0;
+  if (!keep_scale) {
+    scale_estimate_ = 1.0;
+    scale_samples_.clear();
+  }
   state_.reset();
   pose_ = initial_pose_;
 }
@@ -309,7 +321,7 @@ bool EMFitter::ScaleIsFree() const {
     case ScaleMode::kFixed:
       return false;
     case ScaleMode::kEstimateThenFix:
-      return accepted_frames_ < options_.scale_estimation_frames;
+      return scale_samples() < options_.scale_estimation_frames;
     case ScaleMode::kEstimateThenPrior:
       return true;
   }
@@ -317,16 +329,29 @@ bool EMFitter::ScaleIsFree() const {
 }
 
 Pose EMFitter::PredictNextPose() const {
-  if (history_.empty()) return initial_pose_;
+  const bool estimated = scale_samples() >= options_.scale_estimation_frames;
+  if (history_.empty()) {
+    // A first frame (again): after Reset(true) it starts at the kept estimate.
+    Pose guess = initial_pose_;
+    if (estimated && options_.scale_mode != ScaleMode::kFree &&
+        options_.scale_mode != ScaleMode::kFixed) {
+      guess.scale = scale_estimate_;
+    }
+    return guess;
+  }
   Pose guess = history_.back();
   if (options_.constant_velocity_prediction && history_.size() >= 2) {
     guess = ConstantVelocityPrediction(history_[history_.size() - 2], history_.back());
   }
-  const bool estimated = accepted_frames_ >= options_.scale_estimation_frames;
   if (options_.scale_mode == ScaleMode::kFixed ||
       (estimated && options_.scale_mode != ScaleMode::kFree)) {
-    guess.scale =
+    const double scale =
         options_.scale_mode == ScaleMode::kFixed ? history_.back().scale : scale_estimate_;
+    // Rescale about the template's centroid (not the template origin at the feet), so the
+    // switch to the estimate does not shift the body.
+    const Eigen::Vector3d centroid = skinning_->model().vertices.colwise().mean().transpose();
+    guess.translation += (guess.scale - scale) * (guess.rotation * centroid);
+    guess.scale = scale;
   }
   return guess;
 }
@@ -485,7 +510,7 @@ EMIterationInfo EMFitter::Iterate() {
                         st.has_previous ? &st.previous : nullptr);
   JointLimitTerm joint_limits(options_.joint_limits, model.num_joints());
   const bool prior_scale = options_.scale_mode == ScaleMode::kEstimateThenPrior &&
-                           accepted_frames_ >= options_.scale_estimation_frames;
+                           scale_samples() >= options_.scale_estimation_frames;
   ScalePriorTerm scale_prior(options_.scale_prior_weight, scale_estimate_);
   FitProblem problem;
   problem.skinning = fit_skinning_;
@@ -495,8 +520,10 @@ EMIterationInfo EMFitter::Iterate() {
   if (options_.joint_limits.weight > 0.0) problem.terms.push_back(&joint_limits);
   if (st.smoothness) problem.terms.push_back(st.smoothness.get());
   if (prior_scale) problem.terms.push_back(&scale_prior);
-  const bool scale_free =
-      st.scale_free && (st.radii.empty() || radius <= options_.scale_max_radius);
+  const bool em_scale = options_.scale_mode == ScaleMode::kFree ||
+                        options_.scale_estimator == ScaleEstimator::kEm || prior_scale;
+  const bool scale_free = st.scale_free && em_scale &&
+                          (st.radii.empty() || radius <= options_.scale_max_radius);
   if (!scale_free) problem.constant_parameters.push_back(kScaleIndex);
 
   const FitSolverSummary m = solver_->Solve(problem, &pose_);
@@ -551,8 +578,8 @@ EMIterationInfo EMFitter::Iterate() {
 
 bool EMFitter::frame_done() const { return !state_ || state_->done; }
 
-FitSummary EMFitter::EndFrame() {
-  if (!state_) throw Error("EM fitter: EndFrame() called before BeginFrame()");
+FitSummary EMFitter::FinishFrame(bool* ok_out) {
+  if (!state_) throw Error("EM fitter: EndFrame()/DiscardFrame() called before BeginFrame()");
   FrameState& st = *state_;
   FitSummary summary = std::move(st.summary);
   summary.scale = pose_.scale;
@@ -574,33 +601,85 @@ FitSummary EMFitter::EndFrame() {
       ok = false;
     }
   }
-  if (ok) {
-    summary.termination =
-        st.converged ? FrameTermination::kConverged : FrameTermination::kMaxIterations;
-    if (st.scale_free && options_.scale_mode != ScaleMode::kFree &&
-        accepted_frames_ < options_.scale_estimation_frames) {
-      // Running mean of the scale over the estimation frames.
-      const double n = static_cast<double>(accepted_frames_);
-      scale_estimate_ = (scale_estimate_ * n + pose_.scale) / (n + 1.0);
-    }
-    history_.push_back(pose_);
-    ++accepted_frames_;
-  } else {
-    summary.termination = FrameTermination::kFailed;
-    // Keep the previous pose (zero velocity for the next prediction).
-    if (!history_.empty()) {
-      pose_ = history_.back();
-      history_.push_back(pose_);
-    } else {
-      pose_ = st.initial_guess;
-    }
-    summary.scale = pose_.scale;
-  }
-  if (history_.size() > 2) history_.erase(history_.begin(), history_.end() - 2);
+  summary.termination = !ok           ? FrameTermination::kFailed
+                        : st.converged ? FrameTermination::kConverged
+                                       : FrameTermination::kMaxIterations;
   summary.total_seconds = SecondsSince(st.start) + summary.icp_seconds;
-  ++frame_;
-  state_.reset();
+  *ok_out = ok;
   return summary;
+}
+
+void EMFitter::Commit(const Scan& scan, const Pose& pose, bool scale_was_free) {
+  pose_ = pose;
+  if (scale_was_free && options_.scale_mode != ScaleMode::kFree &&
+      scale_samples() < options_.scale_estimation_frames) {
+    if (options_.scale_estimator == ScaleEstimator::kIcp &&
+        scan.size() >= std::max(options_.min_scan_points, 3)) {
+      IcpInitOptions icp = options_.icp;
+      icp.coarse_alignment = false;
+      icp.estimate_scale = true;
+      icp.max_distance = options_.scale_sample_max_distance;
+      const IcpInitResult aligned = AlignByIcp(*skinning_, pose, scan, icp);
+      if (aligned.num_pairs >= options_.min_scan_points && aligned.pose.AllFinite()) {
+        pose_ = aligned.pose;
+      }
+    }
+    // Median of the estimation frames' scales.
+    scale_samples_.push_back(pose_.scale);
+    std::vector<double> sorted = scale_samples_;
+    std::sort(sorted.begin(), sorted.end());
+    const size_t n = sorted.size();
+    scale_estimate_ = n % 2 == 1 ? sorted[n / 2] : 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]);
+  }
+  history_.push_back(pose_);
+  ++accepted_frames_;
+  if (history_.size() > 2) history_.erase(history_.begin(), history_.end() - 2);
+  ++frame_;
+}
+
+FitSummary EMFitter::EndFrame() {
+  bool ok = false;
+  FitSummary summary = FinishFrame(&ok);
+  const bool scale_free = state_->scale_free;
+  const Pose initial_guess = std::move(state_->initial_guess);
+  if (ok) {
+    Commit(state_->estep->scan(), pose_, scale_free);
+    state_.reset();
+    summary.scale = pose_.scale;
+    return summary;
+  }
+  state_.reset();
+  // Keep the previous pose (zero velocity for the next prediction).
+  if (!history_.empty()) {
+    pose_ = history_.back();
+    history_.push_back(pose_);
+  } else {
+    pose_ = initial_guess;
+  }
+  summary.scale = pose_.scale;
+  if (history_.size() > 2) history_.erase(history_.begin(), history_.end() - 2);
+  ++frame_;
+  return summary;
+}
+
+FitSummary EMFitter::DiscardFrame(Pose* result) {
+  bool ok = false;
+  FitSummary summary = FinishFrame(&ok);
+  if (result != nullptr) *result = pose_;
+  state_.reset();
+  pose_ = history_.empty() ? initial_pose_ : history_.back();
+  return summary;
+}
+
+void EMFitter::AcceptPose(const Scan& scan, const Pose& pose) {
+  if (pose.num_joints() != skinning_->model().num_joints() || !pose.AllFinite()) {
+    std::ostringstream msg;
+    msg << "accepted pose: expected a finite pose with " << skinning_->model().num_joints()
+        << " joints, found " << pose.num_joints() << " joints";
+    throw Error(msg.str());
+  }
+  state_.reset();
+  Commit(scan, pose, ScaleIsFree());
 }
 
 FitSummary EMFitter::FitFrame(const Scan& scan) {

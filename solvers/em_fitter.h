@@ -43,6 +43,16 @@ const std::map<std::string, CorrespondenceModel>& CorrespondenceModelNames();
 enum class ScaleMode { kFree, kEstimateThenFix, kEstimateThenPrior, kFixed };
 const std::map<std::string, ScaleMode>& ScaleModeNames();
 
+// How an estimation frame's scale sample is measured (ScaleMode kEstimateThen*):
+// kIcp: the EM fit holds the scale (at the pre-alignment's or the previous frame's value);
+// after the frame the fitted template is aligned to the scan by similarity ICP (pairs within
+// scale_sample_max_distance, so only points the template explains) and its scale is the
+// sample (the frame's accepted pose takes the ICP similarity). kEm: the EM's free scale (biased
+// low by the radius E-step's chord means: -4 % on a full body, -11 % on an upper body on the
+// virtual Kinect, drifting further while tracking).
+enum class ScaleEstimator { kIcp, kEm };
+const std::map<std::string, ScaleEstimator>& ScaleEstimatorNames();  // "icp", "em"
+
 // Which template vertices the fit uses when max_fit_vertices subsamples the template:
 // kStride: every n-th vertex index; kVoxel: one vertex per cell of a cubic grid over the rest
 // pose (even over the surface, whatever the vertex order), cells in Z-curve order.
@@ -86,7 +96,12 @@ struct EMFitterOptions {
   PoseGroupWeights smoothness;     // constant-velocity prior (all 0: off)
 
   ScaleMode scale_mode = ScaleMode::kEstimateThenFix;
-  int scale_estimation_frames = 1;
+  // The scale estimate is the median of the fitted scales of the first this many accepted
+  // frames (the scale is free in them); one frame's scale depends on its view (a person cropped
+  // by the image border, the arms against the body), the median over a few is steadier.
+  int scale_estimation_frames = 5;
+  ScaleEstimator scale_estimator = ScaleEstimator::kIcp;
+  double scale_sample_max_distance = 0.05;  // kIcp: ICP pair rejection distance (m)
   // Radius E-step: the scale is held during stages with a radius above this (m); at wide radii
   // mu_t lies inside curved surfaces (chord means), which biases a free scale downwards.
   double scale_max_radius = 0.05;
@@ -195,8 +210,28 @@ class EMFitter {
   void SetTemplateColors(const Eigen::MatrixX3d& colors);
   // The guess FitFrame would start the next frame from.
   Pose PredictNextPose() const;
-  // Forgets the history: the next frame is a first frame again.
-  void Reset();
+  // Forgets the history: the next frame is a first frame again. keep_scale: the scale
+  // estimate (and the frames counted towards it) survives, e.g. a re-initialisation after a
+  // lost frame of the same person.
+  void Reset(bool keep_scale = false);
+
+  // Ends the frame begun by BeginFrame like EndFrame (robustness checks, summary) but records
+  // nothing: history, frame counter and scale estimate are unchanged and pose() returns to the
+  // last accepted pose (the initial pose before the first). *result (optional) receives the
+  // fitted pose. Lets a caller fit several hypotheses of one frame (solvers/initializer.h).
+  FitSummary DiscardFrame(Pose* result = nullptr);
+  // Records `pose` as the accepted result of the next frame, as EndFrame does for a fitted
+  // frame (history, frame counter, scale estimate when the scale is still being estimated);
+  // pose() becomes it. Throws artex::Error for a wrong joint count or a non-finite pose.
+  // With ScaleEstimator::kIcp the scale sample is measured on `scan` (the frame's).
+  void AcceptPose(const Scan& scan, const Pose& pose);
+
+  // True when the scale is optimised in the next frame (ScaleMode, frames estimated so far).
+  bool ScaleIsFree() const;
+  // Median of the accepted estimation frames' scales (1 before the first).
+  double scale_estimate() const { return scale_estimate_; }
+  // Frames counted towards the scale estimate (at most scale_estimation_frames).
+  int scale_samples() const { return static_cast<int>(scale_samples_.size()); }
 
   // Progress hook, called after every EM iteration (never prints).
   void SetIterationCallback(std::function<void(const EMIterationInfo&)> callback) {
@@ -205,7 +240,10 @@ class EMFitter {
 
  private:
   struct FrameState;
-  bool ScaleIsFree() const;
+  // Robustness checks and summary of the frame begun by BeginFrame; sets *ok.
+  FitSummary FinishFrame(bool* ok);
+  // History, scale estimate and frame counter for an accepted pose (scan: of its frame).
+  void Commit(const Scan& scan, const Pose& pose, bool scale_was_free);
 
   EMFitterOptions options_;
   std::unique_ptr<Skinning> skinning_;
@@ -220,6 +258,7 @@ class EMFitter {
   int frame_ = 0;
   int accepted_frames_ = 0;  // frames that passed the robustness checks
   double scale_estimate_ = 1.0;
+  std::vector<double> scale_samples_;  // scales of the estimation frames
   std::unique_ptr<FrameState> state_;
   std::function<void(const EMIterationInfo&)> callback_;
 };

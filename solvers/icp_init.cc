@@ -100,7 +100,7 @@ IcpInitResult AlignByIcp(const Skinning& skinning, const Pose& initial, const Sc
         rotation = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitY()).toRotationMatrix();
       }
     }
-    if (options.estimate_scale) {
+    if (options.estimate_scale && options.scale_from_extent) {
       const double template_extent = VerticalExtent(x, options.extent_quantile);
       const double scan_extent = VerticalExtent(scan.points, options.extent_quantile);
       if (template_extent > 0.0 && scan_extent > 0.0) scale = scan_extent / template_extent;

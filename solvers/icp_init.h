@@ -1,8 +1,9 @@
 // First-frame initialisation (DESIGN.md "First frame"): the template in a predefined pose
 // (rest pose by default), pre-aligned to the scan by a similarity transform:
 //   1. coarse: yaw from the mean scan normal (the subject faces the camera; the template faces
-//      +Z), scale from the vertical extents, translation from the centroids of the scan and of
-//      the template vertices facing the camera;
+//      +Z), the initial pose's (nominal) scale or, on request, the ratio of the vertical
+//      extents, translation from the centroids of the scan and of the template vertices facing
+//      the camera;
 //   2. similarity ICP: each (subsampled) scan point paired with its nearest template vertex
 //      (distance and normal gated), Umeyama's closed form, iterated. Colour is not used.
 // Only the global similarity (scale, translation, rotation) of the pose is changed.
@@ -19,13 +20,18 @@ namespace artex {
 struct IcpInitOptions {
   bool coarse_alignment = true;   // step 1 (false: start ICP from the given global similarity)
   bool facing_camera = true;      // coarse yaw from the mean scan normal (else keep rotation)
-  bool estimate_scale = true;     // scale in the coarse step and in Umeyama
+  bool estimate_scale = true;     // scale estimated by Umeyama (else the initial scale, rigid)
+  // Coarse scale from the ratio of the scan's and the template's vertical extents (when
+  // estimate_scale). Off by default: a person cut by the image border or the depth range
+  // (upper body only) has a short extent and got scales of 0.54-0.76; the nominal scale of
+  // the initial pose is refined by Umeyama and by the EM fit's free scale instead.
+  bool scale_from_extent = false;
   int max_iterations = 40;
   double max_distance = 0.25;     // pair rejection distance (m, world frame)
   double min_normal_dot = 0.3;    // pair rejection: n_scan . n_template below this
   int max_scan_points = 4000;     // scan subsampled by a fixed stride to at most this many
   double tolerance = 1e-5;        // stop when the similarity changes less (m / rad / scale)
-  double extent_quantile = 0.01;  // vertical extent between this quantile and 1 - it
+  double extent_quantile = 0.01;  // scale_from_extent: extent between this quantile, 1 - it
 
   bool IsValid(std::string* error) const;
 };

@@ -257,6 +257,17 @@ TEST(PipelineTest, TwoRunsGiveIdenticalPoses) {
   EXPECT_EQ(ReadText(OutDir("run_a") / "texture.png"), ReadText(OutDir("run_b") / "texture.png"));
 }
 
+TEST(PipelineTest, BuiltInDefaultsAreConfigsDefaultYaml) {
+  // `artex track` without -c must behave as the README's `-c configs/default.yaml`.
+  Config none;
+  none.Set("texture.atlas_size", std::to_string(kAtlasSize));
+  Track(PipelineTestData::Get().sequence(), OutDir("run_builtin").string(), none);
+  FirstRun();
+  EXPECT_EQ(ReadText(OutDir("run_builtin") / "poses.csv"), ReadText(OutDir("run_a") / "poses.csv"));
+  EXPECT_EQ(ReadText(OutDir("run_builtin") / "texture.png"),
+            ReadText(OutDir("run_a") / "texture.png"));
+}
+
 TEST(PipelineTest, MissingSequenceFolderNamesIt) {
   const std::string missing = (PipelineTestData::Get().root() / "no_such_sequence").string();
   const std::string msg = ErrorOf([&] { Track(missing, OutDir("run_missing").string()); });

@@ -521,10 +521,19 @@ TEST(PreprocessorTest, SyntheticFrameGivesTheSubjectMesh) {
   EXPECT_EQ((again.points - scan.points).norm(), 0.0);
 
   // Untrained alternative: everything within range is foreground (wall and floor too).
-  Preprocessor all(cal);
+  PreprocessOptions range;
+  range.foreground = ForegroundMode::kBackground;
+  Preprocessor all(cal, range);
   all.TrainWithoutBackground();
   all.Process(frame, &again);
   EXPECT_GT(again.size(), 3 * scan.size());
+  // The default without background frames segments the subject: floor and wall removed.
+  Preprocessor segmenting(cal);
+  segmenting.TrainWithoutBackground();
+  EXPECT_TRUE(segmenting.segmenting());
+  segmenting.Process(frame, &again);
+  EXPECT_LT(again.size(), 1.5 * scan.size());
+  EXPECT_GT(again.size(), 0.7 * scan.size());
 }
 
 }  // namespace

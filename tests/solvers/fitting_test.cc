@@ -284,6 +284,7 @@ TEST_F(FittingTest, LiteralEnergyWithFreeScaleShrinksTheScale) {
 TEST_F(FittingTest, ScaleEstimatedOnFirstFrameThenFixed) {
   EMFitterOptions options = DefaultOptions();
   options.scale_mode = ScaleMode::kEstimateThenFix;
+  options.scale_estimation_frames = 1;
   Pose start = start_;
   start.scale = 1.04;
   EMFitter fitter(model_, options);

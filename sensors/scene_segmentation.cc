@@ -1,0 +1,612 @@
+#include "sensors/scene_segmentation.h"
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <sstream>
+
+#include "models/error.h"
+#include "sensors/image_io.h"
+
+namespace artex {
+namespace {
+
+constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
+
+void CheckDepth(const cv::Mat& depth, const PinholeCamera& camera, const char* what) {
+  if (depth.type() != CV_16UC1 || depth.cols != camera.width || depth.rows != camera.height) {
+    std::ostringstream msg;
+    msg << what << ": expected a CV_16UC1 " << camera.width << "x" << camera.height
+        << " depth image, found " << MatTypeName(depth.type()) << " " << depth.cols << "x"
+        << depth.rows;
+    throw Error(msg.str());
+  }
+}
+
+// Undistorted normalised ray (x / z, y / z) of pixel (u, v).
+Eigen::Vector2d Ray(const PinholeCamera& camera, const Distortion& distortion, double u, double v) {
+  Eigen::Vector2d p(u, v);
+  if (!distortion.IsZero()) p = UndistortPixel(camera, distortion, p);
+  return {(p.x() - camera.cx) / camera.fx, (p.y() - camera.cy) / camera.fy};
+}
+
+double Quantile(std::vector<double>* values, double q) {
+  if (values->empty()) return 0.0;
+  const size_t k = static_cast<size_t>(q * static_cast<double>(values->size() - 1));
+  std::nth_element(values->begin(), values->begin() + static_cast<std::ptrdiff_t>(k),
+                   values->end());
+  return (*values)[k];
+}
+
+// Least-squares plane through points (smallest principal axis), normal towards the origin.
+bool FitPlane(const std::vector<Eigen::Vector3d>& points, const std::vector<int>& subset,
+              Eigen::Vector3d* normal, double* offset) {
+  if (subset.size() < 3) return false;
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (int i : subset) mean += points[i];
+  mean /= static_cast<double>(subset.size());
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (int i : subset) cov += (points[i] - mean) * (points[i] - mean).transpose();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+  Eigen::Vector3d n = eig.eigenvectors().col(0).normalized();
+  double d = -n.dot(mean);
+  if (d < 0) {
+    n = -n;
+    d = -d;
+  }
+  if (!n.allFinite() || !std::isfinite(d)) return false;
+  *normal = n;
+  *offset = d;
+  return true;
+}
+
+}  // namespace
+
+bool PlaneDetectionOptions::IsValid(std::string* error) const {
+  std::ostringstream msg;
+  if (sample_stride < 1) {
+    msg << "sample_stride: expected >= 1, found " << sample_stride;
+  } else if (ransac_iterations < 1 || score_points < 3) {
+    msg << "ransac_iterations/score_points: expected >= 1 / >= 3, found " << ransac_iterations
+        << " / " << score_points;
+  } else if (!(inlier_distance > 0) || !(inlier_growth >= 0)) {
+    msg << "inlier_distance/inlier_growth: expected > 0 / >= 0, found " << inlier_distance << " / "
+        << inlier_growth;
+  } else if (!(merge_angle_deg >= 0) || !(merge_distance >= 0)) {
+    msg << "merge_angle_deg/merge_distance: expected >= 0";
+  } else if (max_planes < 0) {
+    msg << "max_planes: expected >= 0, found " << max_planes;
+  } else if (!(min_inlier_fraction > 0 && min_inlier_fraction <= 1)) {
+    msg << "min_inlier_fraction: expected a value in (0, 1], found " << min_inlier_fraction;
+  } else if (!(min_extent >= 0)) {
+    msg << "min_extent: expected >= 0 (m), found " << min_extent;
+  } else if (!(floor_max_angle_deg >= 0 && floor_max_angle_deg <= 90) ||
+             !(wall_max_angle_deg >= 0 && wall_max_angle_deg <= 90)) {
+    msg << "floor_max_angle_deg/wall_max_angle_deg: expected degrees in [0, 90]";
+  } else if (!(min_depth >= 0) || !(max_depth > min_depth)) {
+    msg << "min_depth/max_depth: expected 0 <= min_depth < max_depth, found " << min_depth << " / "
+        << max_depth;
+  } else {
+    return true;
+  }
+  if (error) *error = "planes." + msg.str();
+  return false;
+}
+
+const char* PlaneKindName(PlaneKind kind) {
+  switch (kind) {
+    case PlaneKind::kFloor:
+      return "floor";
+    case PlaneKind::kWall:
+      return "wall";
+    case PlaneKind::kOther:
+      return "other";
+  }
+  return "?";
+}
+
+std::vector<ScenePlane> DetectScenePlanes(const cv::Mat& depth, const PinholeCamera& intrinsics,
+                                          const Distortion& distortion, double depth_scale,
+                                          const Eigen::Vector3d& up_prior,
+                                          const PlaneDetectionOptions& options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw Error("plane detection options: " + error);
+  CheckDepth(depth, intrinsics, "plane detection");
+  if (!(depth_scale > 0)) throw Error("plane detection: expected a positive depth_scale");
+  const Eigen::Vector3d up = up_prior.normalized();
+
+  // Sampled points in the depth range.
+  std::vector<Eigen::Vector3d> points;
+  for (int v = 0; v < depth.rows; v += options.sample_stride) {
+    const uint16_t* row = depth.ptr<uint16_t>(v);
+    for (int u = 0; u < depth.cols; u += options.sample_stride) {
+      if (row[u] == 0) continue;
+      const double z = row[u] / depth_scale;
+      if (z < options.min_depth || z > options.max_depth) continue;
+      const Eigen::Vector2d r = Ray(intrinsics, distortion, u, v);
+      points.emplace_back(r.x() * z, r.y() * z, z);
+    }
+  }
+  std::vector<ScenePlane> planes;
+  const int total = static_cast<int>(points.size());
+  std::vector<double> tolerance(points.size());
+  for (int i = 0; i < total; ++i) {
+    const double z = points[i].z();
+    tolerance[i] = options.inlier_distance + options.inlier_growth * z * z;
+  }
+  if (total < 3) return planes;
+  std::vector<int> remaining(points.size());
+  for (int i = 0; i < total; ++i) remaining[i] = i;
+  std::mt19937_64 rng(options.seed);
+  const double cos_floor = std::cos(options.floor_max_angle_deg * kDegToRad);
+  const double sin_wall = std::sin(options.wall_max_angle_deg * kDegToRad);
+
+  for (int p = 0; p < options.max_planes; ++p) {
+    const int n = static_cast<int>(remaining.size());
+    if (n < 3 || n < options.min_inlier_fraction * total) break;
+    // Hypotheses scored on a fixed random subset of the remaining points.
+    std::vector<int> score;
+    std::uniform_int_distribution<int> pick(0, n - 1);
+    const int score_count = std::min(n, options.score_points);
+    score.reserve(score_count);
+    for (int i = 0; i < score_count; ++i) score.push_back(remaining[pick(rng)]);
+    int best_count = -1;
+    Eigen::Vector3d best_n = Eigen::Vector3d::UnitY();
+    double best_d = 0;
+    for (int it = 0; it < options.ransac_iterations; ++it) {
+      const Eigen::Vector3d& a = points[remaining[pick(rng)]];
+      const Eigen::Vector3d& b = points[remaining[pick(rng)]];
+      const Eigen::Vector3d& c = points[remaining[pick(rng)]];
+      Eigen::Vector3d normal = (b - a).cross(c - a);
+      const double len = normal.norm();
+      if (!(len > 1e-9)) continue;
+      normal /= len;
+      const double d = -normal.dot(a);
+      int count = 0;
+      for (int i : score) count += std::abs(normal.dot(points[i]) + d) < tolerance[i];
+      if (count > best_count) {
+        best_count = count;
+        best_n = normal;
+        best_d = d;
+      }
+    }
+    if (best_count < 3) break;
+    // Inliers among all remaining points, refined by least squares, recounted.
+    std::vector<int> inliers, outliers;
+    for (int pass = 0; pass < 2; ++pass) {
+      inliers.clear();
+      outliers.clear();
+      for (int i : remaining) {
+        (std::abs(best_n.dot(points[i]) + best_d) < tolerance[i] ? inliers : outliers).push_back(i);
+      }
+      if (pass == 0 && !FitPlane(points, inliers, &best_n, &best_d)) break;
+    }
+    if (inliers.size() < options.min_inlier_fraction * total) break;
+    Eigen::Vector3d oriented = best_d < 0 ? Eigen::Vector3d(-best_n) : best_n;
+    bool merged = false;
+    for (ScenePlane& earlier : planes) {
+      if (earlier.normal.dot(oriented) >= std::cos(options.merge_angle_deg * kDegToRad) &&
+          std::abs(earlier.offset - std::abs(best_d)) <= options.merge_distance) {
+        earlier.inliers += static_cast<int>(inliers.size());
+        earlier.inlier_fraction = static_cast<double>(earlier.inliers) / total;
+        merged = true;
+        break;
+      }
+    }
+    if (merged) {
+      remaining.swap(outliers);
+      continue;
+    }
+    ScenePlane plane;
+    plane.normal = best_n;
+    plane.offset = best_d;
+    if (plane.offset < 0) {
+      plane.normal = -plane.normal;
+      plane.offset = -plane.offset;
+    }
+    plane.inliers = static_cast<int>(inliers.size());
+    plane.inlier_fraction = static_cast<double>(inliers.size()) / total;
+    // In-plane spread: two axes orthogonal to the normal (the first as horizontal as possible).
+    Eigen::Vector3d axis0 = up.cross(plane.normal);
+    if (axis0.norm() < 1e-3) axis0 = plane.normal.unitOrthogonal();
+    axis0.normalize();
+    const Eigen::Vector3d axis1 = plane.normal.cross(axis0).normalized();
+    std::vector<double> c0, c1;
+    c0.reserve(inliers.size());
+    c1.reserve(inliers.size());
+    for (int i : inliers) {
+      c0.push_back(axis0.dot(points[i]));
+      c1.push_back(axis1.dot(points[i]));
+    }
+    std::vector<double> copy0 = c0, copy1 = c1;
+    const double e0 = Quantile(&copy0, 0.95) - Quantile(&c0, 0.05);
+    const double e1 = Quantile(&copy1, 0.95) - Quantile(&c1, 0.05);
+    plane.extent[0] = std::max(e0, e1);
+    plane.extent[1] = std::min(e0, e1);
+    const double up_dot = plane.normal.dot(up);
+    if (plane.extent[1] >= options.min_extent) {
+      if (up_dot >= cos_floor) {
+        plane.kind = PlaneKind::kFloor;
+      } else if (std::abs(up_dot) <= sin_wall) {
+        plane.kind = PlaneKind::kWall;
+      }
+    }
+    planes.push_back(plane);
+    remaining.swap(outliers);
+  }
+  return planes;
+}
+
+const std::map<std::string, WorldFrameMode>& WorldFrameModeNames() {
+  static const std::map<std::string, WorldFrameMode> names = {
+      {"auto", WorldFrameMode::kAuto},
+      {"estimate", WorldFrameMode::kEstimate},
+      {"calibration", WorldFrameMode::kCalibration}};
+  return names;
+}
+
+const char* WorldFrameSourceName(WorldFrameSource source) {
+  switch (source) {
+    case WorldFrameSource::kCalibration:
+      return "calibration";
+    case WorldFrameSource::kFloor:
+      return "floor";
+    case WorldFrameSource::kGravity:
+      return "gravity";
+    case WorldFrameSource::kCameraConvention:
+      return "camera_convention";
+  }
+  return "?";
+}
+
+bool WorldFrameOptions::IsValid(std::string* error) const {
+  if (!planes.IsValid(error)) return false;
+  if (!(assumed_camera_height >= 0 && std::isfinite(assumed_camera_height))) {
+    if (error) *error = "assumed_camera_height: expected a finite value >= 0 (m)";
+    return false;
+  }
+  return true;
+}
+
+Eigen::Isometry3d WorldFrameFromUp(const Eigen::Vector3d& up_camera, double height) {
+  const Eigen::Vector3d y = up_camera.normalized();
+  // World -Z: the viewing direction (camera +z) on the floor; +Z points back at the camera.
+  Eigen::Vector3d forward = Eigen::Vector3d::UnitZ() - y.z() * y;
+  if (forward.norm() < 1e-6) forward = Eigen::Vector3d::UnitY() - y.y() * y;  // looking down
+  const Eigen::Vector3d z = -forward.normalized();
+  const Eigen::Vector3d x = y.cross(z).normalized();
+  Eigen::Matrix3d world_to_camera_rotation;  // columns: world axes in camera coordinates
+  world_to_camera_rotation.col(0) = x;
+  world_to_camera_rotation.col(1) = y;
+  world_to_camera_rotation.col(2) = z;
+  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+  t.linear() = world_to_camera_rotation;
+  // Camera centre at (0, height, 0): 0 = R c + t.
+  t.translation() = -world_to_camera_rotation * Eigen::Vector3d(0, height, 0);
+  return t;
+}
+
+std::string WorldFrameEstimate::Describe() const {
+  std::ostringstream s;
+  s.precision(3);
+  s << "world frame from " << WorldFrameSourceName(source) << ": up (camera) = (" << up_camera.x()
+    << ", " << up_camera.y() << ", " << up_camera.z() << "), camera height " << camera_height
+    << " m, pitch " << camera_pitch_deg << " deg, roll " << camera_roll_deg << " deg";
+  return s.str();
+}
+
+WorldFrameEstimate EstimateWorldFrame(const cv::Mat& depth, const PinholeCamera& intrinsics,
+                                      const Distortion& distortion, double depth_scale,
+                                      const std::optional<Eigen::Vector3d>& gravity_up,
+                                      const WorldFrameOptions& options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw Error("world frame options: " + error);
+  WorldFrameEstimate estimate;
+  Eigen::Vector3d prior(0, -1, 0);
+  if (gravity_up && gravity_up->allFinite() && gravity_up->norm() > 1e-9) {
+    prior = gravity_up->normalized();
+  }
+  estimate.planes =
+      DetectScenePlanes(depth, intrinsics, distortion, depth_scale, prior, options.planes);
+  const ScenePlane* floor = nullptr;
+  for (const ScenePlane& p : estimate.planes) {
+    if (p.kind == PlaneKind::kFloor && (!floor || p.inliers > floor->inliers)) floor = &p;
+  }
+  if (floor) {
+    estimate.source = WorldFrameSource::kFloor;
+    estimate.up_camera = floor->normal;
+    estimate.camera_height = floor->offset;
+  } else {
+    const bool gravity = gravity_up && gravity_up->allFinite() && gravity_up->norm() > 1e-9;
+    estimate.source = gravity ? WorldFrameSource::kGravity : WorldFrameSource::kCameraConvention;
+    estimate.up_camera = prior;
+    estimate.camera_height = options.assumed_camera_height;
+  }
+  estimate.world_to_camera = WorldFrameFromUp(estimate.up_camera, estimate.camera_height);
+  const Eigen::Vector3d& up = estimate.up_camera;
+  estimate.camera_pitch_deg = std::asin(std::clamp(up.z(), -1.0, 1.0)) / kDegToRad;
+  estimate.camera_roll_deg = std::atan2(up.x(), -up.y()) / kDegToRad;
+  return estimate;
+}
+
+const std::map<std::string, SubjectChoice>& SubjectChoiceNames() {
+  static const std::map<std::string, SubjectChoice> names = {{"central", SubjectChoice::kCentral},
+                                                             {"nearest", SubjectChoice::kNearest},
+                                                             {"largest", SubjectChoice::kLargest},
+                                                             {"pixel", SubjectChoice::kPixel}};
+  return names;
+}
+
+bool SubjectSegmentationOptions::IsValid(std::string* error) const {
+  if (!planes.IsValid(error)) return false;
+  std::ostringstream msg;
+  if (!(min_depth >= 0) || !(max_depth > min_depth)) {
+    msg << "min_depth/max_depth: expected 0 <= min_depth < max_depth, found " << min_depth << " / "
+        << max_depth;
+  } else if (!(plane_margin >= 0) || !(plane_margin_growth >= 0)) {
+    msg << "plane_margin/plane_margin_growth: expected >= 0, found " << plane_margin << " / "
+        << plane_margin_growth;
+  } else if (!(connect_distance > 0) || !(connect_relative >= 0)) {
+    msg << "connect_distance/connect_relative: expected > 0 / >= 0";
+  } else if (min_pixels < 1) {
+    msg << "min_pixels: expected >= 1, found " << min_pixels;
+  } else if (!(min_height >= 0) || !(max_height > min_height) || !(max_width > 0)) {
+    msg << "min_height/max_height/max_width: expected 0 <= min_height < max_height, "
+           "max_width > 0";
+  } else if (choice == SubjectChoice::kPixel && (pixel.x() < 0 || pixel.y() < 0)) {
+    msg << "pixel: expected a pixel (column, row) >= 0 with choice pixel, found " << pixel.x()
+        << "," << pixel.y();
+  } else if (!(track_max_distance > 0)) {
+    msg << "track_max_distance: expected > 0 (m), found " << track_max_distance;
+  } else {
+    return true;
+  }
+  if (error) *error = msg.str();
+  return false;
+}
+
+SubjectSegmenter::SubjectSegmenter(const PinholeCamera& intrinsics, const Distortion& distortion,
+                                   double depth_scale, const Eigen::Vector3d& up_camera,
+                                   const SubjectSegmentationOptions& options)
+    : intrinsics_(intrinsics),
+      distortion_(distortion),
+      depth_scale_(depth_scale),
+      up_(up_camera.normalized()),
+      options_(options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw Error("subject segmentation options: " + error);
+  if (!(depth_scale > 0)) throw Error("subject segmentation: expected a positive depth_scale");
+  if (!up_.allFinite()) throw Error("subject segmentation: expected a finite up direction");
+  rays_.create(intrinsics.height, intrinsics.width, CV_32FC2);
+  for (int v = 0; v < intrinsics.height; ++v) {
+    cv::Vec2f* row = rays_.ptr<cv::Vec2f>(v);
+    for (int u = 0; u < intrinsics.width; ++u) {
+      const Eigen::Vector2d r = Ray(intrinsics, distortion, u, v);
+      row[u] = cv::Vec2f(static_cast<float>(r.x()), static_cast<float>(r.y()));
+    }
+  }
+}
+
+void SubjectSegmenter::SetPlanes(const std::vector<ScenePlane>& planes) {
+  planes_ = planes;
+  planes_known_ = true;
+}
+
+namespace {
+
+int Find(std::vector<int>& parent, int i) {
+  while (parent[i] != i) {
+    parent[i] = parent[parent[i]];
+    i = parent[i];
+  }
+  return i;
+}
+
+void Union(std::vector<int>& parent, int a, int b) {
+  a = Find(parent, a);
+  b = Find(parent, b);
+  if (a == b) return;
+  if (a < b) std::swap(a, b);
+  parent[a] = b;
+}
+
+struct Component {
+  int root = -1;
+  int pixels = 0;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  double u_sum = 0, v_sum = 0;
+  double up_min = 1e300, up_max = -1e300;
+  double z_min = 1e300;
+  bool contains_pixel = false;
+  Eigen::Vector3d centroid() const { return sum / std::max(1, pixels); }
+};
+
+}  // namespace
+
+void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, SegmentationStats* stats) {
+  CheckDepth(depth, intrinsics_, "subject segmentation");
+  if (!planes_known_) {
+    SetPlanes(
+        DetectScenePlanes(depth, intrinsics_, distortion_, depth_scale_, up_, options_.planes));
+  }
+  std::vector<const ScenePlane*> removed;
+  for (const ScenePlane& p : planes_)
+    if (p.kind != PlaneKind::kOther) removed.push_back(&p);
+
+  const int w = depth.cols, h = depth.rows, n = w * h;
+  parent_.resize(n);
+  z_.assign(n, 0.0f);
+  const double inv_scale = 1.0 / depth_scale_;
+  SegmentationStats local;
+  // Candidates: valid, in range, in front of every floor/wall by more than the margin.
+  for (int v = 0; v < h; ++v) {
+    const uint16_t* row = depth.ptr<uint16_t>(v);
+    const cv::Vec2f* ray = rays_.ptr<cv::Vec2f>(v);
+    for (int u = 0; u < w; ++u) {
+      const int i = v * w + u;
+      parent_[i] = i;
+      if (row[u] == 0) continue;
+      const double z = row[u] * inv_scale;
+      if (z < options_.min_depth || z > options_.max_depth) continue;
+      const Eigen::Vector3d x(ray[u][0] * z, ray[u][1] * z, z);
+      bool keep = true;
+      const double margin = options_.plane_margin + options_.plane_margin_growth * z * z;
+      for (const ScenePlane* p : removed) {
+        if (p->SignedDistance(x) < margin) {
+          keep = false;
+          break;
+        }
+      }
+      if (!keep) continue;
+      z_[i] = static_cast<float>(z);
+      ++local.candidate_pixels;
+    }
+  }
+  // 4-connected components with a depth-jump limit.
+  const float rel = static_cast<float>(options_.connect_relative);
+  const float abs_limit = static_cast<float>(options_.connect_distance);
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const int i = v * w + u;
+      const float z = z_[i];
+      if (z == 0.0f) continue;
+      const float limit = std::max(abs_limit, rel * z);
+      if (u + 1 < w && z_[i + 1] != 0.0f && std::abs(z_[i + 1] - z) < limit)
+        Union(parent_, i, i + 1);
+      if (v + 1 < h && z_[i + w] != 0.0f && std::abs(z_[i + w] - z) < limit)
+        Union(parent_, i, i + w);
+    }
+  }
+  // Flatten: parent_[i] is the root of every candidate pixel.
+  for (int i = 0; i < n; ++i)
+    if (z_[i] != 0.0f) parent_[i] = Find(parent_, i);
+  // Component statistics.
+  std::vector<int> slot(n, -1);
+  std::vector<Component> components;
+  const bool pick_pixel = options_.choice == SubjectChoice::kPixel;
+  for (int v = 0; v < h; ++v) {
+    const cv::Vec2f* ray = rays_.ptr<cv::Vec2f>(v);
+    for (int u = 0; u < w; ++u) {
+      const int i = v * w + u;
+      if (z_[i] == 0.0f) continue;
+      const int r = parent_[i];
+      if (slot[r] < 0) {
+        slot[r] = static_cast<int>(components.size());
+        components.emplace_back();
+        components.back().root = r;
+      }
+      Component& c = components[slot[r]];
+      const double z = z_[i];
+      const Eigen::Vector3d x(ray[u][0] * z, ray[u][1] * z, z);
+      ++c.pixels;
+      c.sum += x;
+      c.u_sum += u;
+      c.v_sum += v;
+      const double height = up_.dot(x);
+      c.up_min = std::min(c.up_min, height);
+      c.up_max = std::max(c.up_max, height);
+      c.z_min = std::min(c.z_min, z);
+      if (pick_pixel && u == options_.pixel.x() && v == options_.pixel.y()) c.contains_pixel = true;
+    }
+  }
+  // Person-sized components; the horizontal extent needs a second pass (about the centroid).
+  std::vector<int> sized;
+  for (int k = 0; k < static_cast<int>(components.size()); ++k) {
+    const Component& c = components[k];
+    if (c.pixels < options_.min_pixels) continue;
+    ++local.components;
+    const double height = c.up_max - c.up_min;
+    if (height >= options_.min_height && height <= options_.max_height) sized.push_back(k);
+  }
+  if (!sized.empty()) {
+    std::vector<double> radius(components.size(), 0.0);
+    std::vector<uint8_t> in_sized(components.size(), 0);
+    for (int k : sized) in_sized[k] = 1;
+    for (int v = 0; v < h; ++v) {
+      const cv::Vec2f* ray = rays_.ptr<cv::Vec2f>(v);
+      for (int u = 0; u < w; ++u) {
+        const int i = v * w + u;
+        if (z_[i] == 0.0f) continue;
+        const int k = slot[parent_[i]];
+        if (!in_sized[k]) continue;
+        const double z = z_[i];
+        Eigen::Vector3d d =
+            Eigen::Vector3d(ray[u][0] * z, ray[u][1] * z, z) - components[k].centroid();
+        d -= up_.dot(d) * up_;
+        radius[k] = std::max(radius[k], d.norm());
+      }
+    }
+    sized.erase(std::remove_if(sized.begin(), sized.end(),
+                               [&](int k) { return 2.0 * radius[k] > options_.max_width; }),
+                sized.end());
+  }
+  local.person_sized = static_cast<int>(sized.size());
+
+  // The subject: the tracked one, else a new choice.
+  int chosen = -1;
+  if (has_subject_) {
+    double best = options_.track_max_distance;
+    for (int k : sized) {
+      const double d = (components[k].centroid() - subject_centroid_).norm();
+      if (d < best) {
+        best = d;
+        chosen = k;
+      }
+    }
+    local.tracked = chosen >= 0;
+  }
+  if (chosen < 0) {
+    double best = -1e300;
+    const double cu = 0.5 * (w - 1), cv = 0.5 * (h - 1), scale = 0.25 * w;
+    for (int k : sized) {
+      const Component& c = components[k];
+      double score = 0;
+      switch (options_.choice) {
+        case SubjectChoice::kCentral: {
+          // Most complete near the centre: pixels damped by the centroid's image distance.
+          const double du = c.u_sum / c.pixels - cu, dv = c.v_sum / c.pixels - cv;
+          score = c.pixels / (1.0 + (du * du + dv * dv) / (scale * scale));
+          break;
+        }
+        case SubjectChoice::kNearest:
+          score = -c.z_min;
+          break;
+        case SubjectChoice::kLargest:
+          score = c.pixels;
+          break;
+        case SubjectChoice::kPixel: {
+          const double du = c.u_sum / c.pixels - options_.pixel.x();
+          const double dv = c.v_sum / c.pixels - options_.pixel.y();
+          score = c.contains_pixel ? 1e300 : -(du * du + dv * dv);
+          break;
+        }
+      }
+      if (score > best) {
+        best = score;
+        chosen = k;
+      }
+    }
+  }
+  mask->create(h, w, CV_8UC1);
+  mask->setTo(0);
+  has_subject_ = chosen >= 0;
+  if (has_subject_) {
+    const Component& c = components[chosen];
+    subject_centroid_ = c.centroid();
+    local.subject_pixels = c.pixels;
+    local.subject_centroid = subject_centroid_;
+    local.subject_height = c.up_max - c.up_min;
+    const int root = c.root;
+    for (int v = 0; v < h; ++v) {
+      uint8_t* out = mask->ptr<uint8_t>(v);
+      for (int u = 0; u < w; ++u) {
+        const int i = v * w + u;
+        if (z_[i] != 0.0f && parent_[i] == root) out[u] = 255;
+      }
+    }
+  }
+  if (stats) *stats = local;
+}
+
+}  // namespace artex

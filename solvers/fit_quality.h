@@ -1,0 +1,76 @@
+// Fit quality without ground truth (docs/fitting.md "Fit quality"): how well a posed template
+// explains one scan, from three measures that a wrong fit cannot all pass (an EM cost cannot
+// tell: it is a weighted mean over the correspondences that exist, whatever their number):
+//   inlier_fraction:  scan points within inlier_distance of the posed template (distance to
+//                     the nearest posed vertex; the template's vertex spacing of ~1 cm is well
+//                     below the default distance), i.e. how much of the scan the fit explains;
+//   support_fraction: pixels of the template's rendering from the depth camera (its visible,
+//                     camera-facing surface) whose observed depth (scan points projected into
+//                     the same raster, nearest kept) is within support_tolerance, i.e. how
+//                     much of the fit the scan confirms (a model on the wall or beside the
+//                     person has none);
+//   depth_residual_m: mean truncated |z_model - z_observed| over the union of the template's
+//                     silhouette and the scan's foreground; a pixel covered by one of them
+//                     only counts depth_truncation.
+// All rasters are the depth camera's image divided by raster_subsample.
+#pragma once
+
+#include <string>
+
+#include <Eigen/Core>
+
+#include "render/camera.h"
+#include "sensors/scan.h"
+
+namespace artex {
+
+enum class FitQualityLabel { kGood, kDoubtful, kLost };
+const char* FitQualityLabelName(FitQualityLabel label);  // "good", "doubtful", "lost"
+
+// Label thresholds measured on the virtual Kinect walk at 2.5 m (tests/solvers/
+// fit_quality_test.cc): the true subject surface and the tracked fits reach inliers >= 0.96,
+// support >= 0.81, residual <= 34 mm (the residual includes the silhouette rims and the
+// projector shadow, one-sided pixels); the template upside down on the person, 1 m beside
+// it or against the back wall stay at inliers <= 0.31, support <= 0.32, residual >= 78 mm.
+struct FitQualityOptions {
+  double inlier_distance = 0.025;  // m: a scan point within this of the fit is explained
+  int max_scan_points = 3000;      // inlier test on a fixed-stride subsample of the scan
+  int raster_subsample = 4;        // rasters at (width / this) x (height / this) pixels
+  double support_tolerance = 0.03;  // m: |z_model - z_observed| of a supported pixel
+  double depth_truncation = 0.10;   // m: truncation of the depth residual
+  // Labels: kLost when any lost_* bound is crossed, else kGood when all good_* bounds hold,
+  // else kDoubtful.
+  double good_min_inlier_fraction = 0.85;
+  double good_min_support_fraction = 0.65;
+  double good_max_depth_residual = 0.045;  // m
+  double lost_min_inlier_fraction = 0.6;
+  double lost_min_support_fraction = 0.45;
+  double lost_max_depth_residual = 0.065;  // m
+
+  bool IsValid(std::string* error) const;
+};
+
+struct FitQuality {
+  double inlier_fraction = 0.0;   // [0, 1]
+  double support_fraction = 0.0;  // [0, 1]; 0 when the template is not visible at all
+  double depth_residual_m = 0.0;  // [0, depth_truncation]
+  FitQualityLabel label = FitQualityLabel::kLost;
+  // Ranking score in [0, 1] (higher is better): the mean of inlier_fraction, support_fraction
+  // and 1 - depth_residual_m / depth_truncation.
+  double score = 0.0;
+  int scan_samples = 0;    // scan points tested for inliers
+  int model_pixels = 0;    // rendered template pixels
+  int union_pixels = 0;    // pixels of the template's silhouette or the scan's foreground
+  double seconds = 0.0;
+
+  std::string BriefReport() const;
+};
+
+// posed_vertices: V x 3 world (m), triangles: F x 3 (counter-clockwise = outwards); the scan
+// and the depth camera (intrinsics and world_to_camera) of the same frame. An empty scan gives
+// inlier_fraction 0. Throws artex::Error on invalid options or a triangle index out of range.
+FitQuality EvaluateFitQuality(const Eigen::MatrixX3d& posed_vertices,
+                              const Eigen::MatrixX3i& triangles, const Scan& scan,
+                              const PinholeCamera& depth_camera, const FitQualityOptions& options);
+
+}  // namespace artex

@@ -1,0 +1,253 @@
+#include "solvers/initializer.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <sstream>
+
+#include <Eigen/Geometry>
+
+#include "models/error.h"
+#include "models/normals.h"
+#include "models/so3.h"
+
+namespace artex {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+constexpr double kDegToRad = M_PI / 180.0;
+
+int FindJoint(const Template& model, const char* name) {
+  for (int j = 0; j < model.num_joints(); ++j) {
+    if (model.joints[j].name == name) return j;
+  }
+  return -1;
+}
+
+// `base` with both upper arms at `elevation_deg` below the horizontal (rotation about the axis
+// that raises the rest-pose upper arm), or false when the template has no such joints.
+bool WithArms(const Template& model, const Pose& base, double elevation_deg, Pose* out) {
+  *out = base;
+  const char* const arms[2][2] = {{"l_shoulder", "l_elbow"}, {"r_shoulder", "r_elbow"}};
+  for (const auto& arm : arms) {
+    const int shoulder = FindJoint(model, arm[0]), elbow = FindJoint(model, arm[1]);
+    if (shoulder < 0 || elbow < 0) return false;
+    const Eigen::Vector3d upper = model.joints[elbow].center - model.joints[shoulder].center;
+    const Eigen::Vector3d axis = upper.cross(Eigen::Vector3d::UnitY());
+    if (upper.norm() <= 0.0 || axis.norm() <= 1e-9) return false;
+    const double rest_deg = std::asin(std::clamp(-upper.normalized().y(), -1.0, 1.0)) / kDegToRad;
+    out->joint_rotations[shoulder] =
+        ExpSO3(axis.normalized() * ((rest_deg - elevation_deg) * kDegToRad));
+  }
+  return true;
+}
+
+}  // namespace
+
+bool InitializerOptions::IsValid(std::string* error) const {
+  std::ostringstream msg;
+  std::string inner;
+  const auto finite = [](const std::vector<double>& v) {
+    return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
+  };
+  if (yaws_deg.empty() || !finite(yaws_deg)) {
+    msg << "yaws_deg: expected at least one finite yaw (degrees)";
+  } else if (!finite(arm_angles_deg)) {
+    msg << "arm_angles_deg: expected finite angles (degrees)";
+  } else if (coarse_iterations < 0) {
+    msg << "coarse_iterations: expected >= 0, found " << coarse_iterations;
+  } else if (!icp.IsValid(&inner)) {
+    msg << "icp." << inner;
+  } else if (em_candidates < 1) {
+    msg << "em_candidates: expected >= 1, found " << em_candidates;
+  } else if (ranking_iterations < 0) {
+    msg << "ranking_iterations: expected >= 0 (0: the whole schedule), found "
+        << ranking_iterations;
+  } else if (!quality.IsValid(&inner)) {
+    msg << "quality." << inner;
+  } else {
+    return true;
+  }
+  if (error) *error = msg.str();
+  return false;
+}
+
+std::string InitResult::BriefReport() const {
+  std::ostringstream out;
+  out << (ok ? "initialised" : "initialisation failed") << " from " << hypotheses.size()
+      << " hypotheses";
+  if (chosen >= 0) {
+    const InitHypothesis& h = hypotheses[chosen];
+    out << ", chosen yaw " << h.yaw_deg << " deg, arms " << h.arm_angle_deg << " deg, "
+        << quality.BriefReport();
+  }
+  out << "; " << total_seconds * 1e3 << " ms (ICP " << icp_seconds * 1e3 << ", EM "
+      << em_seconds * 1e3 << ", quality " << quality_seconds * 1e3 << ")";
+  return out.str();
+}
+
+double YawOfRotation(const Eigen::Matrix3d& rotation) {
+  const Eigen::Vector3d front = rotation.col(2);
+  return std::atan2(front.x(), front.z());
+}
+
+InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera& depth_camera,
+                         const InitializerOptions& options) {
+  const auto start = Clock::now();
+  std::string error;
+  if (!options.IsValid(&error)) throw Error("initializer options: " + error);
+  if (fitter == nullptr) throw Error("InitializeFit: expected an EM fitter, found null");
+  InitResult result;
+  const Skinning& skinning = fitter->skinning();
+  const Template& model = skinning.model();
+  const auto evaluate = [&](const Pose& pose) {
+    const auto t0 = Clock::now();
+    Eigen::MatrixX3d posed;
+    skinning.Apply(pose, &posed);
+    const FitQuality q =
+        EvaluateFitQuality(posed, model.triangles, scan, depth_camera, options.quality);
+    result.quality_seconds += SecondsSince(t0);
+    return q;
+  };
+  const auto finish = [&](InitResult* r) {
+    r->pose = fitter->pose();
+    r->total_seconds = SecondsSince(start);
+  };
+  const bool finite = scan.points.allFinite() && scan.normals.allFinite();
+  if (scan.size() < std::max(fitter->options().min_scan_points, 3) || !finite ||
+      scan.normals.rows() != scan.points.rows()) {
+    result.fit = fitter->FitFrame(scan);  // flagged too_few_points / non_finite
+    result.ok = result.fit.ok();
+    finish(&result);
+    return result;
+  }
+
+  // Arm variants of the start pose, at the scale the fitter would use.
+  const Pose base = fitter->PredictNextPose();
+  std::vector<std::pair<double, Pose>> arm_poses;
+  for (double angle : options.arm_angles_deg) {
+    Pose p;
+    if (WithArms(model, base, angle, &p)) arm_poses.emplace_back(angle, p);
+  }
+  if (arm_poses.empty()) arm_poses.emplace_back(std::numeric_limits<double>::quiet_NaN(), base);
+
+  const Eigen::Vector3d scan_centroid = scan.points.colwise().mean().transpose();
+  const Eigen::Vector3d eye = depth_camera.Center();
+  const double facing_yaw = std::atan2(eye.x() - scan_centroid.x(), eye.z() - scan_centroid.z());
+  IcpInitOptions icp = options.icp;
+  icp.coarse_alignment = false;
+  icp.estimate_scale = icp.estimate_scale && fitter->ScaleIsFree();
+
+  // 1. Coarse placement and similarity ICP of every hypothesis.
+  const auto icp_start = Clock::now();
+  for (const auto& [arm_angle, arm_pose] : arm_poses) {
+    Pose local = arm_pose;
+    local.scale = 1.0;
+    local.translation.setZero();
+    local.rotation.setIdentity();
+    Eigen::MatrixX3d x, xn;
+    skinning.Apply(local, &x);
+    ComputeVertexNormals(x, model.triangles, &xn);
+    for (double yaw_deg : options.yaws_deg) {
+      InitHypothesis h;
+      h.yaw_deg = yaw_deg;
+      h.arm_angle_deg = arm_angle;
+      Pose pose = arm_pose;
+      pose.rotation =
+          Eigen::AngleAxisd(facing_yaw + yaw_deg * kDegToRad, Eigen::Vector3d::UnitY())
+              .toRotationMatrix();
+      // Translation: the centroid of the template vertices that face the camera and project
+      // into the depth image matches the scan centroid (fixed point; starts from all vertices).
+      pose.translation = scan_centroid - pose.scale * pose.rotation *
+                                             Eigen::Vector3d(x.colwise().mean().transpose());
+      for (int it = 0; it < options.coarse_iterations; ++it) {
+        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+        int count = 0;
+        for (int t = 0; t < x.rows(); ++t) {
+          const Eigen::Vector3d w =
+              pose.scale * pose.rotation * x.row(t).transpose() + pose.translation;
+          if ((pose.rotation * xn.row(t).transpose()).dot(eye - w) <= 0.0) continue;
+          double z = 0.0;
+          const Eigen::Vector2d uv = depth_camera.Project(w, &z);
+          if (!(z > 0.0) || uv.x() < -0.5 || uv.y() < -0.5 || uv.x() > depth_camera.width - 0.5 ||
+              uv.y() > depth_camera.height - 0.5) {
+            continue;
+          }
+          sum += w;
+          ++count;
+        }
+        if (count == 0) break;
+        pose.translation += scan_centroid - sum / count;
+      }
+      h.icp = AlignByIcp(skinning, pose, scan, icp);
+      h.pose = h.icp.pose;
+      result.hypotheses.push_back(std::move(h));
+    }
+  }
+  result.icp_seconds = SecondsSince(icp_start);
+  for (InitHypothesis& h : result.hypotheses) {
+    h.icp_quality = evaluate(h.pose);
+    h.quality = h.icp_quality;
+  }
+
+  // 2. EM fits of the best candidates.
+  std::vector<int> order(result.hypotheses.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return result.hypotheses[a].icp_quality.score > result.hypotheses[b].icp_quality.score;
+  });
+  const int candidates = std::min<int>(options.em_candidates, static_cast<int>(order.size()));
+  const auto em_start = Clock::now();
+  const double quality_before_em = result.quality_seconds;
+  int best = -1;
+  for (int c = 0; c < candidates; ++c) {
+    InitHypothesis& h = result.hypotheses[order[c]];
+    fitter->BeginFrame(scan, h.icp.pose);
+    int iterations = 0;
+    while (!fitter->frame_done() &&
+           (options.ranking_iterations == 0 || iterations < options.ranking_iterations)) {
+      fitter->Iterate();
+      ++iterations;
+    }
+    h.fit = fitter->DiscardFrame(&h.pose);
+    h.fitted = true;
+    h.quality = evaluate(h.pose);
+    if (h.fit.ok() &&
+        (best < 0 || h.quality.score > result.hypotheses[best].quality.score)) {
+      best = order[c];
+    }
+  }
+
+  // 3. Accept the best (or fit the best ICP pose as a normal frame).
+  if (best >= 0 && options.ranking_iterations == 0) {
+    fitter->AcceptPose(scan, result.hypotheses[best].pose);
+    result.fit = result.hypotheses[best].fit;
+    result.quality = result.hypotheses[best].quality;
+    if (fitter->pose().scale != result.hypotheses[best].pose.scale) {
+      result.quality = evaluate(fitter->pose());  // the scale sample moved the pose
+    }
+    result.fit.scale = fitter->pose().scale;
+    result.ok = true;
+  } else {
+    const Pose& from =
+        best >= 0 ? result.hypotheses[best].pose : result.hypotheses[order[0]].icp.pose;
+    fitter->BeginFrame(scan, from);
+    while (!fitter->frame_done()) fitter->Iterate();
+    result.fit = fitter->EndFrame();
+    result.ok = result.fit.ok();
+    if (best < 0) best = order[0];
+    result.quality = evaluate(fitter->pose());
+  }
+  result.em_seconds = SecondsSince(em_start) - (result.quality_seconds - quality_before_em);
+  result.chosen = best;
+  finish(&result);
+  return result;
+}
+
+}  // namespace artex

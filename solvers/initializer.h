@@ -1,0 +1,90 @@
+// Multi-hypothesis initialisation of the fit (docs/fitting.md "Initialisation"): for a first
+// frame (or a re-initialisation) the template is tried in several global orientations (yaw
+// about world +Y relative to facing the depth camera: facing it, facing away, both sides) and
+// arm poses (arms down, A-pose, T-pose), each placed by a camera-aware coarse step (nominal
+// scale; translation that matches the centroid of the template's camera-facing vertices inside
+// the depth image to the scan centroid, so a person cut by the image border is placed by the
+// part that is seen), pre-aligned by similarity ICP (solvers/icp_init.h) and ranked by the fit
+// quality (solvers/fit_quality.h); the best few are fitted by the EMFitter's first-frame
+// schedule and the best fit by quality score is accepted as the fitter's frame.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "models/pose.h"
+#include "render/camera.h"
+#include "sensors/scan.h"
+#include "solvers/em_fitter.h"
+#include "solvers/fit_quality.h"
+#include "solvers/icp_init.h"
+
+namespace artex {
+
+struct InitializerOptions {
+  // Yaw hypotheses (degrees) about world +Y relative to facing the camera: 0 turns the
+  // template's front (+Z) towards the depth camera centre, 180 away from it, +-90 sideways.
+  std::vector<double> yaws_deg = {0.0, 180.0, 90.0, -90.0};
+  // Arm hypotheses: elevation of both upper arms below the horizontal (degrees), set by a
+  // shoulder rotation about the axis that raises the arm in the frontal plane: 80 ~ arms down,
+  // 40 A-pose (the default template's rest), 0 T-pose. Needs joints named l_shoulder,
+  // l_elbow, r_shoulder, r_elbow; without them the initial pose's arms are the only variant.
+  std::vector<double> arm_angles_deg = {80.0, 40.0, 0.0};
+  int coarse_iterations = 5;  // fixed-point steps of the visible-centroid translation
+  // Pre-alignment of every hypothesis (its coarse_alignment is ignored: the initialiser's own
+  // camera-aware step replaces it). Fewer points and iterations than a single-start ICP.
+  IcpInitOptions icp = [] {
+    IcpInitOptions o;
+    o.max_scan_points = 1500;
+    o.max_iterations = 30;
+    return o;
+  }();
+  // The best this many ICP hypotheses (by quality score) are fitted by EM (>= 1).
+  int em_candidates = 2;
+  // EM iterations of a candidate's ranking fit (0: the whole first-frame schedule, and the
+  // best candidate is accepted as fitted). > 0: a short fit for ranking, then the best
+  // candidate is fitted again from its result with the whole first-frame schedule.
+  int ranking_iterations = 0;
+  FitQualityOptions quality;  // ranking (score) and the reported labels
+
+  bool IsValid(std::string* error) const;
+};
+
+struct InitHypothesis {
+  double yaw_deg = 0.0;        // relative to facing the camera
+  double arm_angle_deg = 0.0;  // NaN: the initial pose's arms
+  IcpInitResult icp;           // the pre-aligned pose
+  FitQuality icp_quality;
+  bool fitted = false;  // ranked by an EM fit
+  FitSummary fit;       // of that fit
+  Pose pose;            // after EM when fitted, else after ICP
+  FitQuality quality;   // of `pose`
+};
+
+struct InitResult {
+  bool ok = false;  // a hypothesis was fitted and accepted as the fitter's frame
+  int chosen = -1;  // index into hypotheses
+  std::vector<InitHypothesis> hypotheses;
+  Pose pose;          // the accepted pose (fitter->pose())
+  FitQuality quality;  // its quality
+  FitSummary fit;      // its EM summary (the frame's)
+  double icp_seconds = 0.0, em_seconds = 0.0, quality_seconds = 0.0, total_seconds = 0.0;
+
+  std::string BriefReport() const;
+};
+
+// Fits `scan` as the next frame of `fitter` (normally its first, or the first after
+// fitter->Reset(); the scale then starts at fitter->PredictNextPose().scale, the nominal 1 or a
+// kept estimate, and is estimated only when fitter->ScaleIsFree()). On success (ok) the fitter
+// has the chosen pose as its accepted frame. With too few scan points, or when no candidate's
+// fit passes the robustness checks, the frame is fitted by fitter->FitFrame / from the best ICP
+// pose, as a normal frame (ok = false when that frame fails too). Throws artex::Error on
+// invalid options.
+InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera& depth_camera,
+                         const InitializerOptions& options);
+
+// Yaw (radians) of a global rotation: the angle about +Y of its image of the template front
+// +Z, atan2(x, z) of R e_z (0: facing +Z).
+double YawOfRotation(const Eigen::Matrix3d& rotation);
+
+}  // namespace artex

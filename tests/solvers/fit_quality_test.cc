@@ -1,0 +1,189 @@
+// Fit quality without ground truth (solvers/fit_quality.h) on the virtual Kinect: the true
+// subject surface and the tracked fits of a walk are good; the template upside down on the
+// person, 1 m beside the person, and against the back wall are lost.
+#include "solvers/fit_quality.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "models/error.h"
+#include "models/template_generator.h"
+#include "solvers/em_fitter.h"
+#include "solvers/initializer.h"
+#include "tests/solvers/virtual_kinect_scans.h"
+
+namespace artex {
+namespace {
+
+constexpr int kFrames = 30;
+
+struct Fixture {
+  testing_util::KinectScans data;
+  Template subject;                       // the rendered body (its true surface)
+  std::vector<Eigen::MatrixX3d> subject_posed;
+  Template tmpl;                          // the tracking template
+  std::vector<Pose> fitted;               // tracked poses
+  std::vector<FitSummary> fits;
+  double wall_z = 0.0;
+};
+
+const Fixture& GetFixture() {
+  static const Fixture* fixture = [] {
+    auto* f = new Fixture;
+    const SynthOptions options = testing_util::TestSynthOptions(kFrames);
+    f->data = testing_util::SynthesizeScans(options, "fit_quality_test");
+    const SynthSubject subject = PrepareSynthSubject(options);
+    f->subject = subject.subject;
+    const Skinning subject_skinning(f->subject);
+    for (const Pose& p : subject.poses) {
+      Eigen::MatrixX3d posed;
+      subject_skinning.Apply(p, &posed);
+      f->subject_posed.push_back(posed);
+    }
+    f->wall_z = options.kinect.scene.wall_z_m;
+    f->tmpl = GenerateTemplate();
+    EMFitter fitter(f->tmpl, EMFitterOptions());
+    const InitResult init =
+        InitializeFit(&fitter, f->data.scans[0], f->data.depth_camera, InitializerOptions());
+    f->fitted.push_back(fitter.pose());
+    f->fits.push_back(init.fit);
+    for (int i = 1; i < static_cast<int>(f->data.scans.size()); ++i) {
+      f->fits.push_back(fitter.FitFrame(f->data.scans[i]));
+      f->fitted.push_back(fitter.pose());
+    }
+    return f;
+  }();
+  return *fixture;
+}
+
+FitQuality Evaluate(const Template& model, const Eigen::MatrixX3d& posed, int frame) {
+  const Fixture& f = GetFixture();
+  return EvaluateFitQuality(posed, model.triangles, f.data.scans[frame], f.data.depth_camera,
+                            FitQualityOptions());
+}
+
+FitQuality EvaluatePose(const Pose& pose, int frame) {
+  const Fixture& f = GetFixture();
+  Eigen::MatrixX3d posed;
+  Skinning(f.tmpl).Apply(pose, &posed);
+  return Evaluate(f.tmpl, posed, frame);
+}
+
+TEST(FitQualityTest, TrueSurfaceAndTrackedFitsAreGood) {
+  const Fixture& f = GetFixture();
+  ASSERT_EQ(static_cast<int>(f.data.scans.size()), kFrames);
+  double worst_inlier = 1.0, worst_support = 1.0, worst_residual = 0.0, max_ms = 0.0;
+  for (int i = 0; i < kFrames; ++i) {
+    const FitQuality truth = Evaluate(f.subject, f.subject_posed[i], i);
+    const FitQuality fit = EvaluatePose(f.fitted[i], i);
+    if (i % 10 == 0) {
+      std::printf("frame %d truth: %s\n         fit: %s\n", i, truth.BriefReport().c_str(),
+                  fit.BriefReport().c_str());
+    }
+    EXPECT_EQ(truth.label, FitQualityLabel::kGood) << "frame " << i << " " << truth.BriefReport();
+    EXPECT_EQ(fit.label, FitQualityLabel::kGood) << "frame " << i << " " << fit.BriefReport();
+    worst_inlier = std::min({worst_inlier, truth.inlier_fraction, fit.inlier_fraction});
+    worst_support = std::min({worst_support, truth.support_fraction, fit.support_fraction});
+    worst_residual = std::max({worst_residual, truth.depth_residual_m, fit.depth_residual_m});
+    max_ms = std::max(max_ms, 1e3 * fit.seconds);
+    EXPECT_GT(fit.scan_samples, 0);
+    EXPECT_GT(fit.model_pixels, 0);
+    EXPECT_GE(fit.union_pixels, fit.model_pixels);
+  }
+  std::printf("good fits: worst inliers %.3f, support %.3f, residual %.1f mm; max %.1f ms\n",
+              worst_inlier, worst_support, worst_residual * 1e3, max_ms);
+  RecordProperty("good_worst_inlier_fraction", std::to_string(worst_inlier));
+  RecordProperty("good_worst_support_fraction", std::to_string(worst_support));
+  RecordProperty("good_worst_depth_residual_mm", std::to_string(worst_residual * 1e3));
+}
+
+TEST(FitQualityTest, WrongFitsAreLost) {
+  const Fixture& f = GetFixture();
+  for (int i : {0, kFrames / 2, kFrames - 1}) {
+    const Pose& good = f.fitted[i];
+    // Centre of the fitted body (m, world).
+    Eigen::MatrixX3d posed;
+    Skinning(f.tmpl).Apply(good, &posed);
+    const Eigen::Vector3d centre = posed.colwise().mean().transpose();
+    struct Wrong {
+      const char* name;
+      Pose pose;
+    };
+    std::vector<Wrong> wrong;
+    {  // Upside down about the body centre (rotation about the horizontal axis X).
+      Pose p = good;
+      const Eigen::Matrix3d flip =
+          Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
+      p.rotation = flip * good.rotation;
+      p.translation = centre + flip * (good.translation - centre);
+      wrong.push_back({"upside down", p});
+    }
+    {
+      Pose p = good;
+      p.translation.x() += 1.0;
+      wrong.push_back({"1 m beside", p});
+    }
+    {
+      Pose p = good;
+      p.translation.z() += f.wall_z + 0.15 - centre.z();
+      wrong.push_back({"on the wall", p});
+    }
+    for (const Wrong& w : wrong) {
+      const FitQuality q = EvaluatePose(w.pose, i);
+      std::printf("frame %d %-12s %s\n", i, w.name, q.BriefReport().c_str());
+      EXPECT_EQ(q.label, FitQualityLabel::kLost) << w.name << ", frame " << i << ": "
+                                                 << q.BriefReport();
+      EXPECT_LT(q.score, EvaluatePose(good, i).score) << w.name;
+    }
+  }
+}
+
+TEST(FitQualityTest, EmptyScanAndInvisibleModel) {
+  const Fixture& f = GetFixture();
+  Scan empty;
+  empty.points.resize(0, 3);
+  empty.normals.resize(0, 3);
+  Eigen::MatrixX3d posed;
+  Skinning(f.tmpl).Apply(f.fitted[0], &posed);
+  const FitQuality q = EvaluateFitQuality(posed, f.tmpl.triangles, empty, f.data.depth_camera,
+                                          FitQualityOptions());
+  EXPECT_EQ(q.inlier_fraction, 0.0);
+  EXPECT_EQ(q.support_fraction, 0.0);  // nothing observed under the model
+  EXPECT_EQ(q.label, FitQualityLabel::kLost);
+  // Behind the camera: nothing rendered.
+  Pose behind = f.fitted[0];
+  behind.translation.z() += 10.0;
+  Skinning(f.tmpl).Apply(behind, &posed);
+  const FitQuality b = EvaluateFitQuality(posed, f.tmpl.triangles, f.data.scans[0],
+                                          f.data.depth_camera, FitQualityOptions());
+  EXPECT_EQ(b.model_pixels, 0);
+  EXPECT_EQ(b.label, FitQualityLabel::kLost);
+}
+
+TEST(FitQualityTest, InvalidInputThrows) {
+  const Fixture& f = GetFixture();
+  FitQualityOptions bad;
+  bad.inlier_distance = 0.0;
+  std::string error;
+  EXPECT_FALSE(bad.IsValid(&error));
+  EXPECT_NE(error.find("inlier_distance"), std::string::npos);
+  Eigen::MatrixX3d posed;
+  Skinning(f.tmpl).Apply(f.fitted[0], &posed);
+  EXPECT_THROW(EvaluateFitQuality(posed, f.tmpl.triangles, f.data.scans[0], f.data.depth_camera,
+                                  bad),
+               Error);
+  Eigen::MatrixX3i tris = f.tmpl.triangles;
+  tris(0, 0) = static_cast<int>(posed.rows());
+  EXPECT_THROW(EvaluateFitQuality(posed, tris, f.data.scans[0], f.data.depth_camera,
+                                  FitQualityOptions()),
+               Error);
+  EXPECT_STREQ(FitQualityLabelName(FitQualityLabel::kDoubtful), "doubtful");
+}
+
+}  // namespace
+}  // namespace artex
