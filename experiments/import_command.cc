@@ -10,8 +10,11 @@
 #include <vector>
 
 #include "experiments/commands.h"
+#include "experiments/config.h"
+#include "experiments/pipeline.h"
 #include "models/error.h"
 #include "sensors/frame_source.h"
+#include "sensors/scene_segmentation.h"
 #include "sensors/sequence.h"
 
 namespace artex {
@@ -21,9 +24,10 @@ namespace fs = std::filesystem;
 struct ImportCli {
   std::string source;
   std::string output;
+  std::string config;
+  std::vector<std::string> overrides;
   std::string intrinsics;
-  double max_time_difference = TumReaderOptions().max_time_difference;
-  double time_offset = TumReaderOptions().time_offset;
+  std::string world_frame;  // "": preprocess.world_frame of the configuration (default auto)
   int first_frame = 0;
   int max_frames = 0;
   bool quiet = false;
@@ -49,9 +53,17 @@ void RunImport(const ImportCli& cli) {
       fs::equivalent(cli.source, cli.output, ec)) {
     throw Error(cli.output + ": the output folder is the source");
   }
-  FrameSourceOptions options;
-  options.tum.max_time_difference = cli.max_time_difference;
-  options.tum.time_offset = cli.time_offset;
+  // The input and world-frame options of a configuration, as `artex track` reads them.
+  Config config = cli.config.empty() ? Config() : Config::Load(cli.config);
+  for (const auto& o : cli.overrides) {
+    const auto eq = o.find('=');
+    if (eq == std::string::npos || eq == 0)
+      throw Error("--set " + o + ": expected key=value (e.g. input.time_offset=0.01)");
+    config.Set(o.substr(0, eq), o.substr(eq + 1));
+  }
+  if (!cli.world_frame.empty()) config.Set("preprocess.world_frame", cli.world_frame);
+  const PipelineOptions pipeline = LoadPipelineOptions(config);
+  FrameSourceOptions options = pipeline.input;
   if (!cli.intrinsics.empty()) options.tum.SetIntrinsics(cli.intrinsics);
   const std::unique_ptr<FrameSource> source = OpenFrameSource(cli.source, options);
   const std::string description = source->Description();
@@ -64,9 +76,36 @@ void RunImport(const ImportCli& cli) {
   const int begin = cli.first_frame;
   const int end = cli.max_frames > 0 ? std::min(total, begin + cli.max_frames) : total;
 
-  // The world frame: the source's calibration as it is (TUM: world = camera frame).
-  const Calibration& calibration = source->calibration();
+  // The world frame: the source's calibration, or (preprocess.world_frame auto with a
+  // calibration in the camera frame, as TUM's, or estimate) estimated from the first readable
+  // frame: floor plane, else gravity, else the camera convention (sensors/scene_segmentation.h).
+  Calibration calibration = source->calibration();
   const auto* sequence = dynamic_cast<const SequenceReader*>(source.get());
+  const PreprocessOptions& pre = pipeline.preprocess;
+  const bool camera_frame =
+      calibration.depth.world_to_camera.isApprox(Eigen::Isometry3d::Identity(), 1e-12);
+  std::string world = camera_frame ? "camera frame (x right, y down, z forward)"
+                                   : "the source's calibration";
+  if (pre.world_frame == WorldFrameMode::kEstimate ||
+      (pre.world_frame == WorldFrameMode::kAuto && camera_frame)) {
+    Frame first;
+    std::string warning;
+    int i = begin;
+    while (i < end && !source->ReadFrame(i, &first, &warning)) ++i;
+    if (i < end) {
+      WorldFrameOptions wo;
+      wo.planes = pre.segmentation.planes;
+      wo.assumed_camera_height = pre.assumed_camera_height;
+      const WorldFrameEstimate estimate =
+          EstimateWorldFrame(first.depth, calibration.depth, calibration.depth_distortion,
+                             calibration.depth_scale, source->gravity(), wo);
+      const Eigen::Isometry3d depth_to_color = calibration.DepthToColor();
+      calibration.depth.world_to_camera = estimate.world_to_camera;
+      calibration.color.world_to_camera = depth_to_color * estimate.world_to_camera;
+      world = "estimated from frame " + std::to_string(i) + ": " + estimate.Describe();
+    }
+  }
+  if (!cli.quiet) std::fprintf(stderr, "import: world frame: %s\n", world.c_str());
   SequenceWriter writer(cli.output, calibration);
   const std::vector<cv::Mat> background = source->ReadBackgroundFrames();
   for (const cv::Mat& depth : background) writer.AddBackgroundFrame(depth);
@@ -108,9 +147,8 @@ void RunImport(const ImportCli& cli) {
   std::printf("import: %d frames written to %s (%zu skipped", written, cli.output.c_str(),
               warnings.size());
   if (end - begin < total) std::printf(", %d of %d source frames chosen", end - begin, total);
-  std::printf("), %zu background frames%s; world frame = %s\n", background.size(),
-              ground_truth ? ", ground truth" : "",
-              sequence ? "the source's calibration" : "camera frame (x right, y down, z forward)");
+  std::printf("), %zu background frames%s; world frame: %s\n", background.size(),
+              ground_truth ? ", ground truth" : "", world.c_str());
   if (const auto up = source->gravity()) {
     std::printf("import: up (against gravity) in the depth camera frame: (%.4f, %.4f, %.4f)\n",
                 (*up)[0], (*up)[1], (*up)[2]);
@@ -130,21 +168,24 @@ void RegisterImportCommand(CLI::App* app) {
       "(unpaired entries counted); one camera for depth and colour (the benchmark's depth is "
       "registered to colour) with the intrinsics of camera.yaml, --intrinsics FILE or a "
       "preset (fr1, fr2, fr3, kinect); 5000 depth units per metre unless camera.yaml says "
-      "depth_scale; the world frame = the camera frame (x right, y down, z forward); 'up' from "
-      "accelerometer.txt when present (reported). Frames with missing or unreadable files are "
-      "skipped with a warning and counted.");
+      "depth_scale; 'up' from accelerometer.txt when present. The world frame (Y up, as "
+      "`artex track` uses it): a source calibration in the camera frame (TUM) gets one "
+      "estimated from the first frame (floor plane, else gravity, else an upright camera); "
+      "--world-frame calibration keeps the camera frame. Everything inferred is printed. "
+      "Frames with missing or unreadable files are skipped with a warning and counted.");
   cmd->add_option("source", cli->source, "recording folder (artex sequence or TUM RGB-D)")
       ->required();
   cmd->add_option("-o,--output", cli->output, "new artex sequence folder")->required();
   cmd->add_option("--intrinsics", cli->intrinsics,
                   "TUM intrinsics: a YAML file or a preset fr1|fr2|fr3|kinect (default: "
                   "<source>/camera.yaml)");
-  cmd->add_option("--max-time-difference", cli->max_time_difference,
-                  "TUM: largest depth/colour timestamp difference of a pair (s)")
-      ->capture_default_str();
-  cmd->add_option("--time-offset", cli->time_offset,
-                  "TUM: added to every colour timestamp before pairing (s)")
-      ->capture_default_str();
+  cmd->add_option("-c,--config", cli->config,
+                  "configuration (YAML): its input and preprocess.world_frame keys apply");
+  cmd->add_option("-s,--set", cli->overrides,
+                  "override an option: key=value (e.g. input.max_time_difference=0.03)");
+  cmd->add_option("--world-frame", cli->world_frame,
+                  "auto (estimate when the source's is the camera frame), estimate, calibration "
+                  "(default: preprocess.world_frame, auto)");
   cmd->add_option("--first-frame", cli->first_frame, "first source frame to import")
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--max-frames", cli->max_frames, "import at most this many frames (0: all)")

@@ -88,8 +88,9 @@ struct PipelineProgress {
   const FrameRecord* last = nullptr;
 };
 
-// Runs the pipeline on a recording (artex sequence or TUM RGB-D folder, OpenFrameSource) with the tracking template at template_path (.glb;
-// "" = the default generated template) and writes into out_dir (created): config.yaml
+// Runs the pipeline on a recording (artex sequence or TUM RGB-D folder: OpenFrameSource with
+// options.input) with the tracking template at template_path (.glb; "" = the default
+// generated template) and writes into out_dir (created): config.yaml
 // (resolved), poses.csv, frames.csv, summary.json, metrics.json (with ground truth),
 // texture.png, labels.png, tracked.glb, meshes/ on request. Throws artex::Error on bad input.
 PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& template_path,

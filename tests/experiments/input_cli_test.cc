@@ -6,6 +6,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -196,7 +197,7 @@ TEST_F(InputCliTest, ImportsATumFolderWithTheSameDepthPixels) {
   const std::string tum = WriteTum("tum_import", "2000.000000 rgb/late.png\n");
   fs::remove(tum + "/rgb/1000.041333.png");  // frame 1's colour
   const std::string out = Path("imported_tum");
-  const Result r = Run("import '" + tum + "' -o '" + out + "'");
+  const Result r = Run("import '" + tum + "' -o '" + out + "' --world-frame calibration");
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_NE(r.err.find("TUM RGB-D folder"), std::string::npos) << r.err;  // what was inferred
   EXPECT_NE(r.err.find("1 colour unpaired"), std::string::npos) << r.err;
@@ -204,7 +205,7 @@ TEST_F(InputCliTest, ImportsATumFolderWithTheSameDepthPixels) {
   EXPECT_NE(r.out.find(std::to_string(kFrames - 1) + " frames written"), std::string::npos)
       << r.out;
   EXPECT_NE(r.out.find("1 skipped"), std::string::npos) << r.out;
-  EXPECT_NE(r.out.find("world frame = camera frame"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("world frame: camera frame"), std::string::npos) << r.out;
   SequenceReader copy(out);
   ASSERT_EQ(copy.num_frames(), kFrames - 1);
   EXPECT_EQ(copy.calibration().depth_scale, 5000.0);
@@ -232,6 +233,24 @@ TEST_F(InputCliTest, ImportsATumFolderWithTheSameDepthPixels) {
   cv::Mat copied;
   c.depth.convertTo(copied, CV_32S);
   EXPECT_EQ(cv::norm(scaled, copied, cv::NORM_INF), 0.0);
+}
+
+TEST_F(InputCliTest, ImportEstimatesAWorldFrameWithYUp) {
+  // A TUM folder is in the camera frame; import estimates a world frame from the floor of the
+  // first frame whose up direction is the synthetic world's +Y.
+  const std::string tum = WriteTum("tum_world");
+  const std::string out = Path("imported_world");
+  const Result r = Run("import -q '" + tum + "' -o '" + out + "'");
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("world frame: estimated from frame 0"), std::string::npos) << r.out;
+  const Calibration estimated = SequenceReader(out).calibration();
+  const Calibration truth = SequenceReader(Synthetic()).calibration();
+  const Eigen::Vector3d up_estimated = estimated.depth.world_to_camera.linear() * Eigen::Vector3d::UnitY();
+  const Eigen::Vector3d up_true = truth.depth.world_to_camera.linear() * Eigen::Vector3d::UnitY();
+  const double angle_deg = std::acos(std::min(1.0, up_estimated.dot(up_true))) * 180.0 / M_PI;
+  EXPECT_LT(angle_deg, 2.0);
+  std::printf("import: estimated up %.2f deg from the true one\n", angle_deg);
+  EXPECT_TRUE(estimated.color.world_to_camera.isApprox(estimated.depth.world_to_camera, 1e-9));
 }
 
 TEST_F(InputCliTest, BadInputGivesClearErrors) {
@@ -266,7 +285,7 @@ TEST_F(InputCliTest, BadInputGivesClearErrors) {
   EXPECT_NE(r.err.find("999.000000"), std::string::npos) << r.err;
   // Nothing pairs: the counts.
   r = Run("import -q '" + WriteTum("tum_offset") + "' -o '" + Path("offset_out") +
-          "' --time-offset 1.0");
+          "' -s input.time_offset=1.0");
   EXPECT_EQ(r.status, 1);
   EXPECT_NE(r.err.find("all " + std::to_string(kFrames) + " depth and " + std::to_string(kFrames) +
                        " colour entries are unpaired"),
@@ -281,14 +300,19 @@ TEST_F(InputCliTest, TrackRunsOnATumFolder) {
                        "/camera.yaml' --no-texture -s pipeline.export_glb=false");
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_NE(r.err.find("track: input: TUM RGB-D folder"), std::string::npos) << r.err;
-  EXPECT_NE(r.out.find("frames: " + std::to_string(kFrames) + " (0 skipped)"), std::string::npos)
-      << r.out;
+  EXPECT_NE(r.out.find("frames: " + std::to_string(kFrames)), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("0 skipped"), std::string::npos) << r.out;
   const std::string poses = ReadText(fs::path(out) / "poses.csv");
   EXPECT_EQ(CountLines(poses), kFrames + 1) << poses;  // header + one row per frame
   // --intrinsics FILE is recorded in the run's configuration (absolute path).
   EXPECT_NE(
       ReadText(fs::path(out) / "config.yaml").find(fs::absolute(tum).string() + "/camera.yaml"),
       std::string::npos);
+  // The overlay finds the recording through the run (summary.json) and reads it as TUM.
+  const Result overlay = Run("overlay -q '" + out + "' -o '" + Path("tum_overlay") + "'");
+  ASSERT_EQ(overlay.status, 0) << overlay.err;
+  EXPECT_TRUE(fs::exists(Path("tum_overlay") + "/000004.png"));
+  EXPECT_EQ(cv::imread(Path("tum_overlay") + "/overview.png").cols, 3 * 320);
   // The TUM options through --set and the config: a window that pairs nothing fails clearly.
   const Result narrow = Run("track -q '" + tum + "' -o '" + Path("narrow") +
                             "' --no-texture -s input.max_time_difference=0.001");
