@@ -286,8 +286,8 @@ void BindInput(const Config& c, FrameSourceOptions* o) {
 }
 
 void BindPipeline(const Config& c, PipelineOptions* o) {
-  c.CheckKeys({"texture", "colour_term", "first_frame", "max_frames", "export_meshes", "export_glb",
-               "lost_threshold_mm"});
+  c.CheckKeys({"texture", "colour_term", "first_frame", "max_frames", "export_meshes",
+               "export_glb", "lost_threshold_mm", "texture_doubtful_frames"});
   c.Get("texture", &o->texture);
   c.Get("colour_term", &o->colour_term);
   c.Get("first_frame", &o->first_frame);
