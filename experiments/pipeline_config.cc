@@ -32,6 +32,7 @@ void BindPlanes(const Config& c, PlaneDetectionOptions* o) {
   c.Get("max_planes", &o->max_planes);
   c.Get("min_inlier_fraction", &o->min_inlier_fraction);
   c.Get("min_extent", &o->min_extent);
+  c.Get("min_coverage", &o->min_coverage);
   c.Get("floor_max_angle_deg", &o->floor_max_angle_deg);
   c.Get("wall_max_angle_deg", &o->wall_max_angle_deg);
   c.Get("min_depth", &o->min_depth);
@@ -286,8 +287,8 @@ void BindInput(const Config& c, FrameSourceOptions* o) {
 }
 
 void BindPipeline(const Config& c, PipelineOptions* o) {
-  c.CheckKeys({"texture", "colour_term", "first_frame", "max_frames", "export_meshes",
-               "export_glb", "lost_threshold_mm", "texture_doubtful_frames"});
+  c.CheckKeys({"texture", "colour_term", "first_frame", "max_frames", "export_meshes", "export_glb",
+               "lost_threshold_mm", "texture_doubtful_frames"});
   c.Get("texture", &o->texture);
   c.Get("colour_term", &o->colour_term);
   c.Get("first_frame", &o->first_frame);

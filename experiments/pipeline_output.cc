@@ -127,7 +127,8 @@ void WriteSummaryJson(const std::string& path, const PipelineResult& result,
                         {"normal", {p.normal.x(), p.normal.y(), p.normal.z()}},
                         {"offset", p.offset},
                         {"inlier_fraction", p.inlier_fraction},
-                        {"extent", {p.extent[0], p.extent[1]}}});
+                        {"extent", {p.extent[0], p.extent[1]}},
+                        {"coverage", p.coverage}});
     }
     world_json = {{"source", WorldFrameSourceName(e.source)},
                   {"up_camera", {e.up_camera.x(), e.up_camera.y(), e.up_camera.z()}},

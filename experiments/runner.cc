@@ -37,6 +37,7 @@
 #include "models/template_io.h"
 #include "sensors/frame_source.h"
 #include "sensors/sequence.h"
+#include "sensors/synth_conditions.h"
 #include "sensors/virtual_kinect.h"
 
 namespace artex {
@@ -190,6 +191,42 @@ SynthSpec SynthSpecFromConfig(const Config& c) {
   c.Get("color_noise", &o.kinect.color_model.noise_std);
   c.Get("outlier_fraction", &spec.outlier_fraction);
   c.Get("outlier_range_m", &spec.outlier_range_m);
+  // Recording conditions (docs/synthesis.md "Conditions"): presets first, then explicit keys.
+  if (c.Has("condition")) {
+    std::string list;
+    c.Get("condition", &list);
+    std::stringstream names(list);
+    std::string name;
+    while (std::getline(names, name, ',')) {
+      name.erase(0, name.find_first_not_of(" \t"));
+      name.erase(name.find_last_not_of(" \t") + 1);
+      try {
+        ApplySynthCondition(ParseSynthCondition(name), &o);
+      } catch (const Error& e) {
+        throw Error(c.Path("condition") + ": " + e.what());
+      }
+    }
+    c.Get("background_frames", &o.background_frames);
+    c.Get("yaw_deg", &o.subject_yaw_deg);
+  }
+  c.Get("camera_pitch_deg", &o.kinect.depth_pitch_deg);
+  c.Get("camera_roll_deg", &o.kinect.depth_roll_deg);
+  if (c.Has("world_frame")) {
+    std::string frame;
+    c.Get("world_frame", &frame);
+    try {
+      o.world_frame = ParseWorldFrame(frame);
+    } catch (const Error& e) {
+      throw Error(c.Path("world_frame") + ": " + e.what());
+    }
+  }
+  c.Get("boxes", &o.random_boxes);
+  c.Get("second_person", &o.second_person.enabled);
+  if (c.Has("second_person")) {
+    o.second_person.shape.resolution = o.subject_shape.resolution;
+    o.second_person.texture.size = o.texture.size;
+    o.second_person.texture.seed = o.texture.seed + 1;
+  }
   o.write_subject_glb = true;
   if (!(spec.outlier_fraction >= 0 && spec.outlier_fraction <= 1)) {
     throw Error(c.Path("outlier_fraction") + ": expected a fraction in [0, 1], found " +
@@ -240,6 +277,7 @@ std::string DefaultSequenceName(const YAML::Node& synth) {
   if (synth["frames"]) name += "_f" + synth["frames"].as<std::string>();
   if (synth["seed"]) name += "_s" + synth["seed"].as<std::string>();
   if (synth["noise"]) name += "_" + synth["noise"].as<std::string>();
+  if (synth["condition"]) name += "_" + synth["condition"].as<std::string>();
   return Sanitize(name);
 }
 
@@ -507,7 +545,8 @@ std::vector<std::string> SynthSpecKeys() {
           "background_frames", "color_width", "color_height", "texture_size",
           "subject_resolution", "subject_height", "subject_girth", "yaw_deg", "depth_width",
           "depth_height", "disparity_noise_px", "random_dropout", "color_noise",
-          "outlier_fraction", "outlier_range_m"};
+          "outlier_fraction", "outlier_range_m", "condition", "camera_pitch_deg",
+          "camera_roll_deg", "world_frame", "boxes", "second_person"};
 }
 
 const std::vector<MetricInfo>& Metrics() {

@@ -370,7 +370,7 @@ void RegisterSynthCommand(CLI::App* app) {
       ->capture_default_str()
       ->check(CLI::Range(-360.0, 360.0));
   sub->add_option("--camera-target-height", cli->camera.target_height_m,
-                  "Height of the look-at point above the subject's start (m)")
+                  "Height above the floor of the look-at point over the subject's start (m)")
       ->capture_default_str()
       ->check(CLI::Range(-5.0, 10.0));
   sub->add_option("--camera-pitch", cli->camera_pitch_deg,

@@ -79,8 +79,9 @@ bool PlaneDetectionOptions::IsValid(std::string* error) const {
     msg << "max_planes: expected >= 0, found " << max_planes;
   } else if (!(min_inlier_fraction > 0 && min_inlier_fraction <= 1)) {
     msg << "min_inlier_fraction: expected a value in (0, 1], found " << min_inlier_fraction;
-  } else if (!(min_extent >= 0)) {
-    msg << "min_extent: expected >= 0 (m), found " << min_extent;
+  } else if (!(min_extent >= 0) || !(min_coverage >= 0)) {
+    msg << "min_extent/min_coverage: expected >= 0, found " << min_extent << " / "
+        << min_coverage;
   } else if (!(floor_max_angle_deg >= 0 && floor_max_angle_deg <= 90) ||
              !(wall_max_angle_deg >= 0 && wall_max_angle_deg <= 90)) {
     msg << "floor_max_angle_deg/wall_max_angle_deg: expected degrees in [0, 90]";
@@ -224,8 +225,19 @@ std::vector<ScenePlane> DetectScenePlanes(const cv::Mat& depth, const PinholeCam
     const double e1 = Quantile(&copy1, 0.95) - Quantile(&c1, 0.05);
     plane.extent[0] = std::max(e0, e1);
     plane.extent[1] = std::min(e0, e1);
+    // Area on the plane of the inlier samples: (stride z)^2 / (fx fy) per sample, divided by
+    // the cosine between the viewing ray and the normal (bounded at grazing angles).
+    double area = 0.0;
+    const double pixel = options.sample_stride * options.sample_stride /
+                         (intrinsics.fx * intrinsics.fy);
+    for (int i : inliers) {
+      const Eigen::Vector3d& x = points[i];
+      const double cosine = std::max(0.2, std::abs(plane.normal.dot(x)) / x.norm());
+      area += pixel * x.z() * x.z() / cosine;
+    }
+    plane.coverage = area / std::max(1e-9, plane.extent[0] * plane.extent[1]);
     const double up_dot = plane.normal.dot(up);
-    if (plane.extent[1] >= options.min_extent) {
+    if (plane.extent[1] >= options.min_extent && plane.coverage >= options.min_coverage) {
       if (up_dot >= cos_floor) {
         plane.kind = PlaneKind::kFloor;
       } else if (std::abs(up_dot) <= sin_wall) {

@@ -36,7 +36,11 @@ struct PlaneDetectionOptions {
   double min_inlier_fraction = 0.05;
   // ... and inliers spanning at least this much (m; 5-95 % quantiles) along both in-plane
   // axes to count as a floor or wall: a person's torso or a table top is smaller.
-  double min_extent = 1.2;
+  double min_extent = 1.5;
+  // ... and whose inliers cover at least this fraction of that extent (area of the inlier
+  // pixels on the plane / extent[0] * extent[1]): a real floor or wall is dense, a plane
+  // through a person and things beside it at the same depth is not.
+  double min_coverage = 0.5;
   double floor_max_angle_deg = 40.0;  // floor: normal within this of the up direction
   double wall_max_angle_deg = 25.0;   // wall: normal within this of horizontal
   double min_depth = 0.3;             // m: valid range of the samples
@@ -54,6 +58,7 @@ struct ScenePlane {
   int inliers = 0;      // sampled inliers
   double inlier_fraction = 0.0;   // of the sampled valid points
   double extent[2] = {0.0, 0.0};  // in-plane spread of the inliers (m), larger first
+  double coverage = 0.0;          // inlier area / (extent[0] * extent[1])
   PlaneKind kind = PlaneKind::kOther;
   double SignedDistance(const Eigen::Vector3d& x) const { return normal.dot(x) + offset; }
 };

@@ -263,7 +263,9 @@ struct SynthOptions {
   // motion.frames then limits the number of frames (0 = all) and motion.type is ignored.
   std::string bvh_path;
   // World placement of the motion: poses are rotated by subject_yaw_deg about +Y and then
-  // shifted by subject_position_m (the ground-truth poses include this transform).
+  // shifted by subject_position_m (the ground-truth poses include this transform). The
+  // template faces +Z: yaw 180 turns its front away from the default camera, 90 shows the
+  // camera its right side.
   Eigen::Vector3d subject_position_m = Eigen::Vector3d::Zero();
   double subject_yaw_deg = 0.0;
   // Empty-scene depth frames for the background model (static scene incl. boxes, no

@@ -129,6 +129,29 @@ TEST(ExperimentParseTest, BadSynthSpecListsValidKeys) {
   EXPECT_NE(msg.find("arm_raise"), std::string::npos) << msg;
 }
 
+TEST(ExperimentParseTest, SynthConditionKeys) {
+  const Experiment e = ParseExperiment(
+      "sequences:\n  - {synth: {motion: walk, frames: 2, condition: 'room, facing_away',"
+      " camera_roll_deg: 10, world_frame: camera, boxes: 2, second_person: true}}\n",
+      "exp.yaml", "");
+  ASSERT_EQ(e.sequences.size(), 1u);
+  EXPECT_NE(e.sequences[0].name.find("room"), std::string::npos) << e.sequences[0].name;
+  std::string msg = ErrorOf([] {
+    ParseExperiment("sequences:\n  - {synth: {motion: walk, condition: kitchen}}\n", "exp.yaml", "");
+  });
+  EXPECT_NE(msg.find("condition"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("kitchen"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("upper_body"), std::string::npos) << msg;
+  msg = ErrorOf([] {
+    ParseExperiment("sequences:\n  - {synth: {motion: walk, world_frame: world}}\n", "exp.yaml", "");
+  });
+  EXPECT_NE(msg.find("world_frame"), std::string::npos) << msg;
+  msg = ErrorOf([] {
+    ParseExperiment("sequences:\n  - {synth: {motion: walk, camera_roll_deg: 400}}\n", "exp.yaml", "");
+  });
+  EXPECT_NE(msg.find("depth_roll_deg"), std::string::npos) << msg;
+}
+
 TEST(ExperimentParseTest, StructuralErrors) {
   EXPECT_NE(ErrorOf([] { Parse("grids: {texture.lambda: [0]}\n"); }).find("valid keys"), std::string::npos);
   EXPECT_NE(ErrorOf([] {
