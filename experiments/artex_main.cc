@@ -15,6 +15,8 @@ int main(int argc, char** argv) {
   artex::RegisterTrackCommand(&app);
   artex::RegisterRenderCommand(&app);
   artex::RegisterExperimentCommand(&app);
+  artex::RegisterImportCommand(&app);
+  artex::RegisterOverlayCommand(&app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -13,5 +13,7 @@ void RegisterSynthCommand(CLI::App* app);      // artex synth
 void RegisterTrackCommand(CLI::App* app);      // artex track
 void RegisterRenderCommand(CLI::App* app);     // artex render
 void RegisterExperimentCommand(CLI::App* app); // artex experiment
+void RegisterImportCommand(CLI::App* app);     // artex import
+void RegisterOverlayCommand(CLI::App* app);    // artex overlay
 
 }  // namespace artex

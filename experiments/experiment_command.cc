@@ -1,7 +1,7 @@
 // `artex experiment FILE -o OUT`: runs every (sequence, configuration) of an experiment file in
 // child processes with a progress display, then writes results.csv, summary.md and the plots
 // (scripts/plot_results.py). Hidden subcommands `experiment-run` and `experiment-synth` are
-// the children's entry points; `artex overlay` draws fitted meshes over input depth frames.
+// the children's entry points (`artex overlay` is in overlay_command.cc).
 #include <unistd.h>
 
 #include <algorithm>
@@ -15,18 +15,10 @@
 #include <vector>
 
 #include <CLI/CLI.hpp>
-#include <nlohmann/json.hpp>
-#include <opencv2/imgproc.hpp>
 
 #include "experiments/commands.h"
-#include "experiments/pose_csv.h"
 #include "experiments/runner.h"
 #include "models/error.h"
-#include "models/normals.h"
-#include "models/skinning.h"
-#include "models/template_io.h"
-#include "render/rasterizer.h"
-#include "sensors/sequence.h"
 
 namespace artex {
 namespace {
@@ -182,145 +174,6 @@ void RunExperimentCli(const ExperimentCliOptions& cli) {
   }
 }
 
-// ---- artex overlay ---------------------------------------------------------------------------
-
-struct OverlayCliOptions {
-  std::string run;
-  std::string sequence;       // default: run.json's sequence_folder
-  std::string template_path;  // default: run.json's template
-  std::vector<int> frames;
-  std::string output;
-  double scale = 1.0;         // of each panel relative to the depth image
-  double mesh_opacity = 0.45;
-  bool wireframe = false;
-};
-
-std::string ReadAll(const std::string& path) {
-  FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) throw Error(path + ": cannot open");
-  std::string text;
-  char buf[4096];
-  std::size_t n;
-  while ((n = std::fread(buf, 1, sizeof(buf), f)) > 0) text.append(buf, n);
-  std::fclose(f);
-  return text;
-}
-
-// Rows of RUN/poses.csv by frame index.
-std::map<int, Pose> ReadPoses(const std::string& path, int num_joints) {
-  std::map<int, Pose> poses;
-  for (auto& [frame, pose] : ReadPoseCsv(path, num_joints)) poses[frame] = pose;
-  return poses;
-}
-
-// Depth (CV_16UC1) -> TURBO colour map over the frame's valid range (near = red), missing black.
-cv::Mat ColorMapDepth(const cv::Mat& depth) {
-  double lo = 0, hi = 0;
-  cv::minMaxLoc(depth, nullptr, &hi);
-  cv::Mat valid = depth > 0;
-  cv::minMaxLoc(depth, &lo, nullptr, nullptr, nullptr, valid);
-  cv::Mat gray;
-  depth.convertTo(gray, CV_8U, hi > lo ? -255.0 / (hi - lo) : 0.0, hi > lo ? 255.0 * hi / (hi - lo) : 0.0);
-  cv::Mat color;
-  cv::applyColorMap(gray, color, cv::COLORMAP_TURBO);
-  color.setTo(cv::Scalar(0, 0, 0), ~valid);
-  return color;
-}
-
-// One panel: the depth image colour-mapped, the fitted mesh shaded (Lambert, grey) blended on
-// top, its silhouette outlined in white and optionally its visible wireframe.
-cv::Mat OverlayPanel(const cv::Mat& depth, const PinholeCamera& camera, const Template& tmpl,
-                     const Eigen::MatrixX3d& posed, const OverlayCliOptions& cli) {
-  cv::Mat panel = ColorMapDepth(depth);
-  RasterBuffers buffers;
-  Rasterize(posed, tmpl.triangles, camera, RasterOptions(), &buffers);
-  Eigen::MatrixX3d normals;
-  ComputeVertexNormals(posed, tmpl.triangles, &normals);
-  const Eigen::Matrix3d r = camera.world_to_camera.linear();
-  cv::Mat mask(camera.height, camera.width, CV_8UC1, cv::Scalar(0));
-  cv::Mat shade = panel.clone();
-  std::vector<uint8_t> visible(tmpl.num_triangles(), 0);
-  for (int y = 0; y < camera.height; ++y) {
-    for (int x = 0; x < camera.width; ++x) {
-      const int i = buffers.index(x, y);
-      const int f = buffers.triangle_id[i];
-      if (f < 0) continue;
-      visible[f] = 1;
-      const double b1 = buffers.barycentric[i].x(), b2 = buffers.barycentric[i].y();
-      Eigen::Vector3d n = (1 - b1 - b2) * normals.row(tmpl.triangles(f, 0)).transpose() +
-                          b1 * normals.row(tmpl.triangles(f, 1)).transpose() +
-                          b2 * normals.row(tmpl.triangles(f, 2)).transpose();
-      n = r * n.normalized();
-      const double lambert = 0.25 + 0.75 * std::max(0.0, -n.z());
-      const auto g = static_cast<uint8_t>(255 * lambert);
-      shade.at<cv::Vec3b>(y, x) = cv::Vec3b(g, g, g);
-      mask.at<uint8_t>(y, x) = 255;
-    }
-  }
-  cv::Mat blended;
-  cv::addWeighted(panel, 1.0 - cli.mesh_opacity, shade, cli.mesh_opacity, 0.0, blended);
-  blended.copyTo(panel, mask);
-  if (cli.wireframe) {
-    for (int f = 0; f < tmpl.num_triangles(); ++f) {
-      if (!visible[f]) continue;
-      for (int k = 0; k < 3; ++k) {
-        const Eigen::Vector2d a = camera.Project(posed.row(tmpl.triangles(f, k)).transpose());
-        const Eigen::Vector2d b = camera.Project(posed.row(tmpl.triangles(f, (k + 1) % 3)).transpose());
-        cv::line(panel, cv::Point2d(a.x(), a.y()), cv::Point2d(b.x(), b.y()), cv::Scalar(40, 40, 40), 1,
-                 cv::LINE_AA);
-      }
-    }
-  }
-  std::vector<std::vector<cv::Point>> contours;
-  cv::findContours(mask, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
-  cv::drawContours(panel, contours, -1, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
-  return panel;
-}
-
-void RunOverlay(const OverlayCliOptions& cli) {
-  std::string sequence = cli.sequence, template_path = cli.template_path;
-  const std::string run_json = cli.run + "/run.json";
-  if ((sequence.empty() || template_path.empty()) && fs::exists(run_json)) {
-    const auto info = nlohmann::json::parse(ReadAll(run_json));
-    if (sequence.empty()) sequence = info.value("sequence_folder", "");
-    if (template_path.empty()) template_path = info.value("template", "");
-  }
-  if (sequence.empty()) throw Error("--sequence: required (the run has no run.json naming it)");
-  const Template tmpl = template_path.empty() ? ReadTemplateGlb(cli.run + "/tracked.glb")
-                                              : ReadTemplateGlb(template_path);
-  const std::map<int, Pose> poses = ReadPoses(cli.run + "/poses.csv", tmpl.num_joints());
-  if (poses.empty()) throw Error(cli.run + "/poses.csv: no poses");
-  std::vector<int> frames = cli.frames;
-  if (frames.empty()) frames.push_back(poses.rbegin()->first);
-  SequenceReader reader(sequence);
-  const Skinning skinning(tmpl);
-  std::vector<cv::Mat> panels;
-  for (int f : frames) {
-    auto it = poses.find(f);
-    if (it == poses.end()) {
-      throw Error("--frames: frame " + std::to_string(f) + " has no pose in " + cli.run +
-                  "/poses.csv (fitted frames " + std::to_string(poses.begin()->first) + ".." +
-                  std::to_string(poses.rbegin()->first) + ")");
-    }
-    Frame frame;
-    std::string warning;
-    if (!reader.ReadFrame(f, &frame, &warning)) throw Error(sequence + ": frame " + std::to_string(f) + ": " + warning);
-    Eigen::MatrixX3d posed;
-    skinning.Apply(it->second, &posed);
-    cv::Mat panel = OverlayPanel(frame.depth, reader.calibration().depth, tmpl, posed, cli);
-    if (cli.scale != 1.0) cv::resize(panel, panel, cv::Size(), cli.scale, cli.scale, cv::INTER_AREA);
-    const std::string text = "frame " + std::to_string(f);
-    cv::putText(panel, text, cv::Point(6, 18), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 3, cv::LINE_AA);
-    cv::putText(panel, text, cv::Point(6, 18), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1,
-                cv::LINE_AA);
-    panels.push_back(panel);
-  }
-  cv::Mat strip;
-  cv::hconcat(panels, strip);
-  WriteImageAtomic(cli.output, strip);
-  std::fprintf(stderr, "overlay: wrote %s (%zu frames)\n", cli.output.c_str(), panels.size());
-}
-
 void PrintProgress(int done, int total) {
   std::printf("progress %d %d\n", done, total);
   std::fflush(stdout);
@@ -393,30 +246,6 @@ void RegisterExperimentCommand(CLI::App* app) {
     GenerateSyntheticSequence(text, synth->name.empty() ? synth->spec : synth->name, synth->out,
                               PrintProgress);
   });
-
-  auto overlay = std::make_shared<OverlayCliOptions>();
-  CLI::App* overlay_sub = app->add_subcommand(
-      "overlay",
-      "Draw the fitted template of a run over its input depth frames (paper Fig. 3): one panel "
-      "per frame, side by side");
-  overlay_sub->add_option("run", overlay->run, "Run folder (artex track / experiment run)")
-      ->required()
-      ->check(CLI::ExistingDirectory);
-  overlay_sub->add_option("--sequence", overlay->sequence, "Sequence folder (default: from run.json)");
-  overlay_sub->add_option("--template", overlay->template_path,
-                          "Tracking template .glb (default: from run.json, else RUN/tracked.glb)");
-  overlay_sub->add_option("--frames", overlay->frames, "Frame indices (default: the last fitted frame)")
-      ->delimiter(',');
-  overlay_sub->add_option("-o,--output", overlay->output, "Output PNG")->required();
-  overlay_sub->add_option("--scale", overlay->scale, "Panel scale relative to the depth image")
-      ->capture_default_str()
-      ->check(CLI::Range(0.1, 4.0));
-  overlay_sub->add_option("--mesh-opacity", overlay->mesh_opacity, "Opacity of the shaded mesh")
-      ->capture_default_str()
-      ->check(CLI::Range(0.0, 1.0));
-  overlay_sub->add_flag("--wireframe", overlay->wireframe, "Also draw the visible triangle edges");
-  overlay_sub->callback([overlay]() { RunOverlay(*overlay); });
-
 }
 
 }  // namespace artex

@@ -24,6 +24,7 @@
 #include "models/template_generator.h"
 #include "models/template_io.h"
 #include "sensors/calibration.h"
+#include "sensors/frame_source.h"
 #include "sensors/scene_segmentation.h"
 #include "sensors/sequence.h"
 
@@ -152,15 +153,18 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
                            const std::function<void(const PipelineProgress&)>& progress) {
   std::string why;
   if (!options.IsValid(&why)) throw Error(why);
-  SequenceReader reader(sequence_dir);
+  const std::unique_ptr<FrameSource> source = OpenFrameSource(sequence_dir, options.input);
+  FrameSource& reader = *source;
+  // Ground truth exists only in artex sequences.
+  const SequenceReader* sequence = dynamic_cast<const SequenceReader*>(source.get());
   const int total_frames = reader.num_frames();
   const int begin = std::min(options.first_frame, total_frames);
   const int end =
       options.max_frames > 0 ? std::min(total_frames, begin + options.max_frames) : total_frames;
   PipelineResult result;
   const std::vector<cv::Mat> background = reader.ReadBackgroundFrames();
-  const FrameWorld world = ChooseWorldFrame(&reader, begin, end, options.preprocess,
-                                            std::optional<Eigen::Vector3d>(), &result);
+  const FrameWorld world =
+      ChooseWorldFrame(&reader, begin, end, options.preprocess, reader.gravity(), &result);
   const Calibration& calibration = world.calibration;
   const Template tmpl = template_path.empty() ? GenerateTemplate() : ReadTemplateGlb(template_path);
   std::error_code ec;
@@ -182,13 +186,14 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   if (options.texture) texturer = std::make_unique<Texturer>(tmpl, options.texturing);
 
   // Ground truth: the subject's mesh and skeleton (for surface and joint errors).
-  result.has_ground_truth = reader.has_ground_truth() && !reader.GroundTruthSubjectPath().empty() &&
-                            fs::exists(reader.GroundTruthSubjectPath());
+  result.has_ground_truth = sequence && sequence->has_ground_truth() &&
+                            !sequence->GroundTruthSubjectPath().empty() &&
+                            fs::exists(sequence->GroundTruthSubjectPath());
   std::unique_ptr<Template> subject;
   std::unique_ptr<Skinning> subject_skinning;
   std::vector<std::pair<int, int>> joint_pairs;  // (tracked joint, subject joint) by name
   if (result.has_ground_truth) {
-    subject = std::make_unique<Template>(ReadTemplateGlb(reader.GroundTruthSubjectPath()));
+    subject = std::make_unique<Template>(ReadTemplateGlb(sequence->GroundTruthSubjectPath()));
     subject_skinning = std::make_unique<Skinning>(*subject);
     for (int j = 0; j < tmpl.num_joints(); ++j) {
       const int s = subject->FindJoint(tmpl.joints[j].name);
@@ -313,7 +318,7 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
       WritePosedMesh(out_dir + name, posed, tmpl.triangles);
     }
     if (result.has_ground_truth) {
-      const GroundTruthFrame truth = reader.ReadGroundTruth(i);
+      const GroundTruthFrame truth = sequence->ReadGroundTruth(i);
       Eigen::MatrixX3d truth_normals;
       ComputeVertexNormals(truth.vertices, subject->triangles, &truth_normals);
       double mean = 0.0, max = 0.0;

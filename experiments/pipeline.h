@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "experiments/config.h"
+#include "sensors/frame_source.h"
 #include "sensors/preprocess.h"
 #include "solvers/em_fitter.h"
 #include "solvers/fit_quality.h"
@@ -17,6 +18,7 @@
 namespace artex {
 
 struct PipelineOptions {
+  FrameSourceOptions input;  // how recordings are read (TUM association, intrinsics)
   PreprocessOptions preprocess;
   EMFitterOptions fitting;
   InitializerOptions initializer;  // fitting.init: multi-hypothesis first frame / re-init
@@ -36,7 +38,7 @@ struct PipelineOptions {
   bool IsValid(std::string* error) const;
 };
 
-// Reads the sections preprocess, fitting, texture and pipeline of a configuration; unknown
+// Reads the sections input, preprocess, fitting, texture and pipeline of a configuration; unknown
 // keys are errors listing the valid ones.
 PipelineOptions LoadPipelineOptions(const Config& config);
 
@@ -86,8 +88,9 @@ struct PipelineProgress {
   const FrameRecord* last = nullptr;
 };
 
-// Runs the pipeline on a sequence folder with the tracking template at template_path (.glb;
-// "" = the default generated template) and writes into out_dir (created): config.yaml
+// Runs the pipeline on a recording (artex sequence or TUM RGB-D folder: OpenFrameSource with
+// options.input) with the tracking template at template_path (.glb; "" = the default
+// generated template) and writes into out_dir (created): config.yaml
 // (resolved), poses.csv, frames.csv, summary.json, metrics.json (with ground truth),
 // texture.png, labels.png, tracked.glb, meshes/ on request. Throws artex::Error on bad input.
 PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& template_path,

@@ -305,6 +305,20 @@ void BindTexture(const Config& c, TexturingOptions* o) {
   c.Get("vertex_colors_need_full_ring", &o->pool.vertex_colors_need_full_ring);
 }
 
+void BindInput(const Config& c, FrameSourceOptions* o) {
+  c.CheckKeys({"intrinsics", "max_time_difference", "time_offset", "accelerometer",
+               "min_gravity_norm"});
+  if (c.Has("intrinsics")) {
+    std::string intrinsics;
+    c.Get("intrinsics", &intrinsics);
+    o->tum.SetIntrinsics(intrinsics);
+  }
+  c.Get("max_time_difference", &o->tum.max_time_difference);
+  c.Get("time_offset", &o->tum.time_offset);
+  c.Get("accelerometer", &o->tum.read_accelerometer);
+  c.Get("min_gravity_norm", &o->tum.min_gravity_norm);
+}
+
 void BindPipeline(const Config& c, PipelineOptions* o) {
   c.CheckKeys({"texture", "colour_term", "first_frame", "max_frames", "export_meshes", "export_glb",
                "lost_threshold_mm", "texture_doubtful_frames"});
@@ -321,7 +335,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
 }  // namespace
 
 bool PipelineOptions::IsValid(std::string* error) const {
-  if (!preprocess.IsValid(error) || !fitting.IsValid(error)) return false;
+  if (!input.IsValid(error) || !preprocess.IsValid(error) || !fitting.IsValid(error)) return false;
   std::string inner;
   if (!initializer.IsValid(&inner)) {
     if (error) *error = "fitting.init." + inner;
@@ -345,8 +359,9 @@ bool PipelineOptions::IsValid(std::string* error) const {
 }
 
 PipelineOptions LoadPipelineOptions(const Config& config) {
-  config.CheckKeys({"preprocess", "fitting", "texture", "pipeline"});
+  config.CheckKeys({"input", "preprocess", "fitting", "texture", "pipeline"});
   PipelineOptions o;
+  BindInput(config.Section("input"), &o.input);
   BindPreprocess(config.Section("preprocess"), &o.preprocess);
   BindFitting(config.Section("fitting"), &o.fitting);
   BindInitializer(config.Section("fitting").Section("init"), &o.initializer);

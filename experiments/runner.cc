@@ -35,6 +35,7 @@
 #include "models/error.h"
 #include "models/template_generator.h"
 #include "models/template_io.h"
+#include "sensors/frame_source.h"
 #include "sensors/sequence.h"
 #include "sensors/synth_conditions.h"
 #include "sensors/virtual_kinect.h"
@@ -687,6 +688,13 @@ Experiment ParseExperiment(const std::string& yaml, const std::string& source_na
     }
     if (!seq.synthetic && !fs::is_directory(seq.folder)) {
       throw Error(where + ": sequence folder not found: " + seq.folder);
+    }
+    if (!seq.synthetic) {
+      try {
+        DetectFrameSource(seq.folder);  // an artex sequence or a TUM RGB-D folder
+      } catch (const Error& e) {
+        throw Error(where + ": " + e.what());
+      }
     }
     if (!names.insert(seq.name).second) {
       throw Error(where + ": duplicate sequence name '" + seq.name + "' (set name: to distinguish)");

@@ -1,7 +1,9 @@
-// artex track SEQUENCE --config FILE -o OUT/: preprocessing, EM fitting and on-the-fly
-// texturing of every frame (experiments/pipeline.h), with a progress line on stderr.
+// artex track RECORDING --config FILE -o OUT/: preprocessing, EM fitting and on-the-fly
+// texturing of every frame (experiments/pipeline.h), with a progress line on stderr. The
+// recording is an artex sequence or a TUM RGB-D folder (sensors/frame_source.h).
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -9,12 +11,40 @@
 #include "experiments/config.h"
 #include "experiments/pipeline.h"
 #include "models/error.h"
+#include "sensors/frame_source.h"
 
 namespace artex {
+namespace {
+
+// A YAML single-quoted scalar holding `text` verbatim (for Config::Set).
+std::string YamlQuoted(const std::string& text) {
+  std::string out = "'";
+  for (char c : text) out += c == '\'' ? std::string("''") : std::string(1, c);
+  return out + "'";
+}
+
+// The value of input.intrinsics for --intrinsics NAME|FILE: a preset name as is, a file as an
+// absolute path (the run's config.yaml must name it from anywhere).
+std::string IntrinsicsConfigValue(const std::string& name_or_file) {
+  if (TumIntrinsicsPresetNames().count(name_or_file) || name_or_file.empty()) {
+    return YamlQuoted(name_or_file);
+  }
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(name_or_file, ec)) {
+    std::string presets;
+    for (const auto& kv : TumIntrinsicsPresetNames()) presets += " " + kv.first;
+    throw Error("--intrinsics " + name_or_file +
+                ": expected a preset name (" + presets.substr(1) +
+                ") or an intrinsics YAML file, found neither");
+  }
+  return YamlQuoted(std::filesystem::absolute(name_or_file).string());
+}
+
+}  // namespace
 
 void RegisterTrackCommand(CLI::App* app) {
   struct Args {
-    std::string sequence, config, out, template_path;
+    std::string sequence, config, out, template_path, intrinsics;
     std::vector<std::string> overrides;
     bool export_meshes = false;
     bool no_texture = false;
@@ -24,9 +54,10 @@ void RegisterTrackCommand(CLI::App* app) {
   auto args = std::make_shared<Args>();
   CLI::App* cmd = app->add_subcommand(
       "track", "Fit the template to every frame of a sequence and texture it on the fly");
-  cmd->add_option("sequence", args->sequence, "artex sequence folder")->required();
-  cmd->add_option("-c,--config", args->config,
-                  "configuration file (YAML); default: built-in defaults");
+  cmd->add_option("sequence", args->sequence,
+                  "recording: an artex sequence folder or a TUM RGB-D folder (rgb.txt, depth.txt)")
+      ->required();
+  cmd->add_option("-c,--config", args->config, "configuration file (YAML); default: built-in defaults");
   cmd->add_option("-o,--output", args->out, "output folder")->required();
   cmd->add_option("-t,--template", args->template_path,
                   "tracking template (.glb); default: the generated default template");
@@ -36,6 +67,9 @@ void RegisterTrackCommand(CLI::App* app) {
                 "write the posed mesh of every frame (PLY)");
   cmd->add_flag("--no-texture", args->no_texture, "fitting only");
   cmd->add_option("--max-frames", args->max_frames, "process at most this many frames (0: all)");
+  cmd->add_option("--intrinsics", args->intrinsics,
+                  "TUM RGB-D intrinsics: a YAML file or a preset fr1|fr2|fr3|kinect (default: "
+                  "<folder>/camera.yaml; config key input.intrinsics)");
   cmd->add_flag("-q,--quiet", args->quiet, "no progress line");
   cmd->callback([args] {
     Config config = args->config.empty() ? Config() : Config::Load(args->config);
@@ -48,8 +82,14 @@ void RegisterTrackCommand(CLI::App* app) {
     if (args->export_meshes) config.Set("pipeline.export_meshes", "true");
     if (args->no_texture) config.Set("pipeline.texture", "false");
     if (args->max_frames > 0) config.Set("pipeline.max_frames", std::to_string(args->max_frames));
+    if (!args->intrinsics.empty())
+      config.Set("input.intrinsics", IntrinsicsConfigValue(args->intrinsics));
     const PipelineOptions options = LoadPipelineOptions(config);
     const bool quiet = args->quiet;
+    if (!quiet) {
+      const std::string what = OpenFrameSource(args->sequence, options.input)->Description();
+      if (!what.empty()) std::fprintf(stderr, "track: input: %s\n", what.c_str());
+    }
     const PipelineResult result = RunPipeline(
         args->sequence, args->template_path, options, config, args->out,
         [quiet](const PipelineProgress& p) {

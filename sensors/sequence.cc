@@ -351,6 +351,15 @@ std::vector<cv::Mat> SequenceReader::ReadBackgroundFrames() {
   return frames;
 }
 
+std::string SequenceReader::Description() const {
+  const Impl& m = *impl_;
+  return "artex sequence " + m.folder + ": " + std::to_string(m.rows.size()) + " frames, " +
+         std::to_string(m.background_files.size()) + " background frames, " +
+         (m.has_ground_truth ? "ground truth" : "no ground truth") + ", depth " +
+         std::to_string(m.calibration.depth.width) + "x" +
+         std::to_string(m.calibration.depth.height) + ", world frame from calibration.yaml";
+}
+
 GroundTruthFrame SequenceReader::ReadGroundTruth(int i) const {
   const Impl& m = *impl_;
   if (i < 0 || i >= num_frames()) {

@@ -43,6 +43,11 @@ class FrameSource {
   virtual bool ReadFrame(int i, Frame* frame, std::string* warning) = 0;
   // Empty-scene depth frames for the background model (may be empty).
   virtual std::vector<cv::Mat> ReadBackgroundFrames() = 0;
+  // Unit "up" direction (against gravity) in the depth camera frame when the recording holds
+  // one (e.g. an accelerometer); none by default.
+  virtual std::optional<Eigen::Vector3d> gravity() const { return std::nullopt; }
+  // One line for users: what kind of input this is and what was inferred from it.
+  virtual std::string Description() const { return ""; }
 };
 
 class SequenceReader : public FrameSource {
@@ -56,6 +61,7 @@ class SequenceReader : public FrameSource {
   int num_frames() const override;
   bool ReadFrame(int i, Frame* frame, std::string* warning) override;
   std::vector<cv::Mat> ReadBackgroundFrames() override;
+  std::string Description() const override;
 
   bool has_ground_truth() const;
   // Ground truth of frame i, given the number of joints of the subject's skeleton;

@@ -170,6 +170,25 @@ TEST(ExperimentParseTest, StructuralErrors) {
             std::string::npos);
 }
 
+TEST(ExperimentParseTest, RecordedSequencesAreArtexOrTumFolders) {
+  const fs::path dir = FreshDir("recorded");
+  fs::create_directories(dir / "tum");
+  WriteText(dir / "tum" / "rgb.txt", "1.0 rgb/a.png\n");
+  WriteText(dir / "tum" / "depth.txt", "1.0 depth/a.png\n");
+  fs::create_directories(dir / "other");
+  WriteText(dir / "other" / "notes.txt", "x\n");
+  const Experiment ex = ParseExperiment(
+      "base: {input: {intrinsics: kinect}}\nsequences:\n  - {name: lab, path: tum}\n", "exp.yaml",
+      dir.string());
+  ASSERT_EQ(ex.sequences.size(), 1u);
+  EXPECT_EQ(ex.sequences[0].folder, (dir / "tum").string());
+  const std::string msg = ErrorOf(
+      [&] { ParseExperiment("sequences: [other]\n", "exp.yaml", dir.string()); });
+  EXPECT_NE(msg.find("other"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("rgb.txt"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("calibration.yaml"), std::string::npos) << msg;
+}
+
 TEST(ExperimentParseTest, BaseFileIsResolvedAgainstTheExperimentFile) {
   const fs::path dir = FreshDir("base");
   WriteText(dir / "base.yaml", "texture:\n  lambda: 2.5\n");

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "models/error.h"
+#include "tests/error_of.h"
 
 namespace artex {
 namespace {
@@ -122,14 +123,14 @@ TEST(TumReaderTest, OneToOneGreedyPairing) {
 TEST(TumReaderTest, BadInputGivesErrorsOrWarnings) {
   {
     const std::string folder = WriteTum("no_intrinsics", false);
-    try {
-      TumReader reader(folder);
-      ADD_FAILURE() << "no error";
-    } catch (const Error& e) {
-      EXPECT_NE(std::string(e.what()).find("camera.yaml"), std::string::npos) << e.what();
+    const std::string msg = ErrorOf([&] { TumReader reader(folder); });
+    // Names the file, the keys and the ways out.
+    for (const char* part : {"camera.yaml", "width", "height", "fx", "fy", "cx", "cy", "k1", "p2",
+                             "depth_scale", "--intrinsics FILE", "fr1", "fr2", "fr3", "kinect"}) {
+      EXPECT_NE(msg.find(part), std::string::npos) << part << " in: " << msg;
     }
     TumReaderOptions defaults;
-    defaults.freiburg1_defaults = true;
+    defaults.SetIntrinsics("fr1");
     TumReader reader(folder, defaults);
     EXPECT_EQ(reader.calibration().depth.fx, 517.3);
     EXPECT_EQ(reader.calibration().depth.width, 640);
@@ -183,6 +184,122 @@ TEST(TumReaderTest, BadInputGivesErrorsOrWarnings) {
     EXPECT_TRUE(reader.ReadFrame(3, &f, &warning));
   }
   EXPECT_THROW(TumReader(TempFolder("missing") + "/nothing"), Error);
+}
+
+TEST(TumReaderTest, PresetsGiveThePublishedIntrinsics) {
+  struct Expected {
+    const char* name;
+    double fx, fy, cx, cy, k1, k3;
+  };
+  const Expected expected[] = {{"fr1", 517.3, 516.5, 318.6, 255.3, 0.2624, 1.1633},
+                               {"fr2", 520.9, 521.0, 325.1, 249.7, 0.2312, 0.9172},
+                               {"fr3", 535.4, 539.2, 320.1, 247.6, 0, 0},
+                               {"kinect", 525.0, 525.0, 319.5, 239.5, 0, 0}};
+  for (const Expected& e : expected) {
+    TumReaderOptions options;
+    options.SetIntrinsics(e.name);
+    ASSERT_NE(options.intrinsics_preset, TumIntrinsicsPreset::kNone) << e.name;
+    EXPECT_TRUE(options.intrinsics_path.empty());
+    const Calibration c = TumPresetCalibration(options.intrinsics_preset);
+    EXPECT_EQ(TumIntrinsicsPresetName(options.intrinsics_preset), e.name);
+    EXPECT_EQ(c.depth.width, 640);
+    EXPECT_EQ(c.depth.height, 480);
+    EXPECT_EQ(c.depth_scale, 5000.0);
+    EXPECT_EQ(c.depth.fx, e.fx) << e.name;
+    EXPECT_EQ(c.depth.fy, e.fy) << e.name;
+    EXPECT_EQ(c.depth.cx, e.cx) << e.name;
+    EXPECT_EQ(c.depth.cy, e.cy) << e.name;
+    EXPECT_EQ(c.color_distortion.k1, e.k1) << e.name;
+    EXPECT_EQ(c.depth_distortion.k3, e.k3) << e.name;
+    EXPECT_EQ(c.color.fx, c.depth.fx);
+  }
+  EXPECT_EQ(TumPresetCalibration(TumIntrinsicsPreset::kFreiburg2).depth_distortion.p2, -0.0001);
+  EXPECT_TRUE(TumPresetCalibration(TumIntrinsicsPreset::kFreiburg3).depth_distortion.IsZero());
+  // A preset overrides camera.yaml; a name that is no preset is a file.
+  const std::string folder = WriteTum("preset");
+  TumReaderOptions options;
+  options.SetIntrinsics("kinect");
+  EXPECT_EQ(TumReader(folder, options).calibration().depth.fx, 525.0);
+  EXPECT_NE(TumReader(folder, options).intrinsics_source().find("kinect"), std::string::npos);
+  options.SetIntrinsics(folder + "/camera.yaml");
+  EXPECT_EQ(options.intrinsics_preset, TumIntrinsicsPreset::kNone);
+  EXPECT_EQ(TumReader(folder, options).calibration().depth.fx, 517.3);
+  options.SetIntrinsics(folder + "/nothing.yaml");
+  const std::string msg = ErrorOf([&] { TumReader reader(folder, options); });
+  EXPECT_NE(msg.find("nothing.yaml"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("fr1"), std::string::npos) << msg;
+  // Both at once is invalid.
+  options.intrinsics_preset = TumIntrinsicsPreset::kFreiburg1;
+  std::string why;
+  EXPECT_FALSE(options.IsValid(&why));
+  EXPECT_NE(why.find("input.intrinsics"), std::string::npos) << why;
+}
+
+TEST(TumReaderTest, AccelerometerGivesUpInTheCameraFrame) {
+  const std::string folder = WriteTum("accelerometer");
+  EXPECT_FALSE(TumReader(folder).gravity().has_value());  // no file
+  // An upright Kinect tilted forward a little: the specific force points up, -y of the camera,
+  // with some +z as the camera pitches down; noisy samples around the mean.
+  std::ofstream(folder + "/accelerometer.txt") << "# accelerometer data\n# timestamp ax ay az\n"
+                                               << Stamp(kStart) << " 0.10 -9.60 1.90\n"
+                                               << Stamp(kStart + 0.01) << " -0.10 -9.70 1.70\n"
+                                               << Stamp(kStart + 0.02) << " 0.00 -9.65 1.80\n";
+  TumReader reader(folder);
+  ASSERT_TRUE(reader.gravity().has_value());
+  EXPECT_EQ(reader.num_accelerometer_samples(), 3);
+  const Eigen::Vector3d up = *reader.gravity();
+  const Eigen::Vector3d expected = Eigen::Vector3d(0.0, -9.65, 1.8).normalized();
+  EXPECT_NEAR((up - expected).norm(), 0.0, 1e-12);
+  EXPECT_NEAR(up.norm(), 1.0, 1e-12);
+  EXPECT_LT(up.y(), -0.95);  // upright: up is -y of the OpenCV camera (y points down)
+  EXPECT_NE(reader.Description().find("accelerometer.txt"), std::string::npos);
+  // Switched off, or too short a mean (a file of zeros): none.
+  TumReaderOptions off;
+  off.read_accelerometer = false;
+  EXPECT_FALSE(TumReader(folder, off).gravity().has_value());
+  std::ofstream(folder + "/accelerometer.txt", std::ios::trunc) << "1.0 0 0 0\n2.0 0 0 0\n";
+  EXPECT_FALSE(TumReader(folder).gravity().has_value());
+  // Malformed lines: file, line, expected, found.
+  std::ofstream(folder + "/accelerometer.txt", std::ios::trunc)
+      << "# timestamp ax ay az\n1.0 0 -9.8 0\n2.0 0 -9.8\n";
+  std::string msg = ErrorOf([&] { TumReader r(folder); });
+  EXPECT_NE(msg.find("accelerometer.txt: line 3"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("timestamp ax ay az"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("'2.0 0 -9.8'"), std::string::npos) << msg;
+  std::ofstream(folder + "/accelerometer.txt", std::ios::trunc) << "1.0 0 up 0\n";
+  msg = ErrorOf([&] { TumReader r(folder); });
+  EXPECT_NE(msg.find("line 1"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("'1.0 0 up 0'"), std::string::npos) << msg;
+}
+
+TEST(TumReaderTest, CountsUnpairedAndMissingAndReportsThem) {
+  const std::string folder = WriteTum("counts");
+  fs::remove(folder + "/rgb/" + Stamp(kStart + 2 / 30.0 + 0.012) + ".png");
+  TumReader reader(folder);
+  EXPECT_EQ(reader.num_frames(), kFrames);
+  EXPECT_EQ(reader.num_missing_files(), 1);
+  const std::string d = reader.Description();
+  EXPECT_NE(d.find("6 depth/colour pairs of 7 depth and 7 colour entries"), std::string::npos) << d;
+  EXPECT_NE(d.find("1 depth and 1 colour unpaired"), std::string::npos) << d;
+  EXPECT_NE(d.find("missing files in 1 pairs"), std::string::npos) << d;
+  EXPECT_NE(d.find("camera.yaml"), std::string::npos) << d;
+  Frame f;
+  std::string warning;
+  EXPECT_FALSE(reader.ReadFrame(2, &f, &warning));
+  EXPECT_NE(warning.find("rgb.txt line 6"), std::string::npos) << warning;
+  EXPECT_NE(warning.find("skipped"), std::string::npos) << warning;
+  // No pair at all: the counts of entries.
+  TumReaderOptions tight;
+  tight.max_time_difference = 0.001;
+  const std::string msg = ErrorOf([&] { TumReader r(folder, tight); });
+  EXPECT_NE(msg.find("all 7 depth and 7 colour entries are unpaired"), std::string::npos) << msg;
+  // Empty lists.
+  const std::string empty = TempFolder("empty");
+  std::ofstream(empty + "/depth.txt") << "# nothing\n";
+  std::ofstream(empty + "/rgb.txt") << "1.0 rgb/a.png\n";
+  std::ofstream(empty + "/camera.yaml") << "{width: 4, height: 3, fx: 5, fy: 5, cx: 1.5, cy: 1}";
+  const std::string e = ErrorOf([&] { TumReader r(empty); });
+  EXPECT_NE(e.find("depth.txt: expected at least one entry, found none"), std::string::npos) << e;
 }
 
 }  // namespace
