@@ -217,6 +217,10 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
     fs::create_directories(out_dir + "/meshes", ec);
     if (ec) throw Error(out_dir + "/meshes: cannot create the folder: " + ec.message());
   }
+  if (options.export_foreground) {
+    fs::create_directories(out_dir + "/foreground", ec);
+    if (ec) throw Error(out_dir + "/foreground: cannot create the folder: " + ec.message());
+  }
   for (int i = begin; i < end; ++i) {
     FrameRecord record;
     record.frame = i;
@@ -235,6 +239,11 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
     record.scan_points = scan.size();
 
     record.segmentation = stats.segmentation;
+    if (options.export_foreground) {
+      char name[64];
+      std::snprintf(name, sizeof(name), "/foreground/%06d.png", i);
+      WritePng(out_dir + name, preprocessor.foreground_mask());
+    }
 
     // Fit: the multi-hypothesis initialisation on the first frame and after a lost one.
     if (need_init && scan.size() >= options.fitting.min_scan_points) {

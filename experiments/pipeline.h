@@ -29,6 +29,7 @@ struct PipelineOptions {
   int first_frame = 0;            // first frame index of the sequence to process
   int max_frames = 0;             // 0: all frames
   bool export_meshes = false;     // posed meshes per frame (meshes/NNNNNN.ply)
+  bool export_foreground = false;  // foreground masks per frame (foreground/NNNNNN.png)
   bool export_glb = true;         // animated, textured tracked.glb at the end
   std::vector<int> atlas_frames;  // also write the atlas after these frames
   double lost_threshold_mm = 50.0;  // a frame is lost when its mean vertex error exceeds this

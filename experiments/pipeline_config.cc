@@ -45,14 +45,16 @@ void BindPlanes(const Config& c, PlaneDetectionOptions* o) {
 
 void BindSegmentation(const Config& c, SubjectSegmentationOptions* o) {
   c.CheckKeys({"min_depth", "max_depth", "plane_margin", "plane_margin_growth", "connect_distance",
-               "connect_relative", "min_pixels", "min_height", "max_height", "max_width", "subject",
-               "pixel", "track_max_distance"});
+               "connect_growth", "merge_relative", "fragment_fraction", "min_pixels", "min_height",
+               "max_height", "max_width", "subject", "pixel", "track_max_distance"});
   c.Get("min_depth", &o->min_depth);
   c.Get("max_depth", &o->max_depth);
   c.Get("plane_margin", &o->plane_margin);
   c.Get("plane_margin_growth", &o->plane_margin_growth);
   c.Get("connect_distance", &o->connect_distance);
-  c.Get("connect_relative", &o->connect_relative);
+  c.Get("connect_growth", &o->connect_growth);
+  c.Get("merge_relative", &o->merge_relative);
+  c.Get("fragment_fraction", &o->fragment_fraction);
   c.Get("min_pixels", &o->min_pixels);
   c.Get("min_height", &o->min_height);
   c.Get("max_height", &o->max_height);
@@ -306,8 +308,8 @@ void BindTexture(const Config& c, TexturingOptions* o) {
 }
 
 void BindInput(const Config& c, FrameSourceOptions* o) {
-  c.CheckKeys({"intrinsics", "max_time_difference", "time_offset", "accelerometer",
-               "min_gravity_norm"});
+  c.CheckKeys(
+      {"intrinsics", "max_time_difference", "time_offset", "accelerometer", "min_gravity_norm"});
   if (c.Has("intrinsics")) {
     std::string intrinsics;
     c.Get("intrinsics", &intrinsics);
@@ -320,13 +322,14 @@ void BindInput(const Config& c, FrameSourceOptions* o) {
 }
 
 void BindPipeline(const Config& c, PipelineOptions* o) {
-  c.CheckKeys({"texture", "colour_term", "first_frame", "max_frames", "export_meshes", "export_glb",
-               "lost_threshold_mm", "texture_doubtful_frames"});
+  c.CheckKeys({"texture", "colour_term", "first_frame", "max_frames", "export_meshes",
+               "export_foreground", "export_glb", "lost_threshold_mm", "texture_doubtful_frames"});
   c.Get("texture", &o->texture);
   c.Get("colour_term", &o->colour_term);
   c.Get("first_frame", &o->first_frame);
   c.Get("max_frames", &o->max_frames);
   c.Get("export_meshes", &o->export_meshes);
+  c.Get("export_foreground", &o->export_foreground);
   c.Get("export_glb", &o->export_glb);
   c.Get("lost_threshold_mm", &o->lost_threshold_mm);
   c.Get("texture_doubtful_frames", &o->texture_doubtful_frames);

@@ -113,6 +113,7 @@ void WriteSummaryJson(const std::string& path, const PipelineResult& result,
       if (r.reinitialised) f["initialisation"] = r.init_report;
       f["foreground"] = {{"subject_pixels", r.segmentation.subject_pixels},
                          {"person_sized_components", r.segmentation.person_sized},
+                         {"people_splits", r.segmentation.people_splits},
                          {"tracked", r.segmentation.tracked}};
     }
     summary_frames.push_back(f);

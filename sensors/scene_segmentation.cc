@@ -5,6 +5,7 @@
 #include <cmath>
 #include <random>
 #include <sstream>
+#include <unordered_map>
 
 #include "models/error.h"
 #include "sensors/image_io.h"
@@ -365,8 +366,10 @@ bool SubjectSegmentationOptions::IsValid(std::string* error) const {
   } else if (!(plane_margin >= 0) || !(plane_margin_growth >= 0)) {
     msg << "plane_margin/plane_margin_growth: expected >= 0, found " << plane_margin << " / "
         << plane_margin_growth;
-  } else if (!(connect_distance > 0) || !(connect_relative >= 0)) {
-    msg << "connect_distance/connect_relative: expected > 0 / >= 0";
+  } else if (!(connect_distance > 0) || !(connect_growth >= 0) || !(merge_relative >= 0) ||
+             !(fragment_fraction >= 0 && fragment_fraction <= 1)) {
+    msg << "connect_distance/connect_growth/merge_relative/fragment_fraction: expected > 0 / "
+           ">= 0 / >= 0 / in [0, 1]";
   } else if (min_pixels < 1) {
     msg << "min_pixels: expected >= 1, found " << min_pixels;
   } else if (!(min_height >= 0) || !(max_height > min_height) || !(max_width > 0)) {
@@ -481,24 +484,51 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
       ++local.candidate_pixels;
     }
   }
-  // 4-connected components with a depth-jump limit.
-  const float rel = static_cast<float>(options_.connect_relative);
-  const float abs_limit = static_cast<float>(options_.connect_distance);
+  // 4-connected components: tight pass, then fragments merged across the loose limit.
+  const float growth = static_cast<float>(options_.connect_growth);
+  const float base = static_cast<float>(options_.connect_distance);
   for (int v = 0; v < h; ++v) {
     for (int u = 0; u < w; ++u) {
       const int i = v * w + u;
       const float z = z_[i];
       if (z == 0.0f) continue;
-      const float limit = std::max(abs_limit, rel * z);
+      const float limit = base + growth * z * z;
       if (u + 1 < w && z_[i + 1] != 0.0f && std::abs(z_[i + 1] - z) < limit)
         Union(parent_, i, i + 1);
       if (v + 1 < h && z_[i + w] != 0.0f && std::abs(z_[i + w] - z) < limit)
         Union(parent_, i, i + w);
     }
   }
+  if (options_.fragment_fraction > 0 && options_.merge_relative > 0) {
+    size_.assign(n, 0);
+    for (int i = 0; i < n; ++i)
+      if (z_[i] != 0.0f) ++size_[Find(parent_, i)];
+    const float rel = static_cast<float>(options_.merge_relative);
+    const double fraction = options_.fragment_fraction;
+    auto merge = [&](int a, int b) {
+      int ra = Find(parent_, a), rb = Find(parent_, b);
+      if (ra == rb) return;
+      const int small = std::min(size_[ra], size_[rb]), large = std::max(size_[ra], size_[rb]);
+      if (small >= fraction * large) return;
+      if (ra < rb) std::swap(ra, rb);
+      parent_[ra] = rb;
+      size_[rb] += size_[ra];
+    };
+    for (int v = 0; v < h; ++v) {
+      for (int u = 0; u < w; ++u) {
+        const int i = v * w + u;
+        const float z = z_[i];
+        if (z == 0.0f) continue;
+        const float limit = std::max(base, rel * z);
+        if (u + 1 < w && z_[i + 1] != 0.0f && std::abs(z_[i + 1] - z) < limit) merge(i, i + 1);
+        if (v + 1 < h && z_[i + w] != 0.0f && std::abs(z_[i + w] - z) < limit) merge(i, i + w);
+      }
+    }
+  }
   // Flatten: parent_[i] is the root of every candidate pixel.
   for (int i = 0; i < n; ++i)
     if (z_[i] != 0.0f) parent_[i] = Find(parent_, i);
+  if (options_.split_people) SplitPeople(w, h, &local.people_splits);
   // Component statistics.
   std::vector<int> slot(n, -1);
   std::vector<Component> components;
@@ -625,6 +655,110 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
     }
   }
   if (stats) *stats = local;
+}
+
+void SubjectSegmenter::SplitPeople(int w, int h, int* splits) {
+  const SubjectSegmentationOptions& o = options_;
+  Eigen::Vector3d lateral = Eigen::Vector3d::UnitX() - up_.x() * up_;
+  if (lateral.norm() < 1e-6) return;
+  lateral.normalize();
+  struct Profile {
+    float lmin = 1e30f, lmax = -1e30f, top = -1e30f;
+    int pixels = 0;
+    std::vector<float> tops;  // per lateral bin, -inf when empty
+    std::vector<float> cuts;  // lateral split positions, ascending
+    std::vector<int> part_root;
+  };
+  std::unordered_map<int, Profile> profiles;
+  auto point = [&](int u, int v, int i) {
+    const cv::Vec2f r = rays_.ptr<cv::Vec2f>(v)[u];
+    const double z = z_[i];
+    return Eigen::Vector3d(r[0] * z, r[1] * z, z);
+  };
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const int i = v * w + u;
+      if (z_[i] == 0.0f) continue;
+      Profile& p = profiles[parent_[i]];
+      const Eigen::Vector3d x = point(u, v, i);
+      const float l = static_cast<float>(lateral.dot(x));
+      p.lmin = std::min(p.lmin, l);
+      p.lmax = std::max(p.lmax, l);
+      p.top = std::max(p.top, static_cast<float>(up_.dot(x)));
+      ++p.pixels;
+    }
+  }
+  bool any = false;
+  for (auto& [root, p] : profiles) {
+    if (p.pixels < o.min_pixels || p.lmax - p.lmin < 2 * o.min_head_separation) continue;
+    p.tops.assign(static_cast<size_t>((p.lmax - p.lmin) / o.head_bin) + 1, -1e30f);
+    any = true;
+  }
+  if (!any) return;
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const int i = v * w + u;
+      if (z_[i] == 0.0f) continue;
+      Profile& p = profiles[parent_[i]];
+      if (p.tops.empty()) continue;
+      const Eigen::Vector3d x = point(u, v, i);
+      const size_t b = static_cast<size_t>((lateral.dot(x) - p.lmin) / o.head_bin);
+      float& t = p.tops[std::min(b, p.tops.size() - 1)];
+      t = std::max(t, static_cast<float>(up_.dot(x)));
+    }
+  }
+  const int window = std::max(1, static_cast<int>(0.5 * o.min_head_separation / o.head_bin));
+  for (auto& [root, p] : profiles) {
+    if (p.tops.empty()) continue;
+    const int nb = static_cast<int>(p.tops.size());
+    // Width (m) of the run of bins around b whose top reaches `level`.
+    auto run_width = [&](int b, float level) {
+      int a = b, c = b;
+      while (a > 0 && p.tops[a - 1] >= level) --a;
+      while (c + 1 < nb && p.tops[c + 1] >= level) ++c;
+      return (c - a + 1) * o.head_bin;
+    };
+    std::vector<int> heads;
+    for (int b = 0; b < nb; ++b) {
+      const float t = p.tops[b];
+      if (t < p.top - o.head_top_range) continue;
+      bool peak = true;
+      for (int k = std::max(0, b - window); k <= std::min(nb - 1, b + window) && peak; ++k)
+        peak = p.tops[k] < t || (p.tops[k] == t && k >= b);
+      if (!peak) continue;
+      if (run_width(b, t - static_cast<float>(o.head_depth)) > o.max_head_width) continue;
+      if (run_width(b, t - static_cast<float>(o.shoulder_drop)) < o.min_shoulder_width) continue;
+      heads.push_back(b);
+    }
+    for (size_t k = 1; k < heads.size(); ++k) {
+      const int a = heads[k - 1], b = heads[k];
+      if ((b - a) * o.head_bin < o.min_head_separation) continue;
+      int valley = a;
+      for (int m = a; m <= b; ++m)
+        if (p.tops[m] < p.tops[valley]) valley = m;
+      if (p.tops[valley] > std::min(p.tops[a], p.tops[b]) - o.min_valley) continue;
+      p.cuts.push_back(p.lmin + (valley + 0.5f) * static_cast<float>(o.head_bin));
+    }
+    if (!p.cuts.empty()) {
+      p.part_root.assign(p.cuts.size() + 1, -1);
+      ++*splits;
+    }
+  }
+  if (*splits == 0) return;
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const int i = v * w + u;
+      if (z_[i] == 0.0f) continue;
+      auto it = profiles.find(parent_[i]);
+      if (it == profiles.end() || it->second.cuts.empty()) continue;
+      Profile& p = it->second;
+      const float l = static_cast<float>(lateral.dot(point(u, v, i)));
+      const size_t part =
+          static_cast<size_t>(std::upper_bound(p.cuts.begin(), p.cuts.end(), l) - p.cuts.begin());
+      if (p.part_root[part] < 0) p.part_root[part] = i;
+      parent_[i] = p.part_root[part];
+    }
+  }
 }
 
 }  // namespace artex

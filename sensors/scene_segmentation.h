@@ -127,10 +127,30 @@ struct SubjectSegmentationOptions {
   // behind it, are background (m).
   double plane_margin = 0.04;
   double plane_margin_growth = 0.003;
-  // Neighbouring pixels belong to one component when their depths differ by less than
-  // max(connect_distance, connect_relative * z).
-  double connect_distance = 0.03;
-  double connect_relative = 0.03;
+  // Components in two passes. Tight: neighbouring pixels join when their depths differ by
+  // less than connect_distance + connect_growth * z^2 (about twice the Kinect's depth step;
+  // two people touching in the image stay apart). Loose: a fragment (an arm split off by
+  // noise) joins a neighbour across a depth difference below max(connect_distance,
+  // merge_relative * z) when it has fewer than fragment_fraction of the neighbour's pixels.
+  double connect_distance = 0.01;
+  double connect_growth = 0.003;
+  double merge_relative = 0.03;
+  double fragment_fraction = 0.25;
+  // People touching in the image at one depth: a component with two or more heads is split
+  // between them. A head is a profile peak (the highest point of each lateral bin of
+  // head_bin m) within head_top_range of the component's top, narrower than max_head_width
+  // head_depth below its top and at least min_shoulder_width wide shoulder_drop below it (a
+  // raised hand is narrow there); neighbouring heads must lie min_head_separation apart with
+  // a profile valley at least min_valley below the lower one.
+  bool split_people = true;
+  double head_bin = 0.02;
+  double head_top_range = 0.5;
+  double head_depth = 0.12;
+  double max_head_width = 0.30;
+  double shoulder_drop = 0.32;
+  double min_shoulder_width = 0.36;
+  double min_head_separation = 0.22;
+  double min_valley = 0.1;
   // Person-sized: at least min_pixels pixels, an extent along up in [min_height, max_height]
   // and a horizontal extent at most max_width (m; arms spread included).
   int min_pixels = 800;
@@ -150,6 +170,7 @@ struct SegmentationStats {
   int candidate_pixels = 0;  // valid, in range, off the planes
   int components = 0;        // of at least min_pixels
   int person_sized = 0;
+  int people_splits = 0;   // components split between several heads
   int subject_pixels = 0;  // 0: nobody found
   bool tracked = false;    // the subject continues the previous frame's
   Eigen::Vector3d subject_centroid = Eigen::Vector3d::Zero();  // camera frame
@@ -177,6 +198,9 @@ class SubjectSegmenter {
   bool planes_known() const { return planes_known_; }
 
  private:
+  // Splits the flattened components that hold several people (split_people).
+  void SplitPeople(int width, int height, int* splits);
+
   PinholeCamera intrinsics_;
   Distortion distortion_;
   double depth_scale_;
@@ -188,6 +212,7 @@ class SubjectSegmenter {
   bool has_subject_ = false;
   Eigen::Vector3d subject_centroid_ = Eigen::Vector3d::Zero();
   std::vector<int> parent_;  // union-find over pixels
+  std::vector<int> size_;    // pixels per root
   std::vector<float> z_;
 };
 
