@@ -97,7 +97,8 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
                "constant_velocity_prediction", "max_fit_vertices", "min_scan_points",
                "max_mean_motion", "max_scale_change", "ceres_max_iterations", "solver_threads",
                "candidate_margin", "normal_refresh_iterations", "tracking_tikhonov",
-               "fit_vertex_selection", "icp_init", "init", "quality"});
+               "fit_vertex_selection", "scale_estimator", "scale_sample_max_distance",
+               "scale_sample_min_pair_fraction", "icp_init", "init", "quality"});
   c.GetEnum("correspondence", CorrespondenceModelNames(), &o->correspondence);
   c.GetEnum("solver", FitSolverTypeNames(), &o->solver.type);
   c.GetEnum("estep", std::map<std::string, EStepMode>{{"dense", EStepMode::kDense},
@@ -145,6 +146,9 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   c.Get("normal_refresh_iterations", &o->normal_refresh_iterations);
   BindWeights(c.Section("tracking_tikhonov"), &o->tracking_update);
   c.GetEnum("fit_vertex_selection", FitVertexSelectionNames(), &o->fit_vertex_selection);
+  c.GetEnum("scale_estimator", ScaleEstimatorNames(), &o->scale_estimator);
+  c.Get("scale_sample_max_distance", &o->scale_sample_max_distance);
+  c.Get("scale_sample_min_pair_fraction", &o->scale_sample_min_pair_fraction);
   BindIcpInit(c.Section("icp_init"), &o->icp);
 }
 

@@ -102,6 +102,9 @@ struct EMFitterOptions {
   int scale_estimation_frames = 5;
   ScaleEstimator scale_estimator = ScaleEstimator::kIcp;
   double scale_sample_max_distance = 0.05;  // kIcp: ICP pair rejection distance (m)
+  // kIcp: a frame whose fitted template explains (pairs within scale_sample_max_distance) fewer
+  // than this fraction of the scan is no scale sample (the scale stays being estimated).
+  double scale_sample_min_pair_fraction = 0.7;
   // Radius E-step: the scale is held during stages with a radius above this (m); at wide radii
   // mu_t lies inside curved surfaces (chord means), which biases a free scale downwards.
   double scale_max_radius = 0.05;

@@ -1,13 +1,12 @@
 #include "solvers/initializer.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
 #include <numeric>
 #include <sstream>
-
-#include <Eigen/Geometry>
 
 #include "models/error.h"
 #include "models/normals.h"
@@ -159,9 +158,8 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
       h.yaw_deg = yaw_deg;
       h.arm_angle_deg = arm_angle;
       Pose pose = arm_pose;
-      pose.rotation =
-          Eigen::AngleAxisd(facing_yaw + yaw_deg * kDegToRad, Eigen::Vector3d::UnitY())
-              .toRotationMatrix();
+      pose.rotation = Eigen::AngleAxisd(facing_yaw + yaw_deg * kDegToRad, Eigen::Vector3d::UnitY())
+                          .toRotationMatrix();
       // Translation: the centroid of the template vertices that face the camera and project
       // into the depth image matches the scan centroid (fixed point; starts from all vertices).
       pose.translation = scan_centroid - pose.scale * pose.rotation *
@@ -218,8 +216,7 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
     h.fit = fitter->DiscardFrame(&h.pose);
     h.fitted = true;
     h.quality = evaluate(h.pose);
-    if (h.fit.ok() &&
-        (best < 0 || h.quality.score > result.hypotheses[best].quality.score)) {
+    if (h.fit.ok() && (best < 0 || h.quality.score > result.hypotheses[best].quality.score)) {
       best = order[c];
     }
   }

@@ -65,7 +65,7 @@ struct InitResult {
   bool ok = false;  // a hypothesis was fitted and accepted as the fitter's frame
   int chosen = -1;  // index into hypotheses
   std::vector<InitHypothesis> hypotheses;
-  Pose pose;          // the accepted pose (fitter->pose())
+  Pose pose;           // the accepted pose (fitter->pose())
   FitQuality quality;  // its quality
   FitSummary fit;      // its EM summary (the frame's)
   double icp_seconds = 0.0, em_seconds = 0.0, quality_seconds = 0.0, total_seconds = 0.0;
