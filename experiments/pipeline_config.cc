@@ -76,11 +76,12 @@ void BindQuality(const Config& c, FitQualityOptions* o) {
 
 void BindInitializer(const Config& c, InitializerOptions* o) {
   c.CheckKeys({"yaws_deg", "arm_angles_deg", "coarse_iterations", "em_candidates",
-               "ranking_iterations", "icp"});
+               "em_one_per_yaw", "ranking_iterations", "icp"});
   c.Get("yaws_deg", &o->yaws_deg);
   c.Get("arm_angles_deg", &o->arm_angles_deg);
   c.Get("coarse_iterations", &o->coarse_iterations);
   c.Get("em_candidates", &o->em_candidates);
+  c.Get("em_one_per_yaw", &o->em_one_per_yaw);
   c.Get("ranking_iterations", &o->ranking_iterations);
   BindIcpInit(c.Section("icp"), &o->icp);
 }

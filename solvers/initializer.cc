@@ -200,6 +200,22 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
   std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
     return result.hypotheses[a].icp_quality.score > result.hypotheses[b].icp_quality.score;
   });
+  if (options.em_one_per_yaw) {
+    // The best arm variant of each yaw first (in score order), then the others.
+    std::vector<int> first, rest;
+    std::vector<double> seen;
+    for (int h : order) {
+      const double yaw = result.hypotheses[h].yaw_deg;
+      if (std::find(seen.begin(), seen.end(), yaw) == seen.end()) {
+        seen.push_back(yaw);
+        first.push_back(h);
+      } else {
+        rest.push_back(h);
+      }
+    }
+    order = first;
+    order.insert(order.end(), rest.begin(), rest.end());
+  }
   const int candidates = std::min<int>(options.em_candidates, static_cast<int>(order.size()));
   const auto em_start = Clock::now();
   const double quality_before_em = result.quality_seconds;

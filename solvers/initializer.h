@@ -6,7 +6,7 @@
 // the depth image to the scan centroid, so a person cut by the image border is placed by the
 // part that is seen), pre-aligned by similarity ICP (solvers/icp_init.h) and ranked by the fit
 // quality (solvers/fit_quality.h); the best few are fitted by the EMFitter's first-frame
-// schedule and the best fit by quality score is accepted as the fitter's frame.
+// schedule (the best of each yaw by default) and the best fit by quality score is accepted.
 #pragma once
 
 #include <string>
@@ -39,8 +39,14 @@ struct InitializerOptions {
     o.max_iterations = 30;
     return o;
   }();
-  // The best this many ICP hypotheses (by quality score) are fitted by EM (>= 1).
-  int em_candidates = 2;
+  // The best this many ICP hypotheses (by quality score) are fitted by EM (>= 1). ICP from a
+  // rest-like pose ranks the facings poorly when the person is mid-stride (the ICP scores of
+  // facing away and towards the camera differ by ~0.05, after EM the right one wins by ~0.03),
+  // so by default every yaw's best arm variant is fitted.
+  int em_candidates = 4;
+  // Candidates are the best arm variant of each yaw first (in score order), then the rest;
+  // false: plain score order (several arm variants of one facing may take the places).
+  bool em_one_per_yaw = true;
   // EM iterations of a candidate's ranking fit (0: the whole first-frame schedule, and the
   // best candidate is accepted as fitted). > 0: a short fit for ranking, then the best
   // candidate is fitted again from its result with the whole first-frame schedule.

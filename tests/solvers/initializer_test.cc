@@ -36,6 +36,10 @@ struct Tracked {
   std::vector<Pose> poses;
   std::vector<FitQuality> quality;
   double scale_estimate = 0.0;
+  // Re-initialisation of the middle frame after Reset(true) (as after a lost frame).
+  InitResult reinit;
+  int reinit_frame = 0;
+  bool reinit_scale_free = true;
 };
 
 Tracked InitializeAndTrack(const testing_util::KinectScans& data, const Template& tmpl,
@@ -52,6 +56,11 @@ Tracked InitializeAndTrack(const testing_util::KinectScans& data, const Template
                                            FitQualityOptions()));
   }
   t.scale_estimate = fitter.scale_estimate();
+  fitter.Reset(true);
+  t.reinit_scale_free = fitter.ScaleIsFree();
+  t.reinit_frame = static_cast<int>(data.scans.size()) / 2;
+  t.reinit = InitializeFit(&fitter, data.scans[t.reinit_frame], data.depth_camera,
+                           InitializerOptions());
   return t;
 }
 
@@ -97,6 +106,13 @@ TEST_P(InitializerFacingTest, ChoosesTheTrueFacingAndTracks) {
       subject_yaw, good, kFrames, worst_yaw, t.scale_estimate, TrueScale(),
       t.init.total_seconds * 1e3);
   RecordProperty("init_ms", std::to_string(t.init.total_seconds * 1e3));
+  PrintInit("re-initialisation of frame " + std::to_string(t.reinit_frame), t.reinit);
+  // Re-initialisation with the kept scale estimate.
+  EXPECT_FALSE(t.reinit_scale_free);
+  ASSERT_TRUE(t.reinit.ok);
+  EXPECT_EQ(t.reinit.pose.scale, t.scale_estimate);
+  EXPECT_LT(YawDifferenceDeg(t.reinit.pose, data.truth[t.reinit_frame]), 45.0);
+  EXPECT_EQ(t.reinit.quality.label, FitQualityLabel::kGood) << t.reinit.quality.BriefReport();
   // While tracking, a side view constrains the yaw less (measured worst 42 degrees at 90).
   EXPECT_LT(worst_yaw, 60.0);
   EXPECT_EQ(good, kFrames);
