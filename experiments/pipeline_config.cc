@@ -75,9 +75,19 @@ void BindQuality(const Config& c, FitQualityOptions* o) {
 }
 
 void BindInitializer(const Config& c, InitializerOptions* o) {
-  c.CheckKeys({"yaws_deg", "arm_angles_deg", "coarse_iterations", "em_candidates",
+  c.CheckKeys({"yaws_deg", "world_up", "arm_angles_deg", "coarse_iterations", "em_candidates",
                "em_one_per_yaw", "ranking_iterations", "icp"});
   c.Get("yaws_deg", &o->yaws_deg);
+  if (c.Has("world_up")) {
+    std::vector<double> up;
+    c.Get("world_up", &up);
+    if (up.size() != 3) {
+      std::ostringstream msg;
+      msg << c.Path("world_up") << ": expected 3 values (x, y, z), found " << up.size();
+      throw Error(msg.str());
+    }
+    o->world_up = Eigen::Vector3d(up[0], up[1], up[2]);
+  }
   c.Get("arm_angles_deg", &o->arm_angles_deg);
   c.Get("coarse_iterations", &o->coarse_iterations);
   c.Get("em_candidates", &o->em_candidates);

@@ -57,6 +57,8 @@ bool InitializerOptions::IsValid(std::string* error) const {
   };
   if (yaws_deg.empty() || !finite(yaws_deg)) {
     msg << "yaws_deg: expected at least one finite yaw (degrees)";
+  } else if (!(world_up.allFinite() && world_up.norm() > 0.0)) {
+    msg << "world_up: expected a finite non-zero direction, found (" << world_up.transpose() << ")";
   } else if (!finite(arm_angles_deg)) {
     msg << "arm_angles_deg: expected finite angles (degrees)";
   } else if (coarse_iterations < 0) {
@@ -138,7 +140,15 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
 
   const Eigen::Vector3d scan_centroid = scan.points.colwise().mean().transpose();
   const Eigen::Vector3d eye = depth_camera.Center();
-  const double facing_yaw = std::atan2(eye.x() - scan_centroid.x(), eye.z() - scan_centroid.z());
+  // Template up (+Y) to world_up, then the template front (+Z) turned about world_up towards
+  // the camera.
+  const Eigen::Vector3d up = options.world_up.normalized();
+  const Eigen::Matrix3d upright =
+      Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitY(), up).toRotationMatrix();
+  const Eigen::Vector3d front = upright * Eigen::Vector3d::UnitZ();
+  const Eigen::Vector3d to_camera = eye - scan_centroid;
+  const double facing_yaw =
+      std::atan2(front.cross(to_camera).dot(up), front.dot(to_camera - to_camera.dot(up) * up));
   IcpInitOptions icp = options.icp;
   icp.coarse_alignment = false;
   icp.estimate_scale = icp.estimate_scale && fitter->ScaleIsFree();
@@ -158,8 +168,8 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
       h.yaw_deg = yaw_deg;
       h.arm_angle_deg = arm_angle;
       Pose pose = arm_pose;
-      pose.rotation = Eigen::AngleAxisd(facing_yaw + yaw_deg * kDegToRad, Eigen::Vector3d::UnitY())
-                          .toRotationMatrix();
+      pose.rotation =
+          Eigen::AngleAxisd(facing_yaw + yaw_deg * kDegToRad, up).toRotationMatrix() * upright;
       // Translation: the centroid of the template vertices that face the camera and project
       // into the depth image matches the scan centroid (fixed point; starts from all vertices).
       pose.translation = scan_centroid - pose.scale * pose.rotation *

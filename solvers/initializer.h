@@ -25,6 +25,10 @@ struct InitializerOptions {
   // Yaw hypotheses (degrees) about world +Y relative to facing the camera: 0 turns the
   // template's front (+Z) towards the depth camera centre, 180 away from it, +-90 sideways.
   std::vector<double> yaws_deg = {0.0, 180.0, 90.0, -90.0};
+  // World direction of "up" (the template's +Y): +Y for artex sequences; e.g. (0, -1, 0) for a
+  // recording whose world frame is the depth camera's (OpenCV, y down; TUM RGB-D). Yaws are
+  // rotations about it.
+  Eigen::Vector3d world_up = Eigen::Vector3d::UnitY();
   // Arm hypotheses: elevation of both upper arms below the horizontal (degrees), set by a
   // shoulder rotation about the axis that raises the arm in the frontal plane: 80 ~ arms down,
   // 40 A-pose (the default template's rest), 0 T-pose. Needs joints named l_shoulder,

@@ -293,6 +293,8 @@ TEST(PipelineTest, InitialisationAndQualityKeysAreRead) {
   EXPECT_EQ(defaults.quality.lost_max_depth_residual, FitQualityOptions().lost_max_depth_residual);
   EXPECT_EQ(defaults.fitting.scale_estimation_frames, EMFitterOptions().scale_estimation_frames);
   EXPECT_EQ(defaults.fitting.icp.scale_from_extent, false);
+  EXPECT_EQ(defaults.initializer.world_up, Eigen::Vector3d::UnitY());
+  config.Set("fitting.init.world_up", "[0, -1, 0]");
   config.Set("fitting.init.em_candidates", "3");
   config.Set("fitting.init.icp.max_iterations", "12");
   config.Set("fitting.quality.inlier_distance", "0.03");
@@ -300,6 +302,7 @@ TEST(PipelineTest, InitialisationAndQualityKeysAreRead) {
   config.Set("fitting.scale_estimator", "em");
   const PipelineOptions o = LoadPipelineOptions(config);
   EXPECT_EQ(o.initializer.em_candidates, 3);
+  EXPECT_EQ(o.initializer.world_up, Eigen::Vector3d(0, -1, 0));
   EXPECT_EQ(o.initializer.icp.max_iterations, 12);
   EXPECT_EQ(o.quality.inlier_distance, 0.03);
   EXPECT_EQ(o.initializer.quality.inlier_distance, 0.03);  // ranks with the same options

@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <cstdio>
 #include <string>
@@ -42,6 +43,23 @@ struct Tracked {
   bool reinit_scale_free = true;
 };
 
+// The scan and the depth camera of `data` frame `frame` in a world rotated by `m` (e.g. with
+// y down); the initialiser is told the new up direction.
+InitResult InitializeInRotatedWorld(const testing_util::KinectScans& data, int frame,
+                                    const Eigen::Matrix3d& m, const Template& tmpl) {
+  Scan scan = data.scans[frame];
+  scan.points = (scan.points * m.transpose()).eval();
+  scan.normals = (scan.normals * m.transpose()).eval();
+  PinholeCamera camera = data.depth_camera;
+  Eigen::Isometry3d rotation = Eigen::Isometry3d::Identity();
+  rotation.linear() = m;
+  camera.world_to_camera = data.depth_camera.world_to_camera * rotation.inverse();
+  InitializerOptions options;
+  options.world_up = m * Eigen::Vector3d::UnitY();
+  EMFitter fitter(tmpl, EMFitterOptions());
+  return InitializeFit(&fitter, scan, camera, options);
+}
+
 Tracked InitializeAndTrack(const testing_util::KinectScans& data, const Template& tmpl,
                            const EMFitterOptions& fitting = EMFitterOptions()) {
   Tracked t;
@@ -59,8 +77,8 @@ Tracked InitializeAndTrack(const testing_util::KinectScans& data, const Template
   fitter.Reset(true);
   t.reinit_scale_free = fitter.ScaleIsFree();
   t.reinit_frame = static_cast<int>(data.scans.size()) / 2;
-  t.reinit = InitializeFit(&fitter, data.scans[t.reinit_frame], data.depth_camera,
-                           InitializerOptions());
+  t.reinit =
+      InitializeFit(&fitter, data.scans[t.reinit_frame], data.depth_camera, InitializerOptions());
   return t;
 }
 
@@ -113,6 +131,15 @@ TEST_P(InitializerFacingTest, ChoosesTheTrueFacingAndTracks) {
   EXPECT_EQ(t.reinit.pose.scale, t.scale_estimate);
   EXPECT_LT(YawDifferenceDeg(t.reinit.pose, data.truth[t.reinit_frame]), 45.0);
   EXPECT_EQ(t.reinit.quality.label, FitQualityLabel::kGood) << t.reinit.quality.BriefReport();
+  // The same first frame in a world with y down (as a TUM recording's camera frame).
+  const Eigen::Matrix3d flip = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  const InitResult flipped = InitializeInRotatedWorld(data, 0, flip, tmpl);
+  ASSERT_TRUE(flipped.ok);
+  EXPECT_EQ(flipped.quality.label, FitQualityLabel::kGood) << flipped.quality.BriefReport();
+  // Back in the original world, the facing is the truth's.
+  Pose unflipped = flipped.pose;
+  unflipped.rotation = flip.transpose() * flipped.pose.rotation;
+  EXPECT_LT(YawDifferenceDeg(unflipped, data.truth[0]), 45.0);
   // While tracking, a side view constrains the yaw less (measured worst 42 degrees at 90).
   EXPECT_LT(worst_yaw, 60.0);
   EXPECT_EQ(good, kFrames);
