@@ -6,7 +6,7 @@
 //                 frame, with the fitter's own constant-velocity prediction. Time = per frame.
 //   BM_FitFrame*: one hard tracking frame starting ~50 mm mean vertex error from the truth.
 //   BM_InitializeFit: the multi-hypothesis first frame (solvers/initializer.h, default options:
-//                 12 hypotheses, 2 EM fits) on a virtual Kinect frame (640 x 480, default
+//                 12 hypotheses, 4 EM fits) on a virtual Kinect frame (640 x 480, default
 //                 noise, the subject facing away); counters: chosen yaw, ICP / EM / quality ms.
 //   BM_FitQuality: EvaluateFitQuality of the fitted (posed) template on that frame.
 // Variants side by side: truncated-radius E-step + Gauss-Newton (default options), Ceres LM

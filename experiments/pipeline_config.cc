@@ -134,61 +134,41 @@ void BindQuality(const Config& c, FitQualityOptions* o) {
 }
 
 void BindInitializer(const Config& c, InitializerOptions* o) {
-  c.CheckKeys({"yaws_deg", "arm_angles_deg", "coarse_iterations", "em_candidates",
-               "ranking_iterations", "icp"});
+  c.CheckKeys({"yaws_deg", "world_up", "arm_angles_deg", "coarse_iterations", "em_candidates",
+               "em_one_per_yaw", "ranking_iterations", "icp"});
   c.Get("yaws_deg", &o->yaws_deg);
+  if (c.Has("world_up")) {
+    std::vector<double> up;
+    c.Get("world_up", &up);
+    if (up.size() != 3) {
+      std::ostringstream msg;
+      msg << c.Path("world_up") << ": expected 3 values (x, y, z), found " << up.size();
+      throw Error(msg.str());
+    }
+    o->world_up = Eigen::Vector3d(up[0], up[1], up[2]);
+  }
   c.Get("arm_angles_deg", &o->arm_angles_deg);
   c.Get("coarse_iterations", &o->coarse_iterations);
   c.Get("em_candidates", &o->em_candidates);
+  c.Get("em_one_per_yaw", &o->em_one_per_yaw);
   c.Get("ranking_iterations", &o->ranking_iterations);
   BindIcpInit(c.Section("icp"), &o->icp);
 }
 
 void BindFitting(const Config& c, EMFitterOptions* o) {
-  c.CheckKeys({"correspondence",
-               "solver",
-               "estep",
-               "k",
-               "voxel_fraction",
-               "epsilon",
-               "lambda_color",
-               "use_color",
-               "normalize_per_scan_point",
-               "icp_metric",
-               "icp_max_distance",
-               "icp_min_normal_dot",
-               "first_frame_radii",
-               "tracking_radii",
-               "first_frame_iterations_per_stage",
-               "tracking_iterations_per_stage",
-               "max_iterations",
-               "over_relaxation",
-               "relative_cost_tolerance",
-               "parameter_tolerance",
-               "normalize_data_term",
-               "tikhonov",
-               "temporal",
-               "smoothness",
-               "joint_limit_weight",
-               "scale_mode",
-               "scale_estimation_frames",
-               "scale_max_radius",
-               "scale_prior_weight",
-               "icp_first_frame",
-               "constant_velocity_prediction",
-               "max_fit_vertices",
-               "min_scan_points",
-               "max_mean_motion",
-               "max_scale_change",
-               "ceres_max_iterations",
-               "solver_threads",
-               "candidate_margin",
-               "normal_refresh_iterations",
-               "tracking_tikhonov",
-               "fit_vertex_selection",
-               "icp_init",
-               "init",
-               "quality"});
+  c.CheckKeys({"correspondence", "solver", "estep", "k", "voxel_fraction", "epsilon",
+               "lambda_color", "use_color", "normalize_per_scan_point", "icp_metric",
+               "icp_max_distance", "icp_min_normal_dot", "first_frame_radii", "tracking_radii",
+               "first_frame_iterations_per_stage", "tracking_iterations_per_stage",
+               "max_iterations", "over_relaxation", "relative_cost_tolerance",
+               "parameter_tolerance", "normalize_data_term", "tikhonov", "temporal",
+               "smoothness", "joint_limit_weight", "scale_mode", "scale_estimation_frames",
+               "scale_max_radius", "scale_prior_weight", "icp_first_frame",
+               "constant_velocity_prediction", "max_fit_vertices", "min_scan_points",
+               "max_mean_motion", "max_scale_change", "ceres_max_iterations", "solver_threads",
+               "candidate_margin", "normal_refresh_iterations", "tracking_tikhonov",
+               "fit_vertex_selection", "scale_estimator", "scale_sample_max_distance",
+               "scale_sample_min_pair_fraction", "icp_init", "init", "quality"});
   c.GetEnum("correspondence", CorrespondenceModelNames(), &o->correspondence);
   c.GetEnum("solver", FitSolverTypeNames(), &o->solver.type);
   c.GetEnum("estep",
@@ -238,6 +218,9 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   c.Get("normal_refresh_iterations", &o->normal_refresh_iterations);
   BindWeights(c.Section("tracking_tikhonov"), &o->tracking_update);
   c.GetEnum("fit_vertex_selection", FitVertexSelectionNames(), &o->fit_vertex_selection);
+  c.GetEnum("scale_estimator", ScaleEstimatorNames(), &o->scale_estimator);
+  c.Get("scale_sample_max_distance", &o->scale_sample_max_distance);
+  c.Get("scale_sample_min_pair_fraction", &o->scale_sample_min_pair_fraction);
   BindIcpInit(c.Section("icp_init"), &o->icp);
 }
 

@@ -180,6 +180,9 @@ bool EMFitterOptions::IsValid(std::string* error) const {
   } else if (!(std::isfinite(scale_sample_max_distance) && scale_sample_max_distance > 0.0)) {
     msg << "scale_sample_max_distance: expected a finite value > 0 (m), found "
         << scale_sample_max_distance;
+  } else if (!(scale_sample_min_pair_fraction >= 0.0 && scale_sample_min_pair_fraction <= 1.0)) {
+    msg << "scale_sample_min_pair_fraction: expected a value in [0, 1], found "
+        << scale_sample_min_pair_fraction;
   } else if (!(std::isfinite(scale_max_radius) && scale_max_radius > 0.0)) {
     msg << "scale_max_radius: expected a finite value > 0 (m), found " << scale_max_radius;
   } else if (normal_refresh_iterations < 0) {
@@ -613,23 +616,30 @@ void EMFitter::Commit(const Scan& scan, const Pose& pose, bool scale_was_free) {
   pose_ = pose;
   if (scale_was_free && options_.scale_mode != ScaleMode::kFree &&
       scale_samples() < options_.scale_estimation_frames) {
-    if (options_.scale_estimator == ScaleEstimator::kIcp &&
-        scan.size() >= std::max(options_.min_scan_points, 3)) {
-      IcpInitOptions icp = options_.icp;
-      icp.coarse_alignment = false;
-      icp.estimate_scale = true;
-      icp.max_distance = options_.scale_sample_max_distance;
-      const IcpInitResult aligned = AlignByIcp(*skinning_, pose, scan, icp);
-      if (aligned.num_pairs >= options_.min_scan_points && aligned.pose.AllFinite()) {
-        pose_ = aligned.pose;
+    bool sample = true;
+    if (options_.scale_estimator == ScaleEstimator::kIcp) {
+      sample = false;
+      if (scan.size() >= std::max(options_.min_scan_points, 3)) {
+        IcpInitOptions icp = options_.icp;
+        icp.coarse_alignment = false;
+        icp.estimate_scale = true;
+        icp.max_distance = options_.scale_sample_max_distance;
+        const IcpInitResult aligned = AlignByIcp(*skinning_, pose, scan, icp);
+        sample = aligned.pose.AllFinite() &&
+                 aligned.num_pairs >= std::min(options_.min_scan_points, aligned.num_samples) &&
+                 aligned.num_pairs >=
+                     options_.scale_sample_min_pair_fraction * aligned.num_samples;
+        if (sample) pose_ = aligned.pose;
       }
     }
     // Median of the estimation frames' scales.
-    scale_samples_.push_back(pose_.scale);
+    if (sample) scale_samples_.push_back(pose_.scale);
     std::vector<double> sorted = scale_samples_;
     std::sort(sorted.begin(), sorted.end());
     const size_t n = sorted.size();
-    scale_estimate_ = n % 2 == 1 ? sorted[n / 2] : 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]);
+    if (n > 0) {
+      scale_estimate_ = n % 2 == 1 ? sorted[n / 2] : 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]);
+    }
   }
   history_.push_back(pose_);
   ++accepted_frames_;

@@ -6,9 +6,12 @@
 // Radius E-steps follow a coarse-to-fine schedule of stages; the first frame uses its own
 // (wider) schedule. The first frame starts from a predefined pose pre-aligned by similarity
 // ICP (solvers/icp_init.h); later frames from the previous pose, optionally extrapolated at
-// constant velocity. The global scale is free on the first frame(s) and then fixed or held by
+// constant velocity. The global scale is estimated over the first frames (by default from
+// similarity-ICP samples of the fitted template, median of 5 frames) and then fixed or held by
 // a prior (the literal energy is degenerate with a free scale). Bad frames (too few points,
-// non-finite values, divergence) are flagged and keep the previous pose.
+// non-finite values, divergence) are flagged and keep the previous pose. Several hypotheses of
+// one frame can be fitted with BeginFrame/Iterate/DiscardFrame and the chosen one recorded by
+// AcceptPose (solvers/initializer.h).
 #pragma once
 
 #include <Eigen/Core>
@@ -102,6 +105,9 @@ struct EMFitterOptions {
   int scale_estimation_frames = 5;
   ScaleEstimator scale_estimator = ScaleEstimator::kIcp;
   double scale_sample_max_distance = 0.05;  // kIcp: ICP pair rejection distance (m)
+  // kIcp: a frame whose fitted template explains (pairs within scale_sample_max_distance) fewer
+  // than this fraction of the scan is no scale sample (the scale stays being estimated).
+  double scale_sample_min_pair_fraction = 0.7;
   // Radius E-step: the scale is held during stages with a radius above this (m); at wide radii
   // mu_t lies inside curved surfaces (chord means), which biases a free scale downwards.
   double scale_max_radius = 0.05;

@@ -52,8 +52,8 @@ bool FitQualityOptions::IsValid(std::string* error) const {
 std::string FitQuality::BriefReport() const {
   std::ostringstream out;
   out << FitQualityLabelName(label) << ": inliers " << inlier_fraction << ", support "
-      << support_fraction << ", depth residual " << depth_residual_m * 1e3 << " mm, score "
-      << score << " (" << seconds * 1e3 << " ms)";
+      << support_fraction << ", depth residual " << depth_residual_m * 1e3 << " mm, score " << score
+      << " (" << seconds * 1e3 << " ms)";
   return out.str();
 }
 
@@ -103,7 +103,8 @@ FitQuality EvaluateFitQuality(const Eigen::MatrixX3d& posed_vertices,
     const double cell =
         std::max(options.inlier_distance, (high - low).maxCoeff() / kMaxCellsPerAxis);
     int dims[3];
-    for (int d = 0; d < 3; ++d) dims[d] = std::max(1, static_cast<int>((high[d] - low[d]) / cell) + 1);
+    for (int d = 0; d < 3; ++d)
+      dims[d] = std::max(1, static_cast<int>((high[d] - low[d]) / cell) + 1);
     const auto cell_of = [&](const Eigen::Vector3d& p, int* c) {
       for (int d = 0; d < 3; ++d) c[d] = static_cast<int>(std::floor((p[d] - low[d]) / cell));
     };
@@ -124,8 +125,8 @@ FitQuality EvaluateFitQuality(const Eigen::MatrixX3d& posed_vertices,
     for (Eigen::Index v = 0; v < posed_vertices.rows(); ++v) {
       members[fill[vertex_cell[v]]++] = static_cast<int>(v);
     }
-    const int stride = std::max(1, (scan.size() + options.max_scan_points - 1) /
-                                       options.max_scan_points);
+    const int stride =
+        std::max(1, (scan.size() + options.max_scan_points - 1) / options.max_scan_points);
     const double max_d2 = options.inlier_distance * options.inlier_distance;
     int inliers = 0;
     for (int s = 0; s < scan.size(); s += stride) {
@@ -163,8 +164,7 @@ FitQuality EvaluateFitQuality(const Eigen::MatrixX3d& posed_vertices,
   std::vector<float> model;
   RasterizeDepth(posed_vertices, triangles, camera, RasterOptions(), &model);
   const int w = camera.width, h = camera.height;
-  std::vector<float> observed(static_cast<size_t>(w) * h,
-                              std::numeric_limits<float>::infinity());
+  std::vector<float> observed(static_cast<size_t>(w) * h, std::numeric_limits<float>::infinity());
   for (int s = 0; s < scan.size(); ++s) {
     double z = 0.0;
     const Eigen::Vector2d uv = camera.Project(scan.points.row(s).transpose(), &z);

@@ -15,9 +15,8 @@
 // All rasters are the depth camera's image divided by raster_subsample.
 #pragma once
 
-#include <string>
-
 #include <Eigen/Core>
+#include <string>
 
 #include "render/camera.h"
 #include "sensors/scan.h"
@@ -33,9 +32,9 @@ const char* FitQualityLabelName(FitQualityLabel label);  // "good", "doubtful", 
 // projector shadow, one-sided pixels); the template upside down on the person, 1 m beside
 // it or against the back wall stay at inliers <= 0.31, support <= 0.32, residual >= 78 mm.
 struct FitQualityOptions {
-  double inlier_distance = 0.025;  // m: a scan point within this of the fit is explained
-  int max_scan_points = 3000;      // inlier test on a fixed-stride subsample of the scan
-  int raster_subsample = 4;        // rasters at (width / this) x (height / this) pixels
+  double inlier_distance = 0.025;   // m: a scan point within this of the fit is explained
+  int max_scan_points = 3000;       // inlier test on a fixed-stride subsample of the scan
+  int raster_subsample = 4;         // rasters at (width / this) x (height / this) pixels
   double support_tolerance = 0.03;  // m: |z_model - z_observed| of a supported pixel
   double depth_truncation = 0.10;   // m: truncation of the depth residual
   // Labels: kLost when any lost_* bound is crossed, else kGood when all good_* bounds hold,
@@ -58,9 +57,9 @@ struct FitQuality {
   // Ranking score in [0, 1] (higher is better): the mean of inlier_fraction, support_fraction
   // and 1 - depth_residual_m / depth_truncation.
   double score = 0.0;
-  int scan_samples = 0;    // scan points tested for inliers
-  int model_pixels = 0;    // rendered template pixels
-  int union_pixels = 0;    // pixels of the template's silhouette or the scan's foreground
+  int scan_samples = 0;  // scan points tested for inliers
+  int model_pixels = 0;  // rendered template pixels
+  int union_pixels = 0;  // pixels of the template's silhouette or the scan's foreground
   double seconds = 0.0;
 
   std::string BriefReport() const;

@@ -122,6 +122,7 @@ IcpInitResult AlignByIcp(const Skinning& skinning, const Pose& initial, const Sc
   }
 
   IcpInitResult result;
+  result.num_samples = static_cast<int>(sample.size());
   const double max_d2 = options.max_distance * options.max_distance;
   for (int it = 0; it < options.max_iterations; ++it) {
     // Scan points into the template frame: q = R^T (v - t) / s.

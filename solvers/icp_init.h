@@ -40,6 +40,7 @@ struct IcpInitResult {
   Pose pose;            // `initial` with its global similarity replaced
   int iterations = 0;
   int num_pairs = 0;    // pairs of the last iteration
+  int num_samples = 0;  // subsampled scan points paired (or rejected) per iteration
   double rms = 0.0;     // RMS pair distance of the last iteration (m)
   bool converged = false;
 };

@@ -1,13 +1,12 @@
 #include "solvers/initializer.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
 #include <numeric>
 #include <sstream>
-
-#include <Eigen/Geometry>
 
 #include "models/error.h"
 #include "models/normals.h"
@@ -58,6 +57,8 @@ bool InitializerOptions::IsValid(std::string* error) const {
   };
   if (yaws_deg.empty() || !finite(yaws_deg)) {
     msg << "yaws_deg: expected at least one finite yaw (degrees)";
+  } else if (!(world_up.allFinite() && world_up.norm() > 0.0)) {
+    msg << "world_up: expected a finite non-zero direction, found (" << world_up.transpose() << ")";
   } else if (!finite(arm_angles_deg)) {
     msg << "arm_angles_deg: expected finite angles (degrees)";
   } else if (coarse_iterations < 0) {
@@ -139,7 +140,15 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
 
   const Eigen::Vector3d scan_centroid = scan.points.colwise().mean().transpose();
   const Eigen::Vector3d eye = depth_camera.Center();
-  const double facing_yaw = std::atan2(eye.x() - scan_centroid.x(), eye.z() - scan_centroid.z());
+  // Template up (+Y) to world_up, then the template front (+Z) turned about world_up towards
+  // the camera.
+  const Eigen::Vector3d up = options.world_up.normalized();
+  const Eigen::Matrix3d upright =
+      Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitY(), up).toRotationMatrix();
+  const Eigen::Vector3d front = upright * Eigen::Vector3d::UnitZ();
+  const Eigen::Vector3d to_camera = eye - scan_centroid;
+  const double facing_yaw =
+      std::atan2(front.cross(to_camera).dot(up), front.dot(to_camera - to_camera.dot(up) * up));
   IcpInitOptions icp = options.icp;
   icp.coarse_alignment = false;
   icp.estimate_scale = icp.estimate_scale && fitter->ScaleIsFree();
@@ -160,8 +169,7 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
       h.arm_angle_deg = arm_angle;
       Pose pose = arm_pose;
       pose.rotation =
-          Eigen::AngleAxisd(facing_yaw + yaw_deg * kDegToRad, Eigen::Vector3d::UnitY())
-              .toRotationMatrix();
+          Eigen::AngleAxisd(facing_yaw + yaw_deg * kDegToRad, up).toRotationMatrix() * upright;
       // Translation: the centroid of the template vertices that face the camera and project
       // into the depth image matches the scan centroid (fixed point; starts from all vertices).
       pose.translation = scan_centroid - pose.scale * pose.rotation *
@@ -202,6 +210,22 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
   std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
     return result.hypotheses[a].icp_quality.score > result.hypotheses[b].icp_quality.score;
   });
+  if (options.em_one_per_yaw) {
+    // The best arm variant of each yaw first (in score order), then the others.
+    std::vector<int> first, rest;
+    std::vector<double> seen;
+    for (int h : order) {
+      const double yaw = result.hypotheses[h].yaw_deg;
+      if (std::find(seen.begin(), seen.end(), yaw) == seen.end()) {
+        seen.push_back(yaw);
+        first.push_back(h);
+      } else {
+        rest.push_back(h);
+      }
+    }
+    order = first;
+    order.insert(order.end(), rest.begin(), rest.end());
+  }
   const int candidates = std::min<int>(options.em_candidates, static_cast<int>(order.size()));
   const auto em_start = Clock::now();
   const double quality_before_em = result.quality_seconds;
@@ -218,8 +242,7 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
     h.fit = fitter->DiscardFrame(&h.pose);
     h.fitted = true;
     h.quality = evaluate(h.pose);
-    if (h.fit.ok() &&
-        (best < 0 || h.quality.score > result.hypotheses[best].quality.score)) {
+    if (h.fit.ok() && (best < 0 || h.quality.score > result.hypotheses[best].quality.score)) {
       best = order[c];
     }
   }

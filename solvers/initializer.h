@@ -6,7 +6,7 @@
 // the depth image to the scan centroid, so a person cut by the image border is placed by the
 // part that is seen), pre-aligned by similarity ICP (solvers/icp_init.h) and ranked by the fit
 // quality (solvers/fit_quality.h); the best few are fitted by the EMFitter's first-frame
-// schedule and the best fit by quality score is accepted as the fitter's frame.
+// schedule (the best of each yaw by default) and the best fit by quality score is accepted.
 #pragma once
 
 #include <string>
@@ -25,6 +25,10 @@ struct InitializerOptions {
   // Yaw hypotheses (degrees) about world +Y relative to facing the camera: 0 turns the
   // template's front (+Z) towards the depth camera centre, 180 away from it, +-90 sideways.
   std::vector<double> yaws_deg = {0.0, 180.0, 90.0, -90.0};
+  // World direction of "up" (the template's +Y): +Y for artex sequences; e.g. (0, -1, 0) for a
+  // recording whose world frame is the depth camera's (OpenCV, y down; TUM RGB-D). Yaws are
+  // rotations about it.
+  Eigen::Vector3d world_up = Eigen::Vector3d::UnitY();
   // Arm hypotheses: elevation of both upper arms below the horizontal (degrees), set by a
   // shoulder rotation about the axis that raises the arm in the frontal plane: 80 ~ arms down,
   // 40 A-pose (the default template's rest), 0 T-pose. Needs joints named l_shoulder,
@@ -39,8 +43,14 @@ struct InitializerOptions {
     o.max_iterations = 30;
     return o;
   }();
-  // The best this many ICP hypotheses (by quality score) are fitted by EM (>= 1).
-  int em_candidates = 2;
+  // The best this many ICP hypotheses (by quality score) are fitted by EM (>= 1). ICP from a
+  // rest-like pose ranks the facings poorly when the person is mid-stride (the ICP scores of
+  // facing away and towards the camera differ by ~0.05, after EM the right one wins by ~0.03),
+  // so by default every yaw's best arm variant is fitted.
+  int em_candidates = 4;
+  // Candidates are the best arm variant of each yaw first (in score order), then the rest;
+  // false: plain score order (several arm variants of one facing may take the places).
+  bool em_one_per_yaw = true;
   // EM iterations of a candidate's ranking fit (0: the whole first-frame schedule, and the
   // best candidate is accepted as fitted). > 0: a short fit for ranking, then the best
   // candidate is fitted again from its result with the whole first-frame schedule.
@@ -65,7 +75,7 @@ struct InitResult {
   bool ok = false;  // a hypothesis was fitted and accepted as the fitter's frame
   int chosen = -1;  // index into hypotheses
   std::vector<InitHypothesis> hypotheses;
-  Pose pose;          // the accepted pose (fitter->pose())
+  Pose pose;           // the accepted pose (fitter->pose())
   FitQuality quality;  // its quality
   FitSummary fit;      // its EM summary (the frame's)
   double icp_seconds = 0.0, em_seconds = 0.0, quality_seconds = 0.0, total_seconds = 0.0;

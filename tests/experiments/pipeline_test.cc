@@ -294,6 +294,40 @@ TEST(PipelineTest, UnknownConfigKeyListsTheValidKeys) {
   }
 }
 
+TEST(PipelineTest, InitialisationAndQualityKeysAreRead) {
+  Config config = Config::Load(std::string(ARTEX_SOURCE_DIR) + "/configs/default.yaml");
+  const PipelineOptions defaults = LoadPipelineOptions(config);
+  // configs/default.yaml spells out the built-in defaults of these sections.
+  EXPECT_EQ(defaults.initializer.yaws_deg, InitializerOptions().yaws_deg);
+  EXPECT_EQ(defaults.initializer.arm_angles_deg, InitializerOptions().arm_angles_deg);
+  EXPECT_EQ(defaults.initializer.em_candidates, InitializerOptions().em_candidates);
+  EXPECT_EQ(defaults.initializer.icp.max_scan_points, InitializerOptions().icp.max_scan_points);
+  EXPECT_EQ(defaults.quality.lost_max_depth_residual, FitQualityOptions().lost_max_depth_residual);
+  EXPECT_EQ(defaults.fitting.scale_estimation_frames, EMFitterOptions().scale_estimation_frames);
+  EXPECT_EQ(defaults.fitting.icp.scale_from_extent, false);
+  EXPECT_EQ(defaults.initializer.world_up, Eigen::Vector3d::UnitY());
+  config.Set("fitting.init.world_up", "[0, -1, 0]");
+  config.Set("fitting.init.em_candidates", "3");
+  config.Set("fitting.init.icp.max_iterations", "12");
+  config.Set("fitting.quality.inlier_distance", "0.03");
+  config.Set("fitting.icp_init.scale_from_extent", "true");
+  config.Set("fitting.scale_estimator", "em");
+  const PipelineOptions o = LoadPipelineOptions(config);
+  EXPECT_EQ(o.initializer.em_candidates, 3);
+  EXPECT_EQ(o.initializer.world_up, Eigen::Vector3d(0, -1, 0));
+  EXPECT_EQ(o.initializer.icp.max_iterations, 12);
+  EXPECT_EQ(o.quality.inlier_distance, 0.03);
+  EXPECT_EQ(o.initializer.quality.inlier_distance, 0.03);  // ranks with the same options
+  EXPECT_TRUE(o.fitting.icp.scale_from_extent);
+  EXPECT_EQ(o.fitting.scale_estimator, ScaleEstimator::kEm);
+  config.Set("fitting.init.em_candidates", "0");
+  const std::string msg = ErrorOf([&] { LoadPipelineOptions(config); });
+  EXPECT_NE(msg.find("em_candidates"), std::string::npos) << msg;
+  const Config bad = Config::FromString("fitting:\n  quality:\n    inlier: 1\n", "q.yaml");
+  const std::string msg2 = ErrorOf([&] { LoadPipelineOptions(bad); });
+  EXPECT_NE(msg2.find("inlier_distance"), std::string::npos) << msg2;
+}
+
 TEST(PipelineTest, WrongTypeNamesFileAndKey) {
   const Config c = Config::FromString("texture:\n  atlas_size: large\n", "typed.yaml");
   const std::string msg = ErrorOf([&] { LoadPipelineOptions(c); });

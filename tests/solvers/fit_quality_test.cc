@@ -5,11 +5,10 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
 #include <cstdio>
 #include <string>
 #include <vector>
-
-#include <Eigen/Geometry>
 
 #include "models/error.h"
 #include "models/template_generator.h"
@@ -24,10 +23,10 @@ constexpr int kFrames = 30;
 
 struct Fixture {
   testing_util::KinectScans data;
-  Template subject;                       // the rendered body (its true surface)
+  Template subject;  // the rendered body (its true surface)
   std::vector<Eigen::MatrixX3d> subject_posed;
-  Template tmpl;                          // the tracking template
-  std::vector<Pose> fitted;               // tracked poses
+  Template tmpl;             // the tracking template
+  std::vector<Pose> fitted;  // tracked poses
   std::vector<FitSummary> fits;
   double wall_z = 0.0;
 };
@@ -136,8 +135,8 @@ TEST(FitQualityTest, WrongFitsAreLost) {
     for (const Wrong& w : wrong) {
       const FitQuality q = EvaluatePose(w.pose, i);
       std::printf("frame %d %-12s %s\n", i, w.name, q.BriefReport().c_str());
-      EXPECT_EQ(q.label, FitQualityLabel::kLost) << w.name << ", frame " << i << ": "
-                                                 << q.BriefReport();
+      EXPECT_EQ(q.label, FitQualityLabel::kLost)
+          << w.name << ", frame " << i << ": " << q.BriefReport();
       EXPECT_LT(q.score, EvaluatePose(good, i).score) << w.name;
     }
   }
@@ -150,8 +149,8 @@ TEST(FitQualityTest, EmptyScanAndInvisibleModel) {
   empty.normals.resize(0, 3);
   Eigen::MatrixX3d posed;
   Skinning(f.tmpl).Apply(f.fitted[0], &posed);
-  const FitQuality q = EvaluateFitQuality(posed, f.tmpl.triangles, empty, f.data.depth_camera,
-                                          FitQualityOptions());
+  const FitQuality q =
+      EvaluateFitQuality(posed, f.tmpl.triangles, empty, f.data.depth_camera, FitQualityOptions());
   EXPECT_EQ(q.inlier_fraction, 0.0);
   EXPECT_EQ(q.support_fraction, 0.0);  // nothing observed under the model
   EXPECT_EQ(q.label, FitQualityLabel::kLost);
@@ -174,14 +173,14 @@ TEST(FitQualityTest, InvalidInputThrows) {
   EXPECT_NE(error.find("inlier_distance"), std::string::npos);
   Eigen::MatrixX3d posed;
   Skinning(f.tmpl).Apply(f.fitted[0], &posed);
-  EXPECT_THROW(EvaluateFitQuality(posed, f.tmpl.triangles, f.data.scans[0], f.data.depth_camera,
-                                  bad),
-               Error);
+  EXPECT_THROW(
+      EvaluateFitQuality(posed, f.tmpl.triangles, f.data.scans[0], f.data.depth_camera, bad),
+      Error);
   Eigen::MatrixX3i tris = f.tmpl.triangles;
   tris(0, 0) = static_cast<int>(posed.rows());
-  EXPECT_THROW(EvaluateFitQuality(posed, tris, f.data.scans[0], f.data.depth_camera,
-                                  FitQualityOptions()),
-               Error);
+  EXPECT_THROW(
+      EvaluateFitQuality(posed, tris, f.data.scans[0], f.data.depth_camera, FitQualityOptions()),
+      Error);
   EXPECT_STREQ(FitQualityLabelName(FitQualityLabel::kDoubtful), "doubtful");
 }
 

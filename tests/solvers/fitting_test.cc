@@ -307,6 +307,67 @@ TEST_F(FittingTest, ScaleEstimatedOnFirstFrameThenFixed) {
   EXPECT_LT(MeanVertexError(skinning_, fitter.pose(), moved), 0.01);
 }
 
+TEST_F(FittingTest, DiscardFrameLeavesNoTraceAndAcceptPoseCommits) {
+  const EMFitterOptions options = DefaultOptions();
+  EMFitter fitter(model_, options);
+  fitter.SetInitialPose(start_);
+  fitter.BeginFrame(scan_, start_);
+  while (!fitter.frame_done()) fitter.Iterate();
+  Pose fitted;
+  const FitSummary s = fitter.DiscardFrame(&fitted);
+  EXPECT_TRUE(s.ok());
+  EXPECT_GT(s.iterations, 1);
+  EXPECT_EQ(fitter.frames_fitted(), 0);
+  EXPECT_LT(MeanVertexError(skinning_, fitted, truth_), 0.003);
+  EXPECT_LT(MeanVertexError(skinning_, fitter.pose(), start_), 1e-12);  // back to the start
+  EXPECT_LT(MeanVertexError(skinning_, fitter.PredictNextPose(), start_), 1e-12);
+  fitter.AcceptPose(scan_, fitted);
+  EXPECT_EQ(fitter.frames_fitted(), 1);
+  EXPECT_LT(MeanVertexError(skinning_, fitter.pose(), fitted), 1e-12);
+  EXPECT_LT(MeanVertexError(skinning_, fitter.PredictNextPose(), fitted), 1e-12);
+  // The same as fitting the frame directly.
+  EMFitter direct(model_, options);
+  direct.SetInitialPose(start_);
+  direct.FitFrame(scan_);
+  EXPECT_LT(MeanVertexError(skinning_, direct.pose(), fitted), 1e-9);
+  EXPECT_THROW(fitter.AcceptPose(scan_, Pose::Identity(2)), Error);
+  EXPECT_THROW(fitter.DiscardFrame(), Error);  // no frame begun
+}
+
+TEST_F(FittingTest, ScaleSamplesByIcpMedianAndResetKeepingTheScale) {
+  EMFitterOptions options = DefaultOptions();
+  options.scale_mode = ScaleMode::kEstimateThenFix;
+  options.scale_estimation_frames = 3;
+  ASSERT_EQ(options.scale_estimator, ScaleEstimator::kIcp);
+  Pose start = start_;
+  start.scale = 1.05;
+  EMFitter fitter(model_, options);
+  fitter.SetInitialPose(start);
+  const FitSummary first = fitter.FitFrame(scan_);
+  ASSERT_TRUE(first.ok());
+  // The EM held the scale; the frame's ICP sample corrected it.
+  EXPECT_EQ(first.trace.back().scale, 1.05);
+  EXPECT_NEAR(fitter.pose().scale, 1.0, 0.02);
+  EXPECT_EQ(fitter.scale_samples(), 1);
+  EXPECT_TRUE(fitter.ScaleIsFree());
+  for (int f = 0; f < 3; ++f) ASSERT_TRUE(fitter.FitFrame(scan_).ok());
+  EXPECT_EQ(fitter.scale_samples(), 3);
+  EXPECT_FALSE(fitter.ScaleIsFree());
+  const double estimate = fitter.scale_estimate();
+  EXPECT_NEAR(estimate, 1.0, 0.02);
+  EXPECT_EQ(fitter.pose().scale, estimate);  // the 4th frame is fitted at the estimate
+  // A re-initialisation of the same person keeps the estimate; a full reset does not.
+  fitter.Reset(true);
+  EXPECT_EQ(fitter.frames_fitted(), 0);
+  EXPECT_EQ(fitter.scale_samples(), 3);
+  EXPECT_EQ(fitter.PredictNextPose().scale, estimate);
+  EXPECT_FALSE(fitter.ScaleIsFree());
+  fitter.Reset();
+  EXPECT_EQ(fitter.scale_samples(), 0);
+  EXPECT_TRUE(fitter.ScaleIsFree());
+  EXPECT_EQ(fitter.PredictNextPose().scale, 1.05);
+}
+
 TEST_F(FittingTest, TracksASequenceWithConstantVelocity) {
   EMFitterOptions options = DefaultOptions();
   options.smoothness = {0.0, 1e-4, 1e-5, 1e-6};
