@@ -77,7 +77,6 @@ void SurfaceErrors(const Eigen::MatrixX3d& tracked, const Eigen::MatrixX3d& trut
   *max = worst;
 }
 
-
 // Writes `image` as a PNG and returns the encoded bytes.
 std::vector<unsigned char> WritePng(const std::string& path, const cv::Mat& image) {
   std::vector<unsigned char> bytes;
@@ -239,8 +238,7 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
 
     // Fit: the multi-hypothesis initialisation on the first frame and after a lost one.
     if (need_init && scan.size() >= options.fitting.min_scan_points) {
-      const InitResult init =
-          InitializeFit(&fitter, scan, calibration.depth, options.initializer);
+      const InitResult init = InitializeFit(&fitter, scan, calibration.depth, options.initializer);
       record.fit = init.fit;
       record.reinitialised = true;
       record.init_seconds = init.total_seconds;
@@ -280,9 +278,8 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
     }
     const bool lost_frame = record.quality.label == FitQualityLabel::kLost;
     // A lost frame's pose is not texture: it would paint the room onto the body.
-    const bool texture_frame =
-        !lost_frame && (options.texture_doubtful_frames ||
-                        record.quality.label == FitQualityLabel::kGood);
+    const bool texture_frame = !lost_frame && (options.texture_doubtful_frames ||
+                                               record.quality.label == FitQualityLabel::kGood);
 
     if (texturer && texture_frame) {
       record.texture = texturer->AddFrame(i, frame.color, calibration.color, posed);

@@ -20,8 +20,8 @@ void BindWeights(const Config& c, PoseGroupWeights* w) {
 void BindPlanes(const Config& c, PlaneDetectionOptions* o) {
   c.CheckKeys({"sample_stride", "ransac_iterations", "score_points", "inlier_distance",
                "inlier_growth", "merge_angle_deg", "merge_distance", "max_planes",
-               "min_inlier_fraction", "min_extent", "floor_max_angle_deg", "wall_max_angle_deg",
-               "min_depth", "max_depth", "seed"});
+               "min_inlier_fraction", "min_extent", "floor_min_extent", "min_coverage",
+               "floor_max_angle_deg", "wall_max_angle_deg", "min_depth", "max_depth", "seed"});
   c.Get("sample_stride", &o->sample_stride);
   c.Get("ransac_iterations", &o->ransac_iterations);
   c.Get("score_points", &o->score_points);
@@ -32,6 +32,7 @@ void BindPlanes(const Config& c, PlaneDetectionOptions* o) {
   c.Get("max_planes", &o->max_planes);
   c.Get("min_inlier_fraction", &o->min_inlier_fraction);
   c.Get("min_extent", &o->min_extent);
+  c.Get("floor_min_extent", &o->floor_min_extent);
   c.Get("min_coverage", &o->min_coverage);
   c.Get("floor_max_angle_deg", &o->floor_max_angle_deg);
   c.Get("wall_max_angle_deg", &o->wall_max_angle_deg);
@@ -142,18 +143,50 @@ void BindInitializer(const Config& c, InitializerOptions* o) {
 }
 
 void BindFitting(const Config& c, EMFitterOptions* o) {
-  c.CheckKeys({"correspondence", "solver", "estep", "k", "voxel_fraction", "epsilon",
-               "lambda_color", "use_color", "normalize_per_scan_point", "icp_metric",
-               "icp_max_distance", "icp_min_normal_dot", "first_frame_radii", "tracking_radii",
-               "first_frame_iterations_per_stage", "tracking_iterations_per_stage",
-               "max_iterations", "over_relaxation", "relative_cost_tolerance",
-               "parameter_tolerance", "normalize_data_term", "tikhonov", "temporal",
-               "smoothness", "joint_limit_weight", "scale_mode", "scale_estimation_frames",
-               "scale_max_radius", "scale_prior_weight", "icp_first_frame",
-               "constant_velocity_prediction", "max_fit_vertices", "min_scan_points",
-               "max_mean_motion", "max_scale_change", "ceres_max_iterations", "solver_threads",
-               "candidate_margin", "normal_refresh_iterations", "tracking_tikhonov",
-               "fit_vertex_selection", "icp_init", "init", "quality"});
+  c.CheckKeys({"correspondence",
+               "solver",
+               "estep",
+               "k",
+               "voxel_fraction",
+               "epsilon",
+               "lambda_color",
+               "use_color",
+               "normalize_per_scan_point",
+               "icp_metric",
+               "icp_max_distance",
+               "icp_min_normal_dot",
+               "first_frame_radii",
+               "tracking_radii",
+               "first_frame_iterations_per_stage",
+               "tracking_iterations_per_stage",
+               "max_iterations",
+               "over_relaxation",
+               "relative_cost_tolerance",
+               "parameter_tolerance",
+               "normalize_data_term",
+               "tikhonov",
+               "temporal",
+               "smoothness",
+               "joint_limit_weight",
+               "scale_mode",
+               "scale_estimation_frames",
+               "scale_max_radius",
+               "scale_prior_weight",
+               "icp_first_frame",
+               "constant_velocity_prediction",
+               "max_fit_vertices",
+               "min_scan_points",
+               "max_mean_motion",
+               "max_scale_change",
+               "ceres_max_iterations",
+               "solver_threads",
+               "candidate_margin",
+               "normal_refresh_iterations",
+               "tracking_tikhonov",
+               "fit_vertex_selection",
+               "icp_init",
+               "init",
+               "quality"});
   c.GetEnum("correspondence", CorrespondenceModelNames(), &o->correspondence);
   c.GetEnum("solver", FitSolverTypeNames(), &o->solver.type);
   c.GetEnum("estep",

@@ -2,9 +2,8 @@
 
 #include <cmath>
 #include <iomanip>
-#include <sstream>
-
 #include <nlohmann/json.hpp>
+#include <sstream>
 
 #include "models/mesh_export.h"
 
@@ -52,11 +51,11 @@ void WriteFramesCsv(const std::string& path, const PipelineResult& result,
                << r.segmentation.subject_pixels << "," << r.segmentation.tracked << ","
                << (r.skipped ? "skipped" : FitQualityLabelName(r.quality.label)) << ","
                << Fixed(r.quality.inlier_fraction) << "," << Fixed(r.quality.support_fraction)
-               << "," << Fixed(1000 * r.quality.depth_residual_m) << "," << r.reinitialised
-               << "," << Fixed(1000 * r.init_seconds) << "," << r.fit.iterations
-               << "," << FrameTerminationName(r.fit.termination) << "," << Fixed(r.fit.initial_cost)
-               << "," << Fixed(r.fit.final_cost) << "," << r.fit.too_few_points << ","
-               << r.fit.non_finite << "," << r.fit.diverged << "," << Fixed(r.fit.scale) << ","
+               << "," << Fixed(1000 * r.quality.depth_residual_m) << "," << r.reinitialised << ","
+               << Fixed(1000 * r.init_seconds) << "," << r.fit.iterations << ","
+               << FrameTerminationName(r.fit.termination) << "," << Fixed(r.fit.initial_cost) << ","
+               << Fixed(r.fit.final_cost) << "," << r.fit.too_few_points << "," << r.fit.non_finite
+               << "," << r.fit.diverged << "," << Fixed(r.fit.scale) << ","
                << Fixed(1000 * r.preprocess_seconds) << "," << Fixed(1000 * r.fit.estep_seconds)
                << "," << Fixed(1000 * r.fit.mstep_seconds) << ","
                << Fixed(1000 * r.fit.total_seconds) << "," << Fixed(1000 * r.texture.seconds_total)

@@ -1,12 +1,11 @@
 // artex track RECORDING --config FILE -o OUT/: preprocessing, EM fitting and on-the-fly
 // texturing of every frame (experiments/pipeline.h), with a progress line on stderr. The
 // recording is an artex sequence or a TUM RGB-D folder (sensors/frame_source.h).
+#include <CLI/CLI.hpp>
 #include <cstdio>
 #include <filesystem>
 #include <string>
 #include <vector>
-
-#include <CLI/CLI.hpp>
 
 #include "experiments/commands.h"
 #include "experiments/config.h"
@@ -62,8 +61,10 @@ void RegisterTrackCommand(CLI::App* app) {
   cmd->add_option("-o,--output", args->out, "output folder")->required();
   cmd->add_option("-t,--template", args->template_path,
                   "tracking template (.glb); default: the generated default template");
-  cmd->add_option("-s,--set", args->overrides, "override an option: key=value (e.g. texture.lambda=0)");
-  cmd->add_flag("--export-meshes", args->export_meshes, "write the posed mesh of every frame (PLY)");
+  cmd->add_option("-s,--set", args->overrides,
+                  "override an option: key=value (e.g. texture.lambda=0)");
+  cmd->add_flag("--export-meshes", args->export_meshes,
+                "write the posed mesh of every frame (PLY)");
   cmd->add_flag("--no-texture", args->no_texture, "fitting only");
   cmd->add_option("--max-frames", args->max_frames, "process at most this many frames (0: all)");
   cmd->add_option("--intrinsics", args->intrinsics,
@@ -118,9 +119,10 @@ void RegisterTrackCommand(CLI::App* app) {
                 result.texture_ms_per_frame);
     std::printf("stream: %.1f kbit/s (pose + texture updates)\n", result.stream_kbit_per_s);
     if (result.has_ground_truth) {
-      std::printf("mean vertex error: %.2f mm (max %.2f mm), mean joint error: %.2f mm, lost: %.1f%%\n",
-                  result.mean_vertex_error_mm, result.max_vertex_error_mm,
-                  result.mean_joint_error_mm, 100.0 * result.lost_fraction);
+      std::printf(
+          "mean vertex error: %.2f mm (max %.2f mm), mean joint error: %.2f mm, lost: %.1f%%\n",
+          result.mean_vertex_error_mm, result.max_vertex_error_mm, result.mean_joint_error_mm,
+          100.0 * result.lost_fraction);
     }
     std::printf("results in %s\n", args->out.c_str());
   });

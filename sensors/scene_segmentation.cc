@@ -79,9 +79,9 @@ bool PlaneDetectionOptions::IsValid(std::string* error) const {
     msg << "max_planes: expected >= 0, found " << max_planes;
   } else if (!(min_inlier_fraction > 0 && min_inlier_fraction <= 1)) {
     msg << "min_inlier_fraction: expected a value in (0, 1], found " << min_inlier_fraction;
-  } else if (!(min_extent >= 0) || !(min_coverage >= 0)) {
-    msg << "min_extent/min_coverage: expected >= 0, found " << min_extent << " / "
-        << min_coverage;
+  } else if (!(min_extent >= 0) || !(floor_min_extent >= 0) || !(min_coverage >= 0)) {
+    msg << "min_extent/floor_min_extent/min_coverage: expected >= 0, found " << min_extent << " / "
+        << floor_min_extent << " / " << min_coverage;
   } else if (!(floor_max_angle_deg >= 0 && floor_max_angle_deg <= 90) ||
              !(wall_max_angle_deg >= 0 && wall_max_angle_deg <= 90)) {
     msg << "floor_max_angle_deg/wall_max_angle_deg: expected degrees in [0, 90]";
@@ -208,10 +208,16 @@ std::vector<ScenePlane> DetectScenePlanes(const cv::Mat& depth, const PinholeCam
     }
     plane.inliers = static_cast<int>(inliers.size());
     plane.inlier_fraction = static_cast<double>(inliers.size()) / total;
-    // In-plane spread: two axes orthogonal to the normal (the first as horizontal as possible).
-    Eigen::Vector3d axis0 = up.cross(plane.normal);
-    if (axis0.norm() < 1e-3) axis0 = plane.normal.unitOrthogonal();
-    axis0.normalize();
+    // In-plane spread along the principal axes of the inliers.
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (int i : inliers) mean += points[i];
+    mean /= static_cast<double>(inliers.size());
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    for (int i : inliers) cov += (points[i] - mean) * (points[i] - mean).transpose();
+    const Eigen::Matrix3d project =
+        Eigen::Matrix3d::Identity() - plane.normal * plane.normal.transpose();
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> axes(project * cov * project);
+    const Eigen::Vector3d axis0 = axes.eigenvectors().col(2).normalized();
     const Eigen::Vector3d axis1 = plane.normal.cross(axis0).normalized();
     std::vector<double> c0, c1;
     c0.reserve(inliers.size());
@@ -228,8 +234,8 @@ std::vector<ScenePlane> DetectScenePlanes(const cv::Mat& depth, const PinholeCam
     // Area on the plane of the inlier samples: (stride z)^2 / (fx fy) per sample, divided by
     // the cosine between the viewing ray and the normal (bounded at grazing angles).
     double area = 0.0;
-    const double pixel = options.sample_stride * options.sample_stride /
-                         (intrinsics.fx * intrinsics.fy);
+    const double pixel =
+        options.sample_stride * options.sample_stride / (intrinsics.fx * intrinsics.fy);
     for (int i : inliers) {
       const Eigen::Vector3d& x = points[i];
       const double cosine = std::max(0.2, std::abs(plane.normal.dot(x)) / x.norm());
@@ -237,10 +243,10 @@ std::vector<ScenePlane> DetectScenePlanes(const cv::Mat& depth, const PinholeCam
     }
     plane.coverage = area / std::max(1e-9, plane.extent[0] * plane.extent[1]);
     const double up_dot = plane.normal.dot(up);
-    if (plane.extent[1] >= options.min_extent && plane.coverage >= options.min_coverage) {
-      if (up_dot >= cos_floor) {
+    if (plane.coverage >= options.min_coverage) {
+      if (up_dot >= cos_floor && plane.extent[1] >= options.floor_min_extent) {
         plane.kind = PlaneKind::kFloor;
-      } else if (std::abs(up_dot) <= sin_wall) {
+      } else if (std::abs(up_dot) <= sin_wall && plane.extent[1] >= options.min_extent) {
         plane.kind = PlaneKind::kWall;
       }
     }

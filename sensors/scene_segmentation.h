@@ -34,9 +34,11 @@ struct PlaneDetectionOptions {
   int max_planes = 5;  // planes extracted one after the other
   // A plane needs this fraction of the sampled valid points (in the depth range) ...
   double min_inlier_fraction = 0.05;
-  // ... and inliers spanning at least this much (m; 5-95 % quantiles) along both in-plane
-  // axes to count as a floor or wall: a person's torso or a table top is smaller.
+  // ... and inliers spanning at least this much (m; 5-95 % quantiles along the principal
+  // in-plane axes) in both directions to count as a wall (a person's front is smaller), or
+  // floor_min_extent as a floor (a low camera sees the floor foreshortened).
   double min_extent = 1.5;
+  double floor_min_extent = 1.0;
   // ... and whose inliers cover at least this fraction of that extent (area of the inlier
   // pixels on the plane / extent[0] * extent[1]): a real floor or wall is dense, a plane
   // through a person and things beside it at the same depth is not.

@@ -73,11 +73,12 @@ TEST_P(ConditionsTrackingTest, UprightAccurateAndNeverLost) {
   const PipelineOptions options = LoadPipelineOptions(config);
   const PipelineResult r =
       RunPipeline(seq.string(), "", options, config, (Root() / ("run_" + c.name)).string());
-  std::printf("[%s] mean vertex error %.2f mm (max %.1f), joint %.1f mm, good %d, doubtful %d, "
-              "lost %d, initialisations %d, fit %.1f ms/frame, init %.0f ms\n",
-              c.name.c_str(), r.mean_vertex_error_mm, r.max_vertex_error_mm,
-              r.mean_joint_error_mm, r.good_frames, r.doubtful_frames, r.lost_frames,
-              r.initialisations, r.fit_ms_per_frame, r.init_ms_per_initialisation);
+  std::printf(
+      "[%s] mean vertex error %.2f mm (max %.1f), joint %.1f mm, good %d, doubtful %d, "
+      "lost %d, initialisations %d, fit %.1f ms/frame, init %.0f ms\n",
+      c.name.c_str(), r.mean_vertex_error_mm, r.max_vertex_error_mm, r.mean_joint_error_mm,
+      r.good_frames, r.doubtful_frames, r.lost_frames, r.initialisations, r.fit_ms_per_frame,
+      r.init_ms_per_initialisation);
   ASSERT_EQ(static_cast<int>(r.frames.size()), kFrames);
   EXPECT_LE(r.mean_vertex_error_mm, kMaxMeanErrorMm);
   EXPECT_EQ(r.lost_fraction, 0.0);  // mean vertex error <= 50 mm in every frame
@@ -94,16 +95,17 @@ TEST_P(ConditionsTrackingTest, UprightAccurateAndNeverLost) {
   EXPECT_GE(good, kFrames * 8 / 10);
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Conditions, ConditionsTrackingTest,
-    ::testing::Values(Condition{"camera_frame", {}},
-                      Condition{"room", {SynthCondition::kRoom}},
-                      Condition{"facing_away", {SynthCondition::kFacingAway}},
-                      Condition{"sideways", {SynthCondition::kSideways}},
-                      Condition{"upper_body", {SynthCondition::kUpperBody}},
-                      Condition{"rolled", {SynthCondition::kRolled}},
-                      Condition{"high_camera", {SynthCondition::kHighCamera}}),
-    [](const ::testing::TestParamInfo<Condition>& info) { return info.param.name; });
+INSTANTIATE_TEST_SUITE_P(Conditions, ConditionsTrackingTest,
+                         ::testing::Values(Condition{"camera_frame", {}},
+                                           Condition{"room", {SynthCondition::kRoom}},
+                                           Condition{"facing_away", {SynthCondition::kFacingAway}},
+                                           Condition{"sideways", {SynthCondition::kSideways}},
+                                           Condition{"upper_body", {SynthCondition::kUpperBody}},
+                                           Condition{"rolled", {SynthCondition::kRolled}},
+                                           Condition{"high_camera", {SynthCondition::kHighCamera}}),
+                         [](const ::testing::TestParamInfo<Condition>& info) {
+                           return info.param.name;
+                         });
 
 }  // namespace
 }  // namespace artex

@@ -105,7 +105,11 @@ TEST(SceneSegmentationTest, WorldFrameFromTheFloorStandsUpAndFacesTheCamera) {
     const WorldFrameEstimate e =
         EstimateWorldFrame(r.depth, r.calibration.depth, r.calibration.depth_distortion,
                            r.calibration.depth_scale, std::nullopt, WorldFrameOptions());
-    EXPECT_EQ(e.source, WorldFrameSource::kFloor);
+    std::ostringstream planes;
+    for (const ScenePlane& p : e.planes)
+      planes << PlaneKindName(p.kind) << " " << p.extent[0] << "x" << p.extent[1] << " cover "
+             << p.coverage << " fraction " << p.inlier_fraction << "; ";
+    EXPECT_EQ(e.source, WorldFrameSource::kFloor) << planes.str();
     EXPECT_LT(AngleDeg(e.up_camera, true_up), 1.5);
     EXPECT_NEAR(e.camera_height, eye.y(), 0.03);
     // World +Z points from the scene towards the camera (horizontally).
