@@ -84,8 +84,8 @@ void RunImport(const ImportCli& cli) {
   const PreprocessOptions& pre = pipeline.preprocess;
   const bool camera_frame =
       calibration.depth.world_to_camera.isApprox(Eigen::Isometry3d::Identity(), 1e-12);
-  std::string world = camera_frame ? "camera frame (x right, y down, z forward)"
-                                   : "the source's calibration";
+  std::string world =
+      camera_frame ? "camera frame (x right, y down, z forward)" : "the source's calibration";
   if (pre.world_frame == WorldFrameMode::kEstimate ||
       (pre.world_frame == WorldFrameMode::kAuto && camera_frame)) {
     Frame first;
@@ -163,7 +163,9 @@ void RegisterImportCommand(CLI::App* app) {
       "import",
       "Convert a recording into an artex sequence folder (calibration.yaml, frames.csv, depth/, "
       "color/). Detected by its files: an artex sequence (calibration.yaml + frames.csv; copied "
-      "with its background and ground truth) or a TUM RGB-D folder (rgb.txt + depth.txt). For "
+      "with its background and ground truth), a TUM RGB-D folder (rgb.txt + depth.txt) or a "
+      "Matroska .mkv file (16-bit depth + colour tracks, e.g. Azure Kinect; calibration from "
+      "<file>.yaml or calibration.yaml beside it, input.calibration). For "
       "TUM it infers: depth/colour pairs by nearest timestamp within --max-time-difference "
       "(unpaired entries counted); one camera for depth and colour (the benchmark's depth is "
       "registered to colour) with the intrinsics of camera.yaml, --intrinsics FILE or a "
@@ -173,7 +175,8 @@ void RegisterImportCommand(CLI::App* app) {
       "estimated from the first frame (floor plane, else gravity, else an upright camera); "
       "--world-frame calibration keeps the camera frame. Everything inferred is printed. "
       "Frames with missing or unreadable files are skipped with a warning and counted.");
-  cmd->add_option("source", cli->source, "recording folder (artex sequence or TUM RGB-D)")
+  cmd->add_option("source", cli->source,
+                  "recording: artex sequence or TUM RGB-D folder, or a .mkv file")
       ->required();
   cmd->add_option("-o,--output", cli->output, "new artex sequence folder")->required();
   cmd->add_option("--intrinsics", cli->intrinsics,

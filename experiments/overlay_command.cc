@@ -86,20 +86,24 @@ void RunOverlay(const OverlayCli& cli) {
                 "artex overlay SEQUENCE RUN -o DIR");
   }
 
-  // How the run read its input and which template it fitted.
+  // How the run read its input (its resolved configuration; defaults when absent or from an
+  // older version with other keys).
   FrameSourceOptions input;
-  std::string config_template;
   const std::string config_path = run + "/config.yaml";
   if (fs::is_regular_file(config_path, ec)) {
-    const Config config = Config::Load(config_path);
-    input = LoadPipelineOptions(config).input;
-    if (config.Has("template")) config.Get("template", &config_template);
+    try {
+      input = LoadPipelineOptions(Config::Load(config_path)).input;
+    } catch (const Error& e) {
+      std::fprintf(stderr,
+                   "overlay: warning: %s: %s; reading the recording with default input "
+                   "options\n",
+                   config_path.c_str(), e.what());
+    }
   }
   if (!cli.intrinsics.empty()) input.tum.SetIntrinsics(cli.intrinsics);
   std::string template_path = cli.template_path;
   if (template_path.empty()) template_path = JsonField(run_json, "template");
   if (template_path.empty()) template_path = JsonField(summary, "template");
-  if (template_path.empty()) template_path = config_template;
   if (template_path == "default") template_path.clear();
   const Template tmpl = template_path.empty() ? GenerateTemplate() : ReadTemplateGlb(template_path);
 

@@ -291,14 +291,16 @@ void BindTexture(const Config& c, TexturingOptions* o) {
 }
 
 void BindInput(const Config& c, FrameSourceOptions* o) {
-  c.CheckKeys(
-      {"intrinsics", "max_time_difference", "time_offset", "accelerometer", "min_gravity_norm"});
+  c.CheckKeys({"intrinsics", "max_time_difference", "time_offset", "accelerometer",
+               "min_gravity_norm", "calibration"});
   if (c.Has("intrinsics")) {
     std::string intrinsics;
     c.Get("intrinsics", &intrinsics);
     o->tum.SetIntrinsics(intrinsics);
   }
   c.Get("max_time_difference", &o->tum.max_time_difference);
+  o->mkv.max_time_difference = o->tum.max_time_difference;
+  c.Get("calibration", &o->mkv.calibration_path);
   c.Get("time_offset", &o->tum.time_offset);
   c.Get("accelerometer", &o->tum.read_accelerometer);
   c.Get("min_gravity_norm", &o->tum.min_gravity_norm);

@@ -686,7 +686,7 @@ Experiment ParseExperiment(const std::string& yaml, const std::string& source_na
     } else {
       throw Error(where + ": expected a folder path or a mapping");
     }
-    if (!seq.synthetic && !fs::is_directory(seq.folder)) {
+    if (!seq.synthetic && !fs::exists(seq.folder)) {
       throw Error(where + ": sequence folder not found: " + seq.folder);
     }
     if (!seq.synthetic) {

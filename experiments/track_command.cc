@@ -33,8 +33,7 @@ std::string IntrinsicsConfigValue(const std::string& name_or_file) {
   if (!std::filesystem::is_regular_file(name_or_file, ec)) {
     std::string presets;
     for (const auto& kv : TumIntrinsicsPresetNames()) presets += " " + kv.first;
-    throw Error("--intrinsics " + name_or_file +
-                ": expected a preset name (" + presets.substr(1) +
+    throw Error("--intrinsics " + name_or_file + ": expected a preset name (" + presets.substr(1) +
                 ") or an intrinsics YAML file, found neither");
   }
   return YamlQuoted(std::filesystem::absolute(name_or_file).string());
@@ -54,10 +53,13 @@ void RegisterTrackCommand(CLI::App* app) {
   auto args = std::make_shared<Args>();
   CLI::App* cmd = app->add_subcommand(
       "track", "Fit the template to every frame of a sequence and texture it on the fly");
-  cmd->add_option("sequence", args->sequence,
-                  "recording: an artex sequence folder or a TUM RGB-D folder (rgb.txt, depth.txt)")
+  cmd->add_option(
+         "sequence", args->sequence,
+         "recording: an artex sequence folder, a TUM RGB-D folder (rgb.txt, depth.txt) or a "
+         ".mkv file")
       ->required();
-  cmd->add_option("-c,--config", args->config, "configuration file (YAML); default: built-in defaults");
+  cmd->add_option("-c,--config", args->config,
+                  "configuration file (YAML); default: built-in defaults");
   cmd->add_option("-o,--output", args->out, "output folder")->required();
   cmd->add_option("-t,--template", args->template_path,
                   "tracking template (.glb); default: the generated default template");

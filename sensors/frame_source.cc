@@ -1,5 +1,6 @@
 #include "sensors/frame_source.h"
 
+#include <cctype>
 #include <filesystem>
 #include <system_error>
 
@@ -14,20 +15,31 @@ std::string FrameSourceKindName(FrameSourceKind kind) {
       return "artex sequence";
     case FrameSourceKind::kTumRgbd:
       return "TUM RGB-D folder";
+    case FrameSourceKind::kMatroska:
+      return "Matroska file";
   }
   return "?";
 }
 
-bool FrameSourceOptions::IsValid(std::string* error) const { return tum.IsValid(error); }
+bool FrameSourceOptions::IsValid(std::string* error) const {
+  return tum.IsValid(error) && mkv.IsValid(error);
+}
 
 FrameSourceKind DetectFrameSource(const std::string& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) {
     throw Error(path +
-                ": expected a recording folder (artex sequence or TUM RGB-D), found nothing");
+                ": expected a recording (artex sequence or TUM RGB-D folder, .mkv file), found "
+                "nothing");
   }
   if (!fs::is_directory(path, ec)) {
-    throw Error(path + ": expected a recording folder (artex sequence or TUM RGB-D), found a file");
+    std::string ext = fs::path(path).extension().string();
+    for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    if (ext == ".mkv") return FrameSourceKind::kMatroska;
+    throw Error(path +
+                ": expected a recording (artex sequence or TUM RGB-D folder, .mkv file), found a "
+                "file with extension '" +
+                ext + "'");
   }
   const auto has = [&](const char* name) { return fs::exists(fs::path(path) / name, ec); };
   if (has("calibration.yaml") || has("frames.csv")) return FrameSourceKind::kArtexSequence;
@@ -35,7 +47,7 @@ FrameSourceKind DetectFrameSource(const std::string& path) {
   throw Error(path +
               ": not a recording folder: expected an artex sequence (calibration.yaml and "
               "frames.csv) or a TUM RGB-D folder (rgb.txt and depth.txt), found none of these "
-              "files");
+              "files (a Matroska recording is a .mkv file)");
 }
 
 std::unique_ptr<FrameSource> OpenFrameSource(const std::string& path,
@@ -47,6 +59,8 @@ std::unique_ptr<FrameSource> OpenFrameSource(const std::string& path,
       return std::make_unique<SequenceReader>(path);
     case FrameSourceKind::kTumRgbd:
       return std::make_unique<TumReader>(path, options.tum);
+    case FrameSourceKind::kMatroska:
+      return std::make_unique<MkvReader>(path, options.mkv);
   }
   throw Error(path + ": unknown recording kind");
 }

@@ -414,7 +414,7 @@ std::string TumReader::Description() const {
     << c.fx << ", fy " << c.fy << ", cx " << c.cx << ", cy " << c.cy
     << (m.calibration.depth_distortion.IsZero() ? ", no distortion" : ", distortion") << ", "
     << m.calibration.depth_scale << " units/m)"
-    << "; depth registered to colour (one camera); world frame = camera frame";
+    << "; depth registered to colour (one camera); calibration in the camera frame";
   if (m.up) {
     s << "; up from accelerometer.txt (" << m.accelerometer_samples << " samples, mean "
       << std::setprecision(3) << m.mean_specific_force.norm() << " m/s^2) = (" << (*m.up)[0] << ", "

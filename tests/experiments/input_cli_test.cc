@@ -245,7 +245,8 @@ TEST_F(InputCliTest, ImportEstimatesAWorldFrameWithYUp) {
   EXPECT_NE(r.out.find("world frame: estimated from frame 0"), std::string::npos) << r.out;
   const Calibration estimated = SequenceReader(out).calibration();
   const Calibration truth = SequenceReader(Synthetic()).calibration();
-  const Eigen::Vector3d up_estimated = estimated.depth.world_to_camera.linear() * Eigen::Vector3d::UnitY();
+  const Eigen::Vector3d up_estimated =
+      estimated.depth.world_to_camera.linear() * Eigen::Vector3d::UnitY();
   const Eigen::Vector3d up_true = truth.depth.world_to_camera.linear() * Eigen::Vector3d::UnitY();
   const double angle_deg = std::acos(std::min(1.0, up_estimated.dot(up_true))) * 180.0 / M_PI;
   EXPECT_LT(angle_deg, 2.0);
@@ -318,6 +319,27 @@ TEST_F(InputCliTest, TrackRunsOnATumFolder) {
                             "' --no-texture -s input.max_time_difference=0.001");
   EXPECT_EQ(narrow.status, 1);
   EXPECT_NE(narrow.err.find("unpaired"), std::string::npos) << narrow.err;
+}
+
+TEST_F(InputCliTest, ExperimentRunsARecordedTumFolder) {
+  const std::string tum = WriteTum("tum_experiment");
+  const std::string file = Path("tum_experiment.yaml");
+  std::ofstream(file) << "base: {pipeline: {texture: false, export_glb: false}}\n"
+                      << "sequences:\n  - {name: lab, path: '" << tum << "'}\n";
+  const std::string out = Path("tum_experiment_out");
+  const Result r =
+      Run("experiment '" + file + "' -o '" + out + "' --jobs 1 --threads-per-run 1 --no-plots");
+  ASSERT_EQ(r.status, 0) << r.err;
+  // One run of the recorded sequence, with its poses and a row in results.csv.
+  bool found = false;
+  for (const auto& e : fs::recursive_directory_iterator(fs::path(out) / "runs" / "lab")) {
+    if (e.path().filename() == "poses.csv") {
+      EXPECT_EQ(CountLines(ReadText(e.path())), kFrames + 1);
+      found = true;
+    }
+  }
+  EXPECT_TRUE(found);
+  EXPECT_NE(ReadText(fs::path(out) / "results.csv").find(",lab,"), std::string::npos);
 }
 
 TEST_F(InputCliTest, ImportsTheRealSkeltrackRecordingInPlace) {

@@ -114,12 +114,14 @@ TEST(FrameSourceTest, NeitherLayoutNamesTheFolderAndTheFiles) {
   std::ofstream(empty + "/notes.txt") << "hello\n";
   const std::string msg = ErrorOf([&] { OpenFrameSource(empty); });
   for (const std::string& part : {empty, std::string("calibration.yaml"), std::string("frames.csv"),
-                                 std::string("rgb.txt"), std::string("depth.txt")}) {
+                                  std::string("rgb.txt"), std::string("depth.txt")}) {
     EXPECT_NE(msg.find(part), std::string::npos) << part << " in: " << msg;
   }
   EXPECT_NE(ErrorOf([&] { OpenFrameSource(empty + "/missing"); }).find("found nothing"),
             std::string::npos);
-  EXPECT_NE(ErrorOf([&] { OpenFrameSource(empty + "/notes.txt"); }).find("found a file"),
+  EXPECT_NE(ErrorOf([&] {
+              OpenFrameSource(empty + "/notes.txt");
+            }).find("found a file with extension '.txt'"),
             std::string::npos);
   // An incomplete artex sequence is an artex sequence that fails on its missing file.
   std::ofstream(empty + "/calibration.yaml") << "x: 1\n";
