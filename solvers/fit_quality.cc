@@ -31,8 +31,8 @@ bool FitQualityOptions::IsValid(std::string* error) const {
     msg << "inlier_distance: expected a finite value > 0 (m), found " << inlier_distance;
   } else if (max_scan_points < 1) {
     msg << "max_scan_points: expected >= 1, found " << max_scan_points;
-  } else if (raster_subsample < 1) {
-    msg << "raster_subsample: expected >= 1, found " << raster_subsample;
+  } else if (raster_width < 8) {
+    msg << "raster_width: expected >= 8 pixels, found " << raster_width;
   } else if (!(std::isfinite(support_tolerance) && support_tolerance > 0.0)) {
     msg << "support_tolerance: expected a finite value > 0 (m), found " << support_tolerance;
   } else if (!(std::isfinite(depth_truncation) && depth_truncation > 0.0)) {
@@ -160,7 +160,9 @@ FitQuality EvaluateFitQuality(const Eigen::MatrixX3d& posed_vertices,
   }
 
   // Rendered template and observed depth on the subsampled raster.
-  const PinholeCamera camera = Subsampled(depth_camera, options.raster_subsample);
+  const int subsample = std::max(
+      1, static_cast<int>(std::lround(static_cast<double>(depth_camera.width) / options.raster_width)));
+  const PinholeCamera camera = Subsampled(depth_camera, subsample);
   std::vector<float> model;
   RasterizeDepth(posed_vertices, triangles, camera, RasterOptions(), &model);
   const int w = camera.width, h = camera.height;

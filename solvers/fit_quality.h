@@ -12,7 +12,7 @@
 //   depth_residual_m: mean truncated |z_model - z_observed| over the union of the template's
 //                     silhouette and the scan's foreground; a pixel covered by one of them
 //                     only counts depth_truncation.
-// All rasters are the depth camera's image divided by raster_subsample.
+// All rasters are the depth camera's image subsampled to about raster_width pixels across.
 #pragma once
 
 #include <Eigen/Core>
@@ -34,7 +34,9 @@ const char* FitQualityLabelName(FitQualityLabel label);  // "good", "doubtful", 
 struct FitQualityOptions {
   double inlier_distance = 0.025;   // m: a scan point within this of the fit is explained
   int max_scan_points = 3000;       // inlier test on a fixed-stride subsample of the scan
-  int raster_subsample = 4;         // rasters at (width / this) x (height / this) pixels
+  // Rasters about this many pixels wide: the depth image divided by max(1, round(width /
+  // raster_width)) (a subject of a few pixels would make support and residual meaningless).
+  int raster_width = 160;
   double support_tolerance = 0.03;  // m: |z_model - z_observed| of a supported pixel
   double depth_truncation = 0.10;   // m: truncation of the depth residual
   // Labels: kLost when any lost_* bound is crossed, else kGood when all good_* bounds hold,

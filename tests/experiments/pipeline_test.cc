@@ -151,7 +151,7 @@ TEST(PipelineTest, ResultCoversEveryFrameWithFiniteErrors) {
     EXPECT_TRUE(std::isfinite(f.mean_vertex_error_mm));
     EXPECT_GE(f.max_vertex_error_mm, f.mean_vertex_error_mm);
     EXPECT_TRUE(std::isfinite(f.mean_joint_error_mm));
-    EXPECT_GT(f.texture.pool_size, 0) << "frame " << i << ": " << f.quality.BriefReport();
+    EXPECT_GT(f.texture.pool_size, 0) << "frame " << i << ": " << f.quality.BriefReport() << ", error " << f.mean_vertex_error_mm << " mm";
     EXPECT_NE(f.quality.label, FitQualityLabel::kLost) << f.quality.BriefReport();
   }
   // Coarse template and subject, half-size depth: tracked, not lost.
