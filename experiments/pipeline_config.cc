@@ -45,7 +45,7 @@ void BindPlanes(const Config& c, PlaneDetectionOptions* o) {
 
 void BindSegmentation(const Config& c, SubjectSegmentationOptions* o) {
   c.CheckKeys({"min_depth", "max_depth", "plane_margin", "plane_margin_growth", "connect_distance",
-               "connect_growth", "merge_relative", "fragment_fraction", "min_pixels", "min_height",
+               "connect_growth", "merge_relative", "fragment_height", "split_people", "head_bin", "head_top_range", "head_depth", "max_head_width", "shoulder_drop", "min_shoulder_width", "min_head_separation", "min_valley", "min_pixels", "min_height",
                "max_height", "max_width", "subject", "pixel", "track_max_distance"});
   c.Get("min_depth", &o->min_depth);
   c.Get("max_depth", &o->max_depth);
@@ -54,7 +54,16 @@ void BindSegmentation(const Config& c, SubjectSegmentationOptions* o) {
   c.Get("connect_distance", &o->connect_distance);
   c.Get("connect_growth", &o->connect_growth);
   c.Get("merge_relative", &o->merge_relative);
-  c.Get("fragment_fraction", &o->fragment_fraction);
+  c.Get("fragment_height", &o->fragment_height);
+  c.Get("split_people", &o->split_people);
+  c.Get("head_bin", &o->head_bin);
+  c.Get("head_top_range", &o->head_top_range);
+  c.Get("head_depth", &o->head_depth);
+  c.Get("max_head_width", &o->max_head_width);
+  c.Get("shoulder_drop", &o->shoulder_drop);
+  c.Get("min_shoulder_width", &o->min_shoulder_width);
+  c.Get("min_head_separation", &o->min_head_separation);
+  c.Get("min_valley", &o->min_valley);
   c.Get("min_pixels", &o->min_pixels);
   c.Get("min_height", &o->min_height);
   c.Get("max_height", &o->max_height);

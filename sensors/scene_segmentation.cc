@@ -367,9 +367,9 @@ bool SubjectSegmentationOptions::IsValid(std::string* error) const {
     msg << "plane_margin/plane_margin_growth: expected >= 0, found " << plane_margin << " / "
         << plane_margin_growth;
   } else if (!(connect_distance > 0) || !(connect_growth >= 0) || !(merge_relative >= 0) ||
-             !(fragment_fraction >= 0 && fragment_fraction <= 1)) {
-    msg << "connect_distance/connect_growth/merge_relative/fragment_fraction: expected > 0 / "
-           ">= 0 / >= 0 / in [0, 1]";
+             !(fragment_height >= 0)) {
+    msg << "connect_distance/connect_growth/merge_relative/fragment_height: expected > 0 / "
+           ">= 0 / >= 0 / >= 0";
   } else if (min_pixels < 1) {
     msg << "min_pixels: expected >= 1, found " << min_pixels;
   } else if (!(min_height >= 0) || !(max_height > min_height) || !(max_width > 0)) {
@@ -499,20 +499,31 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
         Union(parent_, i, i + w);
     }
   }
-  if (options_.fragment_fraction > 0 && options_.merge_relative > 0) {
-    size_.assign(n, 0);
-    for (int i = 0; i < n; ++i)
-      if (z_[i] != 0.0f) ++size_[Find(parent_, i)];
+  if (options_.fragment_height > 0 && options_.merge_relative > 0) {
+    low_.assign(n, 1e30f);
+    high_.assign(n, -1e30f);
+    const Eigen::Vector3f up = up_.cast<float>();
+    for (int v = 0; v < h; ++v) {
+      const cv::Vec2f* ray = rays_.ptr<cv::Vec2f>(v);
+      for (int u = 0; u < w; ++u) {
+        const int i = v * w + u;
+        if (z_[i] == 0.0f) continue;
+        const int r = Find(parent_, i);
+        const float height = z_[i] * (up.x() * ray[u][0] + up.y() * ray[u][1] + up.z());
+        low_[r] = std::min(low_[r], height);
+        high_[r] = std::max(high_[r], height);
+      }
+    }
     const float rel = static_cast<float>(options_.merge_relative);
-    const double fraction = options_.fragment_fraction;
+    const float tall = static_cast<float>(options_.fragment_height);
     auto merge = [&](int a, int b) {
       int ra = Find(parent_, a), rb = Find(parent_, b);
       if (ra == rb) return;
-      const int small = std::min(size_[ra], size_[rb]), large = std::max(size_[ra], size_[rb]);
-      if (small >= fraction * large) return;
+      if (high_[ra] - low_[ra] >= tall && high_[rb] - low_[rb] >= tall) return;
       if (ra < rb) std::swap(ra, rb);
       parent_[ra] = rb;
-      size_[rb] += size_[ra];
+      low_[rb] = std::min(low_[rb], low_[ra]);
+      high_[rb] = std::max(high_[rb], high_[ra]);
     };
     for (int v = 0; v < h; ++v) {
       for (int u = 0; u < w; ++u) {

@@ -129,13 +129,14 @@ struct SubjectSegmentationOptions {
   double plane_margin_growth = 0.003;
   // Components in two passes. Tight: neighbouring pixels join when their depths differ by
   // less than connect_distance + connect_growth * z^2 (about twice the Kinect's depth step;
-  // two people touching in the image stay apart). Loose: a fragment (an arm split off by
-  // noise) joins a neighbour across a depth difference below max(connect_distance,
-  // merge_relative * z) when it has fewer than fragment_fraction of the neighbour's pixels.
+  // two people touching in the image stay apart). Loose: a fragment (an arm in front of the
+  // body, a limb split off by noise) joins a neighbour across a depth difference below
+  // max(connect_distance, merge_relative * z) unless both are at least fragment_height tall
+  // (extent along up, m): two people stay apart.
   double connect_distance = 0.01;
   double connect_growth = 0.003;
-  double merge_relative = 0.03;
-  double fragment_fraction = 0.25;
+  double merge_relative = 0.08;
+  double fragment_height = 0.9;
   // People touching in the image at one depth: a component with two or more heads is split
   // between them. A head is a profile peak (the highest point of each lateral bin of
   // head_bin m) within head_top_range of the component's top, narrower than max_head_width
@@ -212,7 +213,7 @@ class SubjectSegmenter {
   bool has_subject_ = false;
   Eigen::Vector3d subject_centroid_ = Eigen::Vector3d::Zero();
   std::vector<int> parent_;  // union-find over pixels
-  std::vector<int> size_;    // pixels per root
+  std::vector<float> low_, high_;  // extent along up per root (loose merging)
   std::vector<float> z_;
 };
 
