@@ -578,8 +578,8 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
     const double height = c.up_max - c.up_min;
     if (height >= options_.min_height && height <= options_.max_height) sized.push_back(k);
   }
+  std::vector<double> radius(components.size(), 0.0);
   if (!sized.empty()) {
-    std::vector<double> radius(components.size(), 0.0);
     std::vector<uint8_t> in_sized(components.size(), 0);
     for (int k : sized) in_sized[k] = 1;
     for (int v = 0; v < h; ++v) {
@@ -656,6 +656,7 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
     local.subject_pixels = c.pixels;
     local.subject_centroid = subject_centroid_;
     local.subject_height = c.up_max - c.up_min;
+    local.subject_width = 2.0 * radius[chosen];
     const int root = c.root;
     for (int v = 0; v < h; ++v) {
       uint8_t* out = mask->ptr<uint8_t>(v);

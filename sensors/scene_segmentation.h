@@ -176,6 +176,7 @@ struct SegmentationStats {
   bool tracked = false;    // the subject continues the previous frame's
   Eigen::Vector3d subject_centroid = Eigen::Vector3d::Zero();  // camera frame
   double subject_height = 0.0;                                 // m along up
+  double subject_width = 0.0;  // m: twice the largest horizontal distance from its centroid
 };
 
 // Foreground without background frames: floor and walls (detected on the first frame, or
@@ -212,7 +213,7 @@ class SubjectSegmenter {
   bool planes_known_ = false;
   bool has_subject_ = false;
   Eigen::Vector3d subject_centroid_ = Eigen::Vector3d::Zero();
-  std::vector<int> parent_;  // union-find over pixels
+  std::vector<int> parent_;        // union-find over pixels
   std::vector<float> low_, high_;  // extent along up per root (loose merging)
   std::vector<float> z_;
 };

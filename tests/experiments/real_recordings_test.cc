@@ -1,0 +1,141 @@
+// Tracking real Kinect recordings as users bring them (TUM RGB-D layout, camera.yaml, no
+// calibration.yaml, no empty-scene frames, no ground truth), read in place from the shared
+// data folder and skipped when it is absent (docs/real-data.md). What must hold without
+// ground truth: the world frame stands the template up (head above chest in the image, in
+// every frame), the foreground is one person, and the template lies on that person.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <string>
+
+#include "experiments/config.h"
+#include "experiments/pipeline.h"
+#include "experiments/pose_csv.h"
+#include "models/skinning.h"
+#include "models/template_generator.h"
+#include "sensors/calibration.h"
+
+namespace artex {
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path Recording(const std::string& name) { return fs::path(ARTEX_SHARED_DATA) / "real" / name; }
+
+fs::path OutDir(const std::string& name) {
+  return fs::temp_directory_path() / ("artex_real_" + name + "_" + std::to_string(::getpid()));
+}
+
+struct TrackedRun {
+  PipelineResult result;
+  fs::path out;
+};
+
+TrackedRun Track(const std::string& name) {
+  TrackedRun run;
+  run.out = OutDir(name);
+  fs::remove_all(run.out);
+  Config config;
+  config.Set("pipeline.texture", "false");
+  config.Set("pipeline.export_glb", "false");
+  config.Set("pipeline.export_foreground", "true");
+  const PipelineOptions options = LoadPipelineOptions(config);
+  run.result = RunPipeline(Recording(name).string(), "", options, config, run.out.string());
+  std::printf("[%s] %zu frames: %d good, %d doubtful, %d lost (%d failed), %d initialisations\n",
+              name.c_str(), run.result.frames.size(), run.result.good_frames,
+              run.result.doubtful_frames, run.result.lost_frames, run.result.failed_frames,
+              run.result.initialisations);
+  for (const FrameRecord& f : run.result.frames) {
+    std::printf("  frame %d: %s, scale %.3f, subject pixels %d\n", f.frame,
+                f.quality.BriefReport().c_str(), f.fit.scale, f.segmentation.subject_pixels);
+  }
+  return run;
+}
+
+// Image rows of the head and chest joints of every fitted frame, projected with the run's
+// calibration (its estimated world frame).
+struct Uprightness {
+  int frames = 0;
+  int upright = 0;  // head above the chest in the image
+};
+
+Uprightness CheckUpright(const TrackedRun& run) {
+  const Template tmpl = GenerateTemplate();
+  const Skinning skinning(tmpl);
+  const Calibration calibration = ReadCalibration((run.out / "calibration.yaml").string());
+  const int head = tmpl.FindJoint("head"), chest = tmpl.FindJoint("chest");
+  Uprightness u;
+  for (const auto& [frame, pose] :
+       ReadPoseCsv((run.out / "poses.csv").string(), tmpl.num_joints())) {
+    Eigen::MatrixX3d joints;
+    skinning.PosedJointCenters(pose, &joints);
+    const Eigen::Vector2d h = calibration.depth.Project(joints.row(head).transpose());
+    const Eigen::Vector2d c = calibration.depth.Project(joints.row(chest).transpose());
+    ++u.frames;
+    u.upright += h.y() < c.y() - 10.0;  // rows grow downwards
+  }
+  return u;
+}
+
+TEST(RealRecordingsTest, FivePeopleOneSubjectUprightOnThatPerson) {
+  if (!fs::exists(Recording("pcl-five-people") / "depth.txt")) {
+    GTEST_SKIP() << "real recordings absent (" << Recording("pcl-five-people") << ")";
+  }
+  const TrackedRun run = Track("pcl-five-people");
+  ASSERT_EQ(run.result.frames.size(), 1u);
+  const FrameRecord& f = run.result.frames[0];
+  // Five people in the room: several person-sized components, one chosen.
+  EXPECT_GE(f.segmentation.person_sized, 3);
+  EXPECT_GT(f.segmentation.subject_height, 1.3);
+  EXPECT_LT(f.segmentation.subject_height, 2.0);
+  const cv::Mat mask =
+      cv::imread((run.out / "foreground" / "000000.png").string(), cv::IMREAD_GRAYSCALE);
+  ASSERT_FALSE(mask.empty());
+  cv::Mat labels, stats, centroids;
+  const int n = cv::connectedComponentsWithStats(mask, labels, stats, centroids, 8);
+  int large = 0;
+  for (int k = 1; k < n; ++k) large += stats.at<int>(k, cv::CC_STAT_AREA) > 500;
+  EXPECT_EQ(large, 1) << "the foreground is one person";
+  // One person wide: well under two shoulder widths at its depth.
+  EXPECT_LT(f.segmentation.subject_width, 0.8);
+  const Uprightness u = CheckUpright(run);
+  EXPECT_EQ(u.upright, u.frames);
+  // The template lies on that person: most of its vertices project into the foreground.
+  const Template tmpl = GenerateTemplate();
+  const Calibration calibration = ReadCalibration((run.out / "calibration.yaml").string());
+  const auto poses = ReadPoseCsv((run.out / "poses.csv").string(), tmpl.num_joints());
+  Eigen::MatrixX3d posed;
+  Skinning(tmpl).Apply(poses[0].second, &posed);
+  int inside = 0;
+  for (Eigen::Index v = 0; v < posed.rows(); ++v) {
+    const Eigen::Vector2d p = calibration.depth.Project(posed.row(v).transpose());
+    const int x = static_cast<int>(std::lround(p.x())), y = static_cast<int>(std::lround(p.y()));
+    inside += x >= 0 && y >= 0 && x < mask.cols && y < mask.rows && mask.at<uint8_t>(y, x) > 0;
+  }
+  std::printf("[pcl-five-people] %.1f%% of the template's vertices project into the foreground\n",
+              100.0 * inside / posed.rows());
+  EXPECT_GT(inside, 0.6 * posed.rows());
+  fs::remove_all(run.out);
+}
+
+TEST(RealRecordingsTest, SkeltrackEveryFrameUpright) {
+  if (!fs::exists(Recording("skeltrack") / "depth.txt")) {
+    GTEST_SKIP() << "real recordings absent (" << Recording("skeltrack") << ")";
+  }
+  const TrackedRun run = Track("skeltrack");
+  ASSERT_EQ(run.result.frames.size(), 12u);
+  EXPECT_EQ(run.result.skipped_frames, 0);
+  const Uprightness u = CheckUpright(run);
+  EXPECT_EQ(u.frames, 12);
+  EXPECT_EQ(u.upright, u.frames) << "head above the chest in every frame";
+  // The subject was cut out of its background: the foreground keeps nearly all of it.
+  for (const FrameRecord& f : run.result.frames) EXPECT_GT(f.segmentation.subject_pixels, 30000);
+  fs::remove_all(run.out);
+}
+
+}  // namespace
+}  // namespace artex
