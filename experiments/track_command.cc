@@ -3,6 +3,7 @@
 // recording is an artex sequence or a TUM RGB-D folder (sensors/frame_source.h).
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -12,6 +13,7 @@
 #include "experiments/pipeline.h"
 #include "models/error.h"
 #include "sensors/frame_source.h"
+#include "sensors/scene_segmentation.h"
 
 namespace artex {
 namespace {
@@ -43,7 +45,7 @@ std::string IntrinsicsConfigValue(const std::string& name_or_file) {
 
 void RegisterTrackCommand(CLI::App* app) {
   struct Args {
-    std::string sequence, config, out, template_path, intrinsics;
+    std::string sequence, config, out, template_path, intrinsics, subject;
     std::vector<std::string> overrides;
     bool export_meshes = false;
     bool no_texture = false;
@@ -73,6 +75,10 @@ void RegisterTrackCommand(CLI::App* app) {
                   "TUM RGB-D intrinsics: a YAML file or a preset fr1|fr2|fr3|kinect (default: "
                   "<folder>/camera.yaml; config key input.intrinsics)");
   cmd->add_flag("-q,--quiet", args->quiet, "no progress line");
+  cmd->add_option("--subject", args->subject,
+                  "who to track without background frames: central (default), nearest, largest, "
+                  "or the person at pixel X,Y (config keys preprocess.segmentation.subject, "
+                  ".pixel)");
   cmd->callback([args] {
     Config config = args->config.empty() ? Config() : Config::Load(args->config);
     for (const auto& o : args->overrides) {
@@ -80,6 +86,25 @@ void RegisterTrackCommand(CLI::App* app) {
       if (eq == std::string::npos || eq == 0)
         throw Error("--set " + o + ": expected key=value (e.g. texture.lambda=0)");
       config.Set(o.substr(0, eq), o.substr(eq + 1));
+    }
+    if (!args->subject.empty()) {
+      const auto comma = args->subject.find(',');
+      if (comma == std::string::npos) {
+        if (!SubjectChoiceNames().count(args->subject) || args->subject == "pixel")
+          throw Error("--subject " + args->subject +
+                      ": expected central, nearest, largest or a pixel X,Y");
+        config.Set("preprocess.segmentation.subject", args->subject);
+      } else {
+        char* end = nullptr;
+        const long x = std::strtol(args->subject.c_str(), &end, 10);
+        const bool x_ok = end == args->subject.c_str() + comma;
+        const long y = std::strtol(args->subject.c_str() + comma + 1, &end, 10);
+        if (!x_ok || *end != '\0' || x < 0 || y < 0)
+          throw Error("--subject " + args->subject + ": expected a pixel X,Y (column, row >= 0)");
+        config.Set("preprocess.segmentation.subject", "pixel");
+        config.Set("preprocess.segmentation.pixel",
+                   "[" + std::to_string(x) + ", " + std::to_string(y) + "]");
+      }
     }
     if (args->export_meshes) config.Set("pipeline.export_meshes", "true");
     if (args->no_texture) config.Set("pipeline.texture", "false");
