@@ -13,6 +13,7 @@
 #include "models/skinning.h"
 #include "models/template_io.h"
 #include "sensors/bvh.h"
+#include "sensors/option_text.h"
 #include "sensors/virtual_kinect.h"
 
 namespace artex {
@@ -21,16 +22,8 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kDegToRad = kPi / 180.0;
 
-bool Fail(std::string* error, const std::string& message) {
-  if (error) *error = message;
-  return false;
-}
-template <typename T>
-std::string Str(const T& value) {
-  std::ostringstream s;
-  s << value;
-  return s.str();
-}
+using option_text::Fail;
+using option_text::Str;
 
 Eigen::Matrix3d Yaw(double degrees) {
   return Eigen::AngleAxisd(degrees * kDegToRad, Eigen::Vector3d::UnitY()).toRotationMatrix();

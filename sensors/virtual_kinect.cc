@@ -18,6 +18,7 @@
 #include "models/skinning.h"
 #include "models/template_io.h"
 #include "render/rasterizer.h"
+#include "sensors/option_text.h"
 #include "sensors/synth_random.h"
 
 namespace artex {
@@ -32,16 +33,8 @@ using synth_random::kStreamColorWalk;
 using synth_random::kStreamFrameDepth;
 using synth_random::MixSeed;
 
-bool Fail(std::string* error, const std::string& message) {
-  if (error) *error = message;
-  return false;
-}
-template <typename T>
-std::string Str(const T& value) {
-  std::ostringstream s;
-  s << value;
-  return s.str();
-}
+using option_text::Fail;
+using option_text::Str;
 
 Eigen::Isometry3d Translation(const Eigen::Vector3d& t) {
   Eigen::Isometry3d m = Eigen::Isometry3d::Identity();

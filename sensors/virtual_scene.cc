@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "models/error.h"
+#include "sensors/option_text.h"
 #include "sensors/synth_random.h"
 
 namespace artex {
@@ -22,16 +23,8 @@ constexpr int kMaxBoxes = 32;
 
 double Frac(double x) { return x - std::floor(x); }
 
-bool Fail(std::string* error, const std::string& message) {
-  if (error) *error = message;
-  return false;
-}
-template <typename T>
-std::string Str(const T& value) {
-  std::ostringstream s;
-  s << value;
-  return s.str();
-}
+using option_text::Fail;
+using option_text::Str;
 
 // Box k's local frame: x along its width, z along its depth (yaw about +Y).
 Eigen::Matrix3d BoxRotation(const SceneBox& b) {
