@@ -428,6 +428,40 @@ int RunCommand(const std::string& command, std::string* output) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
+TEST(PipelineTest, NobodyInViewIsLostAndTheReturnReinitialises) {
+  // The person leaves the view in frames 2 and 3 (all depth zero) and comes back in frame 4.
+  const fs::path copy = OutDir("sequence_empty");
+  fs::copy(PipelineTestData::Get().sequence(), copy, fs::copy_options::recursive);
+  const std::vector<std::string> rows = Lines(ReadText(copy / "frames.csv"));
+  for (int f : {2, 3}) {
+    const fs::path depth = copy / Fields(rows[f + 1])[3];
+    const cv::Mat d = cv::imread(depth.string(), cv::IMREAD_UNCHANGED);
+    ASSERT_FALSE(d.empty());
+    ASSERT_TRUE(cv::imwrite(depth.string(), cv::Mat::zeros(d.size(), d.type())));
+  }
+  const PipelineResult r = Track(copy.string(), OutDir("run_empty").string());
+  ASSERT_EQ(static_cast<int>(r.frames.size()), kFrames);
+  EXPECT_EQ(r.skipped_frames, 0);
+  EXPECT_EQ(r.failed_frames, 2);
+  EXPECT_EQ(r.lost_frames, 2);
+  EXPECT_EQ(r.initialisations, 2);  // the first frame and the return
+  for (const FrameRecord& f : r.frames) {
+    const bool empty = f.frame == 2 || f.frame == 3;
+    EXPECT_EQ(f.quality.label == FitQualityLabel::kLost, empty) << "frame " << f.frame;
+    EXPECT_EQ(f.fit.too_few_points, empty) << "frame " << f.frame;
+    EXPECT_EQ(f.reinitialised, f.frame == 0 || f.frame == 4) << "frame " << f.frame;
+    if (!empty) {
+      EXPECT_LT(f.mean_vertex_error_mm, 50.0) << "frame " << f.frame;
+    }
+  }
+  // Failed frames are not scored as tracked: their kept pose counts as lost.
+  EXPECT_NEAR(r.lost_fraction, 2.0 / kFrames, 1e-12);
+  const nlohmann::json metrics =
+      nlohmann::json::parse(ReadText(OutDir("run_empty") / "metrics.json"));
+  EXPECT_EQ(metrics.at("failed_frames").get<int>(), 2);
+  EXPECT_EQ(metrics.at("lost_frames").get<int>(), 2);
+}
+
 TEST(PipelineTest, TrackCommandExitStatus) {
   const PipelineTestData& data = PipelineTestData::Get();
   const std::string binary = ARTEX_BINARY;
