@@ -531,8 +531,21 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
         const float z = z_[i];
         if (z == 0.0f) continue;
         const float limit = std::max(base, rel * z);
-        if (u + 1 < w && z_[i + 1] != 0.0f && std::abs(z_[i + 1] - z) < limit) merge(i, i + 1);
-        if (v + 1 < h && z_[i + w] != 0.0f && std::abs(z_[i + w] - z) < limit) merge(i, i + w);
+        // 8-neighbours, and across one missing pixel (the sensor drops pixels along depth
+        // edges, and a diagonal chain of them can cut a body in two).
+        const auto link = [&](int j) {
+          if (z_[j] != 0.0f && std::abs(z_[j] - z) < limit) merge(i, j);
+        };
+        if (u + 1 < w) {
+          link(i + 1);
+          if (z_[i + 1] == 0.0f && u + 2 < w) link(i + 2);
+        }
+        if (v + 1 < h) {
+          link(i + w);
+          if (u + 1 < w) link(i + w + 1);
+          if (u > 0) link(i + w - 1);
+          if (z_[i + w] == 0.0f && v + 2 < h) link(i + 2 * w);
+        }
       }
     }
   }
