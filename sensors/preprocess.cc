@@ -149,9 +149,8 @@ void Preprocessor::TrainWithoutBackground() {
   if (options_.foreground != ForegroundMode::kBackground) {
     const Eigen::Vector3d up =
         calibration_.depth.world_to_camera.linear() * Eigen::Vector3d::UnitY();
-    segmenter_ =
-        std::make_unique<SubjectSegmenter>(calibration_.depth, calibration_.depth_distortion,
-                                           calibration_.depth_scale, up, options_.segmentation);
+    segmenter_ = std::make_unique<SubjectSegmenter>(mesher_.projector(), calibration_.depth_scale,
+                                                    up, options_.segmentation);
     return;
   }
   background_.TrainEmpty(calibration_.depth.width, calibration_.depth.height,

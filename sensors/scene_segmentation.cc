@@ -25,13 +25,6 @@ void CheckDepth(const cv::Mat& depth, const PinholeCamera& camera, const char* w
   }
 }
 
-// Undistorted normalised ray (x / z, y / z) of pixel (u, v).
-Eigen::Vector2d Ray(const PinholeCamera& camera, const Distortion& distortion, double u, double v) {
-  Eigen::Vector2d p(u, v);
-  if (!distortion.IsZero()) p = UndistortPixel(camera, distortion, p);
-  return {(p.x() - camera.cx) / camera.fx, (p.y() - camera.cy) / camera.fy};
-}
-
 double Quantile(std::vector<double>* values, double q) {
   if (values->empty()) return 0.0;
   const size_t k = static_cast<size_t>(q * static_cast<double>(values->size() - 1));
@@ -112,6 +105,14 @@ std::vector<ScenePlane> DetectScenePlanes(const cv::Mat& depth, const PinholeCam
                                           const Distortion& distortion, double depth_scale,
                                           const Eigen::Vector3d& up_prior,
                                           const PlaneDetectionOptions& options) {
+  return DetectScenePlanes(depth, DepthBackProjector(intrinsics, distortion), depth_scale, up_prior,
+                           options);
+}
+
+std::vector<ScenePlane> DetectScenePlanes(const cv::Mat& depth, const DepthBackProjector& projector,
+                                          double depth_scale, const Eigen::Vector3d& up_prior,
+                                          const PlaneDetectionOptions& options) {
+  const PinholeCamera& intrinsics = projector.camera();
   std::string error;
   if (!options.IsValid(&error)) throw Error("plane detection options: " + error);
   CheckDepth(depth, intrinsics, "plane detection");
@@ -126,8 +127,7 @@ std::vector<ScenePlane> DetectScenePlanes(const cv::Mat& depth, const PinholeCam
       if (row[u] == 0) continue;
       const double z = row[u] / depth_scale;
       if (z < options.min_depth || z > options.max_depth) continue;
-      const Eigen::Vector2d r = Ray(intrinsics, distortion, u, v);
-      points.emplace_back(r.x() * z, r.y() * z, z);
+      points.push_back(projector.CameraPoint(u, v, z));
     }
   }
   std::vector<ScenePlane> planes;
@@ -322,10 +322,8 @@ WorldFrameEstimate EstimateWorldFrame(const cv::Mat& depth, const PinholeCamera&
   std::string error;
   if (!options.IsValid(&error)) throw Error("world frame options: " + error);
   WorldFrameEstimate estimate;
-  Eigen::Vector3d prior(0, -1, 0);
-  if (gravity_up && gravity_up->allFinite() && gravity_up->norm() > 1e-9) {
-    prior = gravity_up->normalized();
-  }
+  const bool gravity = gravity_up && gravity_up->allFinite() && gravity_up->norm() > 1e-9;
+  const Eigen::Vector3d prior = gravity ? gravity_up->normalized() : Eigen::Vector3d(0, -1, 0);
   estimate.planes =
       DetectScenePlanes(depth, intrinsics, distortion, depth_scale, prior, options.planes);
   const ScenePlane* floor = nullptr;
@@ -337,7 +335,6 @@ WorldFrameEstimate EstimateWorldFrame(const cv::Mat& depth, const PinholeCamera&
     estimate.up_camera = floor->normal;
     estimate.camera_height = floor->offset;
   } else {
-    const bool gravity = gravity_up && gravity_up->allFinite() && gravity_up->norm() > 1e-9;
     estimate.source = gravity ? WorldFrameSource::kGravity : WorldFrameSource::kCameraConvention;
     estimate.up_camera = prior;
     estimate.camera_height = options.assumed_camera_height;
@@ -390,8 +387,13 @@ bool SubjectSegmentationOptions::IsValid(std::string* error) const {
 SubjectSegmenter::SubjectSegmenter(const PinholeCamera& intrinsics, const Distortion& distortion,
                                    double depth_scale, const Eigen::Vector3d& up_camera,
                                    const SubjectSegmentationOptions& options)
-    : intrinsics_(intrinsics),
-      distortion_(distortion),
+    : SubjectSegmenter(DepthBackProjector(intrinsics, distortion), depth_scale, up_camera,
+                       options) {}
+
+SubjectSegmenter::SubjectSegmenter(const DepthBackProjector& projector, double depth_scale,
+                                   const Eigen::Vector3d& up_camera,
+                                   const SubjectSegmentationOptions& options)
+    : projector_(projector),
       depth_scale_(depth_scale),
       up_(up_camera.normalized()),
       options_(options) {
@@ -399,14 +401,6 @@ SubjectSegmenter::SubjectSegmenter(const PinholeCamera& intrinsics, const Distor
   if (!options.IsValid(&error)) throw Error("subject segmentation options: " + error);
   if (!(depth_scale > 0)) throw Error("subject segmentation: expected a positive depth_scale");
   if (!up_.allFinite()) throw Error("subject segmentation: expected a finite up direction");
-  rays_.create(intrinsics.height, intrinsics.width, CV_32FC2);
-  for (int v = 0; v < intrinsics.height; ++v) {
-    cv::Vec2f* row = rays_.ptr<cv::Vec2f>(v);
-    for (int u = 0; u < intrinsics.width; ++u) {
-      const Eigen::Vector2d r = Ray(intrinsics, distortion, u, v);
-      row[u] = cv::Vec2f(static_cast<float>(r.x()), static_cast<float>(r.y()));
-    }
-  }
 }
 
 void SubjectSegmenter::SetPlanes(const std::vector<ScenePlane>& planes) {
@@ -446,10 +440,9 @@ struct Component {
 }  // namespace
 
 void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, SegmentationStats* stats) {
-  CheckDepth(depth, intrinsics_, "subject segmentation");
+  CheckDepth(depth, projector_.camera(), "subject segmentation");
   if (!planes_known_) {
-    SetPlanes(
-        DetectScenePlanes(depth, intrinsics_, distortion_, depth_scale_, up_, options_.planes));
+    SetPlanes(DetectScenePlanes(depth, projector_, depth_scale_, up_, options_.planes));
   }
   std::vector<const ScenePlane*> removed;
   for (const ScenePlane& p : planes_)
@@ -463,14 +456,14 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
   // Candidates: valid, in range, in front of every floor/wall by more than the margin.
   for (int v = 0; v < h; ++v) {
     const uint16_t* row = depth.ptr<uint16_t>(v);
-    const cv::Vec2f* ray = rays_.ptr<cv::Vec2f>(v);
+    const float* ray = RayRow(v);
     for (int u = 0; u < w; ++u) {
       const int i = v * w + u;
       parent_[i] = i;
       if (row[u] == 0) continue;
       const double z = row[u] * inv_scale;
       if (z < options_.min_depth || z > options_.max_depth) continue;
-      const Eigen::Vector3d x(ray[u][0] * z, ray[u][1] * z, z);
+      const Eigen::Vector3d x(ray[2 * u] * z, ray[2 * u + 1] * z, z);
       bool keep = true;
       const double margin = options_.plane_margin + options_.plane_margin_growth * z * z;
       for (const ScenePlane* p : removed) {
@@ -484,7 +477,7 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
       ++local.candidate_pixels;
     }
   }
-  // 4-connected components: tight pass, then fragments merged across the loose limit.
+  // Components: a tight 4-connected pass, then fragments merged across the loose limit.
   const float growth = static_cast<float>(options_.connect_growth);
   const float base = static_cast<float>(options_.connect_distance);
   for (int v = 0; v < h; ++v) {
@@ -504,12 +497,12 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
     high_.assign(n, -1e30f);
     const Eigen::Vector3f up = up_.cast<float>();
     for (int v = 0; v < h; ++v) {
-      const cv::Vec2f* ray = rays_.ptr<cv::Vec2f>(v);
+      const float* ray = RayRow(v);
       for (int u = 0; u < w; ++u) {
         const int i = v * w + u;
         if (z_[i] == 0.0f) continue;
         const int r = Find(parent_, i);
-        const float height = z_[i] * (up.x() * ray[u][0] + up.y() * ray[u][1] + up.z());
+        const float height = z_[i] * (up.x() * ray[2 * u] + up.y() * ray[2 * u + 1] + up.z());
         low_[r] = std::min(low_[r], height);
         high_[r] = std::max(high_[r], height);
       }
@@ -558,7 +551,7 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
   std::vector<Component> components;
   const bool pick_pixel = options_.choice == SubjectChoice::kPixel;
   for (int v = 0; v < h; ++v) {
-    const cv::Vec2f* ray = rays_.ptr<cv::Vec2f>(v);
+    const float* ray = RayRow(v);
     for (int u = 0; u < w; ++u) {
       const int i = v * w + u;
       if (z_[i] == 0.0f) continue;
@@ -570,7 +563,7 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
       }
       Component& c = components[slot[r]];
       const double z = z_[i];
-      const Eigen::Vector3d x(ray[u][0] * z, ray[u][1] * z, z);
+      const Eigen::Vector3d x(ray[2 * u] * z, ray[2 * u + 1] * z, z);
       ++c.pixels;
       c.sum += x;
       c.u_sum += u;
@@ -596,7 +589,7 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
     std::vector<uint8_t> in_sized(components.size(), 0);
     for (int k : sized) in_sized[k] = 1;
     for (int v = 0; v < h; ++v) {
-      const cv::Vec2f* ray = rays_.ptr<cv::Vec2f>(v);
+      const float* ray = RayRow(v);
       for (int u = 0; u < w; ++u) {
         const int i = v * w + u;
         if (z_[i] == 0.0f) continue;
@@ -604,7 +597,7 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
         if (!in_sized[k]) continue;
         const double z = z_[i];
         Eigen::Vector3d d =
-            Eigen::Vector3d(ray[u][0] * z, ray[u][1] * z, z) - components[k].centroid();
+            Eigen::Vector3d(ray[2 * u] * z, ray[2 * u + 1] * z, z) - components[k].centroid();
         d -= up_.dot(d) * up_;
         radius[k] = std::max(radius[k], d.norm());
       }
@@ -695,11 +688,7 @@ void SubjectSegmenter::SplitPeople(int w, int h, int* splits) {
     std::vector<int> part_root;
   };
   std::unordered_map<int, Profile> profiles;
-  auto point = [&](int u, int v, int i) {
-    const cv::Vec2f r = rays_.ptr<cv::Vec2f>(v)[u];
-    const double z = z_[i];
-    return Eigen::Vector3d(r[0] * z, r[1] * z, z);
-  };
+  auto point = [&](int u, int v, int i) { return projector_.CameraPoint(u, v, z_[i]); };
   for (int v = 0; v < h; ++v) {
     for (int u = 0; u < w; ++u) {
       const int i = v * w + u;

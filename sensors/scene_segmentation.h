@@ -16,6 +16,7 @@
 
 #include "render/camera.h"
 #include "sensors/calibration.h"
+#include "sensors/depth_mesh.h"
 
 namespace artex {
 
@@ -72,6 +73,10 @@ struct ScenePlane {
 std::vector<ScenePlane> DetectScenePlanes(const cv::Mat& depth, const PinholeCamera& intrinsics,
                                           const Distortion& distortion, double depth_scale,
                                           const Eigen::Vector3d& up_prior,
+                                          const PlaneDetectionOptions& options);
+// The same with the camera's ray table (distortion undone) already built.
+std::vector<ScenePlane> DetectScenePlanes(const cv::Mat& depth, const DepthBackProjector& projector,
+                                          double depth_scale, const Eigen::Vector3d& up_prior,
                                           const PlaneDetectionOptions& options);
 
 // Which world frame tracking uses. kAuto: estimated when the calibration's world frame is the
@@ -188,6 +193,9 @@ class SubjectSegmenter {
   SubjectSegmenter(const PinholeCamera& intrinsics, const Distortion& distortion,
                    double depth_scale, const Eigen::Vector3d& up_camera,
                    const SubjectSegmentationOptions& options);
+  // The same with the camera's ray table already built (e.g. the depth mesher's).
+  SubjectSegmenter(const DepthBackProjector& projector, double depth_scale,
+                   const Eigen::Vector3d& up_camera, const SubjectSegmentationOptions& options);
   // Uses these planes instead of detecting them on the first frame (only floors and walls
   // are removed).
   void SetPlanes(const std::vector<ScenePlane>& planes);
@@ -203,12 +211,15 @@ class SubjectSegmenter {
   // Splits the flattened components that hold several people (split_people).
   void SplitPeople(int width, int height, int* splits);
 
-  PinholeCamera intrinsics_;
-  Distortion distortion_;
+  // Row v of the ray table: 2 floats (x / z, y / z) per pixel.
+  const float* RayRow(int v) const {
+    return projector_.rays() + 2 * static_cast<size_t>(v) * projector_.camera().width;
+  }
+
+  DepthBackProjector projector_;
   double depth_scale_;
   Eigen::Vector3d up_;
   SubjectSegmentationOptions options_;
-  cv::Mat rays_;  // CV_32FC2: undistorted (x / z, y / z) per pixel
   std::vector<ScenePlane> planes_;
   bool planes_known_ = false;
   bool has_subject_ = false;
