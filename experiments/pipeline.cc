@@ -402,7 +402,7 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   info.template_name = template_path.empty() ? "default" : template_path;
   info.texture = texturer != nullptr;
   info.world = world.estimate ? &*world.estimate : nullptr;
-  WriteFramesCsv(out_dir + "/frames.csv", result, info);
+  WriteFramesCsv(out_dir + "/frames.csv", result);
   WriteSummaryJson(out_dir + "/summary.json", result, info);
   WriteMetricsJson(out_dir + "/metrics.json", result);
   if (texturer) {

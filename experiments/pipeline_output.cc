@@ -35,9 +35,7 @@ nlohmann::json QualityJson(const FitQuality& q) {
 
 }  // namespace
 
-void WriteFramesCsv(const std::string& path, const PipelineResult& result,
-                    const PipelineOutputInfo& info) {
-  (void)info;
+void WriteFramesCsv(const std::string& path, const PipelineResult& result) {
   std::ostringstream frames_csv;
   frames_csv << "frame,skipped,scan_points,subject_pixels,subject_tracked,quality,"
                 "inlier_fraction,support_fraction,depth_residual_mm,reinitialised,init_ms,"

@@ -18,8 +18,7 @@ struct PipelineOutputInfo {
   const WorldFrameEstimate* world = nullptr;  // null: the calibration's world frame
 };
 
-void WriteFramesCsv(const std::string& path, const PipelineResult& result,
-                    const PipelineOutputInfo& info);
+void WriteFramesCsv(const std::string& path, const PipelineResult& result);
 void WriteSummaryJson(const std::string& path, const PipelineResult& result,
                       const PipelineOutputInfo& info);
 void WriteMetricsJson(const std::string& path, const PipelineResult& result);
