@@ -1,11 +1,10 @@
 #include "solvers/icp_init.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <sstream>
 #include <vector>
-
-#include <Eigen/Geometry>
 
 #include "models/error.h"
 #include "models/normals.h"
@@ -49,10 +48,9 @@ double VerticalExtent(const Eigen::MatrixX3d& points, double q) {
   return Quantile(y, 1.0 - q) - Quantile(y, q);
 }
 
-}  // namespace
-
-IcpInitResult AlignByIcp(const Skinning& skinning, const Pose& initial, const Scan& scan,
-                         const IcpInitOptions& options) {
+// Options, scan and the pose's joint count, in this order (the errors name the first fault).
+void CheckInputs(const Pose& initial, int num_joints, const Scan& scan,
+                 const IcpInitOptions& options) {
   std::string error;
   if (!options.IsValid(&error)) throw Error("ICP initialisation options: " + error);
   if (scan.size() < 3) {
@@ -63,27 +61,53 @@ IcpInitResult AlignByIcp(const Skinning& skinning, const Pose& initial, const Sc
   if (scan.normals.rows() != scan.points.rows()) {
     throw Error("ICP initialisation: scan.normals: expected one normal per point");
   }
-  const Template& model = skinning.model();
-  if (initial.num_joints() != model.num_joints()) {
+  if (initial.num_joints() != num_joints) {
     std::ostringstream msg;
-    msg << "ICP initialisation: initial pose: expected " << model.num_joints()
-        << " joints, found " << initial.num_joints();
+    msg << "ICP initialisation: initial pose: expected " << num_joints << " joints, found "
+        << initial.num_joints();
     throw Error(msg.str());
   }
+}
 
-  // Articulated template without its global similarity: x_t, n_t.
-  Pose local = initial;
+}  // namespace
+
+IcpTemplate::IcpTemplate(const Skinning& skinning, const Pose& articulation) {
+  const Template& model = skinning.model();
+  num_joints_ = model.num_joints();
+  if (articulation.num_joints() != num_joints_) {
+    std::ostringstream msg;
+    msg << "ICP template: pose: expected " << num_joints_ << " joints, found "
+        << articulation.num_joints();
+    throw Error(msg.str());
+  }
+  Pose local = articulation;
   local.scale = 1.0;
   local.translation.setZero();
   local.rotation.setIdentity();
-  Eigen::MatrixX3d x, xn;
-  skinning.Apply(local, &x);
-  ComputeVertexNormals(x, model.triangles, &xn);
-  const PointCloudIndex index(x);
+  skinning.Apply(local, &vertices_);
+  ComputeVertexNormals(vertices_, model.triangles, &normals_);
+  index_ = std::make_unique<PointCloudIndex>(vertices_);
+}
+
+IcpTemplate::~IcpTemplate() = default;
+
+IcpInitResult AlignByIcp(const Skinning& skinning, const Pose& initial, const Scan& scan,
+                         const IcpInitOptions& options) {
+  CheckInputs(initial, skinning.model().num_joints(), scan, options);
+  return AlignByIcp(IcpTemplate(skinning, initial), initial, scan, options);
+}
+
+IcpInitResult AlignByIcp(const IcpTemplate& target, const Pose& initial, const Scan& scan,
+                         const IcpInitOptions& options) {
+  CheckInputs(initial, target.num_joints(), scan, options);
+  // Articulated template without its global similarity: x_t, n_t.
+  const Eigen::MatrixX3d& x = target.vertices();
+  const Eigen::MatrixX3d& xn = target.normals();
+  const PointCloudIndex& index = target.index();
 
   // Subsampled scan.
-  const int stride = std::max(1, (scan.size() + options.max_scan_points - 1) /
-                                     options.max_scan_points);
+  const int stride =
+      std::max(1, (scan.size() + options.max_scan_points - 1) / options.max_scan_points);
   std::vector<int> sample;
   for (int s = 0; s < scan.size(); s += stride) sample.push_back(s);
 

@@ -9,6 +9,7 @@
 // Only the global similarity (scale, translation, rotation) of the pose is changed.
 #pragma once
 
+#include <memory>
 #include <string>
 
 #include "models/pose.h"
@@ -18,9 +19,9 @@
 namespace artex {
 
 struct IcpInitOptions {
-  bool coarse_alignment = true;   // step 1 (false: start ICP from the given global similarity)
-  bool facing_camera = true;      // coarse yaw from the mean scan normal (else keep rotation)
-  bool estimate_scale = true;     // scale estimated by Umeyama (else the initial scale, rigid)
+  bool coarse_alignment = true;  // step 1 (false: start ICP from the given global similarity)
+  bool facing_camera = true;     // coarse yaw from the mean scan normal (else keep rotation)
+  bool estimate_scale = true;    // scale estimated by Umeyama (else the initial scale, rigid)
   // Coarse scale from the ratio of the scan's and the template's vertical extents (when
   // estimate_scale). Off by default: a person cut by the image border or the depth range
   // (upper body only) has a short extent and got scales of 0.54-0.76; the nominal scale of
@@ -37,7 +38,7 @@ struct IcpInitOptions {
 };
 
 struct IcpInitResult {
-  Pose pose;            // `initial` with its global similarity replaced
+  Pose pose;  // `initial` with its global similarity replaced
   int iterations = 0;
   int num_pairs = 0;    // pairs of the last iteration
   int num_samples = 0;  // subsampled scan points paired (or rejected) per iteration
@@ -45,8 +46,33 @@ struct IcpInitResult {
   bool converged = false;
 };
 
+class PointCloudIndex;
+
+// The articulated template of a pose without its global similarity (scale 1, no rotation or
+// translation): T x 3 vertices and normals and their nearest-neighbour index, posed once and
+// shared by every alignment that starts from that articulation (solvers/initializer.h aligns
+// several facings of each arm pose).
+class IcpTemplate {
+ public:
+  // Throws artex::Error for a pose with the wrong joint count.
+  IcpTemplate(const Skinning& skinning, const Pose& articulation);
+  ~IcpTemplate();
+  const Eigen::MatrixX3d& vertices() const { return vertices_; }
+  const Eigen::MatrixX3d& normals() const { return normals_; }
+  const PointCloudIndex& index() const { return *index_; }
+  int num_joints() const { return num_joints_; }
+
+ private:
+  Eigen::MatrixX3d vertices_, normals_;
+  std::unique_ptr<PointCloudIndex> index_;
+  int num_joints_ = 0;
+};
+
 // Throws artex::Error on invalid options, an empty scan or a pose with the wrong joint count.
 IcpInitResult AlignByIcp(const Skinning& skinning, const Pose& initial, const Scan& scan,
+                         const IcpInitOptions& options);
+// The same against a posed template (initial's articulation is taken to be target's).
+IcpInitResult AlignByIcp(const IcpTemplate& target, const Pose& initial, const Scan& scan,
                          const IcpInitOptions& options);
 
 }  // namespace artex

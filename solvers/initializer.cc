@@ -156,13 +156,10 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
   // 1. Coarse placement and similarity ICP of every hypothesis.
   const auto icp_start = Clock::now();
   for (const auto& [arm_angle, arm_pose] : arm_poses) {
-    Pose local = arm_pose;
-    local.scale = 1.0;
-    local.translation.setZero();
-    local.rotation.setIdentity();
-    Eigen::MatrixX3d x, xn;
-    skinning.Apply(local, &x);
-    ComputeVertexNormals(x, model.triangles, &xn);
+    // Posed once per arm pose, shared by its facings' coarse placements and ICP alignments.
+    const IcpTemplate target(skinning, arm_pose);
+    const Eigen::MatrixX3d& x = target.vertices();
+    const Eigen::MatrixX3d& xn = target.normals();
     for (double yaw_deg : options.yaws_deg) {
       InitHypothesis h;
       h.yaw_deg = yaw_deg;
@@ -193,7 +190,7 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
         if (count == 0) break;
         pose.translation += scan_centroid - sum / count;
       }
-      h.icp = AlignByIcp(skinning, pose, scan, icp);
+      h.icp = AlignByIcp(target, pose, scan, icp);
       h.pose = h.icp.pose;
       result.hypotheses.push_back(std::move(h));
     }
