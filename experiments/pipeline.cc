@@ -246,34 +246,78 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
     }
 
     // Fit: the multi-hypothesis initialisation on the first frame and after a lost one.
-    if (need_init && scan.size() >= options.fitting.min_scan_points) {
+    const bool enough_points = scan.size() >= options.fitting.min_scan_points;
+    const auto initialise = [&](FrameRecord* r) {
       const InitResult init = InitializeFit(&fitter, scan, calibration.depth, options.initializer);
-      record.fit = init.fit;
-      record.reinitialised = true;
-      record.init_seconds = init.total_seconds;
-      record.init_report = init.BriefReport();
+      r->fit = init.fit;
+      r->reinitialised = true;
+      r->init_seconds = init.total_seconds;
+      r->init_report = init.BriefReport();
       ++result.initialisations;
       init_seconds += init.total_seconds;
+    };
+    const auto evaluate = [&](FrameRecord* r) {
+      skinning.Apply(fitter.pose(), &posed);
+      if (r->fit.ok()) {
+        r->quality =
+            EvaluateFitQuality(posed, tmpl.triangles, scan, calibration.depth, options.quality);
+      } else {
+        r->quality = FitQuality();  // a failed fit is lost, whatever its kept pose shows
+        r->quality.label = FitQualityLabel::kLost;
+      }
+      quality_seconds += r->quality.seconds;
+    };
+    if (need_init && enough_points) {
+      initialise(&record);
     } else {
       record.fit = fitter.FitFrame(scan);
       fit_seconds += record.fit.total_seconds;
       ++tracked_frames;
     }
+    evaluate(&record);
+    Pose tracked_pose;
+    bool keep_tracked = false;
+    // Tracking that loses the frame (or doubts it, by option) is followed by a
+    // re-initialisation in the same frame; the better of the two by quality score is kept.
+    const FitQualityLabel label = record.quality.label;
+    if (!record.reinitialised && record.fit.ok() && enough_points &&
+        (label == FitQualityLabel::kLost ||
+         (label == FitQualityLabel::kDoubtful &&
+          options.reinitialise_on == ReinitialiseOn::kDoubtful))) {
+      tracked_pose = fitter.pose();
+      const Scan tracked_scan = scan;
+      FrameRecord retry = record;
+      fitter.Reset(/*keep_scale=*/true);
+      if (label == FitQualityLabel::kLost) {
+        // The tracked component may be the wrong one: choose the subject again.
+        preprocessor.ResetSubject();
+        preprocessor.Process(frame, &scan, &stats);
+        retry.scan_points = scan.size();
+        retry.segmentation = stats.segmentation;
+      }
+      if (scan.size() >= options.fitting.min_scan_points) {
+        initialise(&retry);
+        evaluate(&retry);
+      }
+      if (retry.reinitialised && retry.fit.ok() && retry.quality.score > record.quality.score) {
+        record = retry;
+      } else {
+        // The tracked fit stays (its scan too); a lost one is re-initialised next frame.
+        scan = tracked_scan;
+        fitter.Reset(/*keep_scale=*/true);
+        if (label != FitQualityLabel::kLost) fitter.AcceptPose(scan, tracked_pose);
+        keep_tracked = true;
+        record.init_seconds = retry.init_seconds;
+        record.init_report = retry.init_report + " (not better than tracking: kept)";
+      }
+    }
+    if (!record.fit.ok()) ++result.failed_frames;
     iterations += record.fit.iterations;
-    const Pose frame_pose = fitter.pose();
+    const Pose frame_pose = keep_tracked ? tracked_pose : fitter.pose();
     skinning.Apply(frame_pose, &posed);
     poses.push_back(frame_pose);
     pose_frames.push_back(i);
     stream_bytes += sizeof(float) * frame_pose.num_parameters();
-    if (record.fit.ok()) {
-      record.quality =
-          EvaluateFitQuality(posed, tmpl.triangles, scan, calibration.depth, options.quality);
-    } else {
-      record.quality = FitQuality();  // a failed fit is lost, whatever its kept pose shows
-      record.quality.label = FitQualityLabel::kLost;
-      ++result.failed_frames;
-    }
-    quality_seconds += record.quality.seconds;
     switch (record.quality.label) {
       case FitQualityLabel::kGood:
         ++result.good_frames;

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <functional>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -16,6 +17,13 @@
 #include "texture/texturer.h"
 
 namespace artex {
+
+// When a tracked frame is fitted again by the multi-hypothesis initialisation in the same frame
+// (the better of both by quality score is kept): kLost, frames the tracking loses (always at
+// least these); kDoubtful, also frames it doubts (for frame sets that are not a continuous
+// recording, e.g. stills of different poses; costs an initialisation per doubtful frame).
+enum class ReinitialiseOn { kLost, kDoubtful };
+const std::map<std::string, ReinitialiseOn>& ReinitialiseOnNames();  // lost, doubtful
 
 struct PipelineOptions {
   FrameSourceOptions input;  // how recordings are read (TUM association, intrinsics)
@@ -35,6 +43,7 @@ struct PipelineOptions {
   double lost_threshold_mm = 50.0;  // a frame is lost when its mean vertex error exceeds this
   // Texture doubtful frames too (lost frames never are).
   bool texture_doubtful_frames = true;
+  ReinitialiseOn reinitialise_on = ReinitialiseOn::kLost;
 
   bool IsValid(std::string* error) const;
 };

@@ -144,7 +144,8 @@ void BindQuality(const Config& c, FitQualityOptions* o) {
 
 void BindInitializer(const Config& c, InitializerOptions* o) {
   c.CheckKeys({"yaws_deg", "world_up", "arm_angles_deg", "coarse_iterations", "em_candidates",
-               "em_one_per_yaw", "ranking_iterations", "icp"});
+               "em_one_per_yaw", "ranking_iterations", "refine_arms", "refine_side_angles_deg",
+               "refine_front_angles_deg", "icp"});
   c.Get("yaws_deg", &o->yaws_deg);
   if (c.Has("world_up")) {
     std::vector<double> up;
@@ -161,6 +162,9 @@ void BindInitializer(const Config& c, InitializerOptions* o) {
   c.Get("em_candidates", &o->em_candidates);
   c.Get("em_one_per_yaw", &o->em_one_per_yaw);
   c.Get("ranking_iterations", &o->ranking_iterations);
+  c.Get("refine_arms", &o->refine_arms);
+  c.Get("refine_side_angles_deg", &o->refine_side_angles_deg);
+  c.Get("refine_front_angles_deg", &o->refine_front_angles_deg);
   BindIcpInit(c.Section("icp"), &o->icp);
 }
 
@@ -317,7 +321,8 @@ void BindInput(const Config& c, FrameSourceOptions* o) {
 
 void BindPipeline(const Config& c, PipelineOptions* o) {
   c.CheckKeys({"texture", "colour_term", "first_frame", "max_frames", "export_meshes",
-               "export_foreground", "export_glb", "lost_threshold_mm", "texture_doubtful_frames"});
+               "export_foreground", "export_glb", "lost_threshold_mm", "texture_doubtful_frames",
+               "reinitialise_on"});
   c.Get("texture", &o->texture);
   c.Get("colour_term", &o->colour_term);
   c.Get("first_frame", &o->first_frame);
@@ -327,9 +332,16 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("export_glb", &o->export_glb);
   c.Get("lost_threshold_mm", &o->lost_threshold_mm);
   c.Get("texture_doubtful_frames", &o->texture_doubtful_frames);
+  c.GetEnum("reinitialise_on", ReinitialiseOnNames(), &o->reinitialise_on);
 }
 
 }  // namespace
+
+const std::map<std::string, ReinitialiseOn>& ReinitialiseOnNames() {
+  static const std::map<std::string, ReinitialiseOn> names = {
+      {"lost", ReinitialiseOn::kLost}, {"doubtful", ReinitialiseOn::kDoubtful}};
+  return names;
+}
 
 bool PipelineOptions::IsValid(std::string* error) const {
   if (!input.IsValid(error) || !preprocess.IsValid(error) || !fitting.IsValid(error)) return false;

@@ -47,6 +47,26 @@ bool WithArms(const Template& model, const Pose& base, double elevation_deg, Pos
   return true;
 }
 
+// `base` with the arm of `shoulder` (its elbow straightened) pointing in the direction
+// `elevation_deg` below the horizontal, sideways (frontal plane) or forwards, relative to the
+// parent's frame (the torso).
+Pose WithArmDirection(const Template& model, const Pose& base, int shoulder, int elbow,
+                      double elevation_deg, bool forwards) {
+  Pose out = base;
+  const Eigen::Vector3d upper = model.joints[elbow].center - model.joints[shoulder].center;
+  const double e = elevation_deg * kDegToRad;
+  const double side = upper.x() >= 0.0 ? 1.0 : -1.0;
+  // A little outwards when forwards, so the arm does not pass through the chest.
+  const Eigen::Vector3d direction = forwards
+                                        ? Eigen::Vector3d(0.2 * side, -std::sin(e), std::cos(e))
+                                        : Eigen::Vector3d(side * std::cos(e), -std::sin(e), 0.0);
+  out.joint_rotations[shoulder] =
+      Eigen::Quaterniond::FromTwoVectors(upper.normalized(), direction.normalized())
+          .toRotationMatrix();
+  out.joint_rotations[elbow] = Eigen::Matrix3d::Identity();
+  return out;
+}
+
 }  // namespace
 
 bool InitializerOptions::IsValid(std::string* error) const {
@@ -70,6 +90,8 @@ bool InitializerOptions::IsValid(std::string* error) const {
   } else if (ranking_iterations < 0) {
     msg << "ranking_iterations: expected >= 0 (0: the whole schedule), found "
         << ranking_iterations;
+  } else if (!finite(refine_side_angles_deg) || !finite(refine_front_angles_deg)) {
+    msg << "refine_side_angles_deg, refine_front_angles_deg: expected finite angles (degrees)";
   } else if (!quality.IsValid(&inner)) {
     msg << "quality." << inner;
   } else {
@@ -85,8 +107,9 @@ std::string InitResult::BriefReport() const {
       << " hypotheses";
   if (chosen >= 0) {
     const InitHypothesis& h = hypotheses[chosen];
-    out << ", chosen yaw " << h.yaw_deg << " deg, arms " << h.arm_angle_deg << " deg, "
-        << quality.BriefReport();
+    out << ", chosen yaw " << h.yaw_deg << " deg, arms "
+        << (arms_refined ? std::string("refined") : std::to_string(h.arm_angle_deg) + " deg")
+        << ", " << quality.BriefReport();
   }
   out << "; " << total_seconds * 1e3 << " ms (ICP " << icp_seconds * 1e3 << ", EM "
       << em_seconds * 1e3 << ", quality " << quality_seconds * 1e3 << ")";
@@ -241,6 +264,48 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
     h.quality = evaluate(h.pose);
     if (h.fit.ok() && (best < 0 || h.quality.score > result.hypotheses[best].quality.score)) {
       best = order[c];
+    }
+  }
+
+  // 2b. Arm refinement of the best fit: each arm's best straight direction by score.
+  if (best >= 0 && options.ranking_iterations == 0 && options.refine_arms) {
+    const InitHypothesis& from = result.hypotheses[best];
+    Pose refined = from.pose;
+    double refined_score = from.quality.score;
+    bool changed = false;
+    const char* const arms[2][2] = {{"l_shoulder", "l_elbow"}, {"r_shoulder", "r_elbow"}};
+    for (const auto& arm : arms) {
+      const int shoulder = FindJoint(model, arm[0]), elbow = FindJoint(model, arm[1]);
+      if (shoulder < 0 || elbow < 0) continue;
+      for (int forwards = 0; forwards < 2; ++forwards) {
+        for (double angle :
+             forwards ? options.refine_front_angles_deg : options.refine_side_angles_deg) {
+          const Pose p = WithArmDirection(model, refined, shoulder, elbow, angle, forwards);
+          const double score = evaluate(p).score;
+          if (score > refined_score) {
+            refined_score = score;
+            refined = p;
+            changed = true;
+          }
+        }
+      }
+    }
+    if (changed) {
+      InitHypothesis h;
+      h.yaw_deg = from.yaw_deg;
+      h.arm_angle_deg = std::numeric_limits<double>::quiet_NaN();
+      h.icp = from.icp;
+      h.icp_quality = from.icp_quality;
+      fitter->BeginFrame(scan, refined);
+      while (!fitter->frame_done()) fitter->Iterate();
+      h.fit = fitter->DiscardFrame(&h.pose);
+      h.fitted = true;
+      h.quality = evaluate(h.pose);
+      result.hypotheses.push_back(h);
+      if (h.fit.ok() && h.quality.score > from.quality.score) {
+        best = static_cast<int>(result.hypotheses.size()) - 1;
+        result.arms_refined = true;
+      }
     }
   }
 

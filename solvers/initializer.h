@@ -59,6 +59,15 @@ struct InitializerOptions {
   // best candidate is accepted as fitted). > 0: a short fit for ranking, then the best
   // candidate is fitted again from its result with the whole first-frame schedule.
   int ranking_iterations = 0;
+  // Arm refinement after the EM fits (the symmetric arm hypotheses above cannot show one arm
+  // raised and the other down): each arm of the best fit is tried, straight, in the directions
+  // below relative to the torso, scored by the fit quality without fitting; the best
+  // direction of each arm (when it scores above the fitted arm) starts one more EM fit, kept
+  // when its score is higher. Elevations below the horizontal (degrees): in the frontal plane
+  // (80 down ... -80 straight up) and forwards (in front of the body).
+  bool refine_arms = true;
+  std::vector<double> refine_side_angles_deg = {80.0, 40.0, 0.0, -40.0, -80.0};
+  std::vector<double> refine_front_angles_deg = {45.0, 0.0, -45.0};
   FitQualityOptions quality;  // ranking (score) and the reported labels
 
   bool IsValid(std::string* error) const;
@@ -76,8 +85,10 @@ struct InitHypothesis {
 };
 
 struct InitResult {
-  bool ok = false;  // a hypothesis was fitted and accepted as the fitter's frame
-  int chosen = -1;  // index into hypotheses
+  bool ok = false;
+  bool arms_refined = false;  // the accepted fit started from a refined arm pose  // a hypothesis
+                              // was fitted and accepted as the fitter's frame
+  int chosen = -1;            // index into hypotheses
   std::vector<InitHypothesis> hypotheses;
   Pose pose;           // the accepted pose (fitter->pose())
   FitQuality quality;  // its quality

@@ -11,6 +11,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "experiments/config.h"
 #include "experiments/pipeline.h"
@@ -35,7 +37,8 @@ struct TrackedRun {
   fs::path out;
 };
 
-TrackedRun Track(const std::string& name) {
+TrackedRun Track(const std::string& name,
+                 const std::vector<std::pair<std::string, std::string>>& settings = {}) {
   TrackedRun run;
   run.out = OutDir(name);
   fs::remove_all(run.out);
@@ -43,6 +46,7 @@ TrackedRun Track(const std::string& name) {
   config.Set("pipeline.texture", "false");
   config.Set("pipeline.export_glb", "false");
   config.Set("pipeline.export_foreground", "true");
+  for (const auto& [key, value] : settings) config.Set(key, value);
   const PipelineOptions options = LoadPipelineOptions(config);
   run.result = RunPipeline(Recording(name).string(), "", options, config, run.out.string());
   std::printf("[%s] %zu frames: %d good, %d doubtful, %d lost (%d failed), %d initialisations\n",
@@ -126,8 +130,14 @@ TEST(RealRecordingsTest, SkeltrackEveryFrameUpright) {
   if (!fs::exists(Recording("skeltrack") / "depth.txt")) {
     GTEST_SKIP() << "real recordings absent (" << Recording("skeltrack") << ")";
   }
-  const TrackedRun run = Track("skeltrack");
+  // The twelve frames are stills of different poses, not a continuous recording: every
+  // frame that tracking doubts is initialised again (docs/real-data.md).
+  const TrackedRun run = Track("skeltrack", {{"pipeline.reinitialise_on", "doubtful"}});
   ASSERT_EQ(run.result.frames.size(), 12u);
+  // Measured: 6 good, 6 doubtful, 0 lost (arms refined per side; the template's shape is not
+  // the subject's, and the inlier fraction of the doubtful ones is 0.80-0.85).
+  EXPECT_EQ(run.result.lost_frames, 0);
+  EXPECT_GE(run.result.good_frames, 5);
   EXPECT_EQ(run.result.skipped_frames, 0);
   const Uprightness u = CheckUpright(run);
   EXPECT_EQ(u.frames, 12);
