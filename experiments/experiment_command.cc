@@ -93,6 +93,9 @@ class ProgressDisplay {
         active_.erase(e.label);
         Line("experiment: FAILED " + e.label + ": " + e.message);
         break;
+      case K::kNote:
+        Line("experiment: " + e.message);
+        break;
     }
   }
 
@@ -189,7 +192,6 @@ void RunExperimentCli(const ExperimentCliOptions& cli) {
                "%.1f s\n",
                summary.runs_total, summary.runs_completed, summary.runs_skipped, summary.runs_failed,
                summary.seconds);
-  if (!summary.note.empty()) std::fprintf(stderr, "experiment: %s\n", summary.note.c_str());
   if (summary.runs_unfinished > 0) {
     std::fprintf(stderr,
                  "experiment: %d run(s) queued or running; follow with `artex experiment status %s`, "

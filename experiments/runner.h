@@ -122,6 +122,7 @@ struct RunnerEvent {
     kRunFinished,
     kRunSkipped,       // already complete
     kRunFailed,
+    kNote,             // a backend's message (message): the job ids it submitted
   } kind = Kind::kPlan;
   std::string label;   // "sequence/combination" or the sequence name
   int done = 0;        // frames (kRunProgress)

@@ -379,6 +379,12 @@ RunBackend MakeSlurmBackend(const Experiment& experiment, const std::string& out
                   " run(s) still queued or running from an earlier submission (not resubmitted)";
     }
     summary->note = job_note;
+    if (!job_note.empty()) {
+      RunnerEvent e;
+      e.kind = RunnerEvent::Kind::kNote;
+      e.message = job_note;
+      emit(e);
+    }
     // Pointers into subs stay valid from here on (no more push_back).
     for (auto& w : watch) w.task = &subs[w.submission].tasks[w.index];
     if (!options.wait) {
