@@ -288,7 +288,9 @@ RunBackend MakeSlurmBackend(const Experiment& experiment, const std::string& out
   const std::string experiment_file = fs::absolute(experiment.file).string();
   const std::string name = experiment.name;
   return [=](const std::vector<PendingRun>& pending, ExperimentSummary* summary,
-             const std::function<void(const RunnerEvent&)>& emit) {
+             const std::function<void(const RunnerEvent&)>& on_event) {
+    std::function<void(const RunnerEvent&)> emit = on_event;
+    if (!emit) emit = [](const RunnerEvent&) {};
     const fs::path out = fs::absolute(out_dir);
     const std::string exe = options.executable.empty() ? SelfExecutable() : options.executable;
     fs::create_directories(SlurmDir(out.string()));
