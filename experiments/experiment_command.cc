@@ -250,6 +250,10 @@ void RegisterExperimentCommand(CLI::App* app) {
   sub->add_option("--max-parallel", so.max_parallel, "slurm: array throttle %K (0: none)")
       ->capture_default_str()
       ->check(CLI::Range(0, 100000));
+  sub->add_option("--max-array-size", so.max_array_size,
+                  "slurm: runs per job array; more are split into several arrays (<= MaxArraySize - 1)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 4000000));
   sub->add_option("--sbatch-arg", so.sbatch_args, "slurm: further sbatch argument (repeatable)")
       ->allow_extra_args(false);
   sub->add_option("--poll-seconds", so.poll_seconds, "slurm: seconds between squeue/sacct polls")

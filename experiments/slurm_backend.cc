@@ -240,6 +240,7 @@ bool SlurmOptions::IsValid(std::string* error) const {
     return false;
   };
   if (cpus_per_task < 1) return fail("cpus_per_task: expected >= 1, found " + std::to_string(cpus_per_task));
+  if (max_array_size < 1) return fail("max_array_size: expected >= 1, found " + std::to_string(max_array_size));
   if (max_parallel < 0) return fail("max_parallel: expected >= 0 (0: no throttle), found " + std::to_string(max_parallel));
   if (!(poll_seconds > 0)) return fail("poll_seconds: expected > 0, found " + std::to_string(poll_seconds));
   if (!(probe_timeout_seconds > 0)) {
@@ -344,33 +345,41 @@ RunBackend MakeSlurmBackend(const Experiment& experiment, const std::string& out
         if (std::find(paths.begin(), paths.end(), t.sequence_folder) == paths.end()) paths.push_back(t.sequence_folder);
       }
       Probe(out, paths, options, exe);
-      next.name = NextSubmissionName(out.string());
-      next.dir = (fs::path(SlurmDir(out.string())) / next.name).string();
-      fs::create_directories(fs::path(next.dir) / "state");
-      WriteTasks(next);
-      const std::string script_path = (fs::path(next.dir) / "job.sh").string();
-      WriteFileAtomic(script_path, SlurmArrayScript(name, out.string(), next.name,
-                                                    static_cast<int>(next.tasks.size()), options, exe));
-      std::vector<std::string> args = {"sbatch", "--parsable"};
-      for (const auto& a : options.sbatch_args) args.push_back(a);
-      args.push_back(script_path);
-      const std::string what = "the job array " + script_path + " (" +
-                               std::to_string(next.tasks.size()) + " tasks" +
-                               (next.tasks.size() > 1000 ? "; more than the default MaxArraySize allows" : "") +
-                               ")";
-      next.job_id = Submit(args, what, options);
-      WriteFileAtomic((fs::path(next.dir) / "job_id").string(), next.job_id + "\n");
-      subs.push_back(next);
-      for (std::size_t j = 0; j < next.tasks.size(); ++j) {
-        Watch w;
-        w.submission = subs.size() - 1;
-        w.index = static_cast<int>(j);
-        w.task = &subs.back().tasks[j];
-        watch.push_back(w);
+      // One job array per at most max_array_size runs (one array when they fit).
+      std::string arrays;
+      const std::size_t chunk = static_cast<std::size_t>(options.max_array_size);
+      for (std::size_t first = 0; first < next.tasks.size(); first += chunk) {
+        Submission part;
+        part.tasks.assign(next.tasks.begin() + first,
+                          next.tasks.begin() + std::min(next.tasks.size(), first + chunk));
+        part.name = NextSubmissionName(out.string());
+        part.dir = (fs::path(SlurmDir(out.string())) / part.name).string();
+        fs::create_directories(fs::path(part.dir) / "state");
+        WriteTasks(part);
+        const std::string script_path = (fs::path(part.dir) / "job.sh").string();
+        WriteFileAtomic(script_path, SlurmArrayScript(name, out.string(), part.name,
+                                                      static_cast<int>(part.tasks.size()), options, exe));
+        std::vector<std::string> args = {"sbatch", "--parsable"};
+        for (const auto& a : options.sbatch_args) args.push_back(a);
+        args.push_back(script_path);
+        const std::string what = "the job array " + script_path + " (" +
+                                 std::to_string(part.tasks.size()) + " tasks" +
+                                 (part.tasks.size() > 1000 ? "; more than Slurm's default MaxArraySize allows, see --max-array-size" : "") +
+                                 ")";
+        part.job_id = Submit(args, what, options);
+        WriteFileAtomic((fs::path(part.dir) / "job_id").string(), part.job_id + "\n");
+        subs.push_back(part);
+        for (std::size_t j = 0; j < part.tasks.size(); ++j) {
+          Watch w;
+          w.submission = subs.size() - 1;
+          w.index = static_cast<int>(j);
+          watch.push_back(w);
+        }
+        summary->runs_submitted += static_cast<int>(part.tasks.size());
+        arrays += std::string(arrays.empty() ? "" : ", ") + part.job_id + " (" + script_path + ")";
       }
-      summary->runs_submitted = static_cast<int>(next.tasks.size());
-      job_note = "submitted " + std::to_string(next.tasks.size()) + " run(s) as job array " +
-                 next.job_id + " (" + script_path + ")";
+      job_note = "submitted " + std::to_string(next.tasks.size()) + " run(s) as job array" +
+                 (next.tasks.size() > chunk ? "s " : " ") + arrays;
       if (!resubmitted.empty()) {
         job_note += "; resubmitted " + std::to_string(resubmitted.size()) + " whose task had ended without completing:";
         for (const auto& r : resubmitted) job_note += " " + r;

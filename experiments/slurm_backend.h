@@ -23,6 +23,9 @@ struct SlurmOptions {
   std::string mem;                       // --mem per task ("" = the partition's default)
   int cpus_per_task = 1;                 // --cpus-per-task; also each run's worker threads
   int max_parallel = 0;                  // array throttle %K; 0 = no throttle
+  // Runs per job array: more pending runs are split into several arrays (submissions). Slurm
+  // refuses arrays whose largest index reaches its MaxArraySize (default 1001).
+  int max_array_size = 1000;
   std::vector<std::string> sbatch_args;  // further sbatch arguments, passed verbatim
   bool wait = true;                      // poll until every task ended; false: return at once
   double poll_seconds = 10;              // interval of the squeue/sacct polls while waiting

@@ -209,6 +209,31 @@ TEST(SlurmBackendTest, RerunSubmitsOnlyRunsWhoseTaskEndedWithoutCompleting) {
   fs::remove_all(dir);
 }
 
+TEST(SlurmBackendTest, RunsBeyondMaxArraySizeAreSplitIntoSeveralArrays) {
+  const fs::path dir = FreshDir("split");
+  const fs::path out = dir / "out";
+  fs::create_directories(dir / "bin");
+  // Job ids 100, 101, ... from a counter file.
+  FakeCommand(dir / "bin", "sbatch",
+              "n=$(cat '" + (dir / "n").string() + "' 2>/dev/null || echo 100); echo $((n + 1)) > '" +
+                  (dir / "n").string() + "'; echo $n");
+  SlurmOptions o = FakeOptions(dir / "bin");
+  o.max_array_size = 2;
+  ExperimentSummary summary;
+  MakeSlurmBackend(NamedExperiment(dir), out.string(), o)(Pending(out, 5), &summary, {});
+  EXPECT_EQ(summary.runs_submitted, 5);
+  const auto subs = slurm::LoadSubmissions(out.string());
+  ASSERT_EQ(subs.size(), 3u);
+  EXPECT_EQ(subs[0].job_id, "100");
+  EXPECT_EQ(subs[2].job_id, "102");
+  EXPECT_EQ(subs[0].tasks.size(), 2u);
+  EXPECT_EQ(subs[2].tasks.size(), 1u);
+  EXPECT_EQ(subs[2].tasks[0].label, "seq/texture.lambda=4");
+  EXPECT_NE(ReadText(fs::path(subs[1].dir) / "job.sh").find("--array=0-1\n"), std::string::npos);
+  EXPECT_NE(summary.note.find("as job arrays 100 ("), std::string::npos) << summary.note;
+  fs::remove_all(dir);
+}
+
 TEST(SlurmBackendTest, TaskStateFallsBackToMarkersWithoutAccounting) {
   const fs::path dir = FreshDir("states");
   fs::create_directories(dir / "bin");

@@ -46,7 +46,7 @@ say "one-node cluster up in $(elapsed) s ($(sinfo -h -N -o '%N %c CPUs %m MB'))"
   >"$WORK/local.log" 2>&1 || { cat "$WORK/local.log"; fail "local backend"; }
 say "local backend done at $(elapsed) s"
 
-# 2. The Slurm backend, one task at a time; task 1 is cancelled while it runs.
+# 2. The Slurm backend, one task at a time; task 1 is cancelled while its run computes.
 OUT="$WORK/slurm"
 SLURM_ARGS=(--backend slurm --cpus-per-task 1 --max-parallel 1 --poll-seconds 0.5 --no-plots)
 "$ARTEX" experiment "$EXPERIMENT" -o "$OUT" "${SLURM_ARGS[@]}" >"$WORK/first.log" 2>&1 &
@@ -54,7 +54,8 @@ FIRST=$!
 JOB=""
 for ((i = 0; i < 1200; ++i)); do
   [[ -s $OUT/slurm/submit-001/job_id ]] && JOB=$(cat "$OUT/slurm/submit-001/job_id")
-  if [[ -n $JOB ]] && squeue -h -r -j "$JOB" -t running -o '%i' 2>/dev/null | grep -qx "${JOB}_1"; then
+  # Task 1 has started its run (its start marker is written once artex runs in the task).
+  if [[ -n $JOB && -e $OUT/slurm/submit-001/state/1.started ]]; then
     scancel "${JOB}_1"
     break
   fi
