@@ -8,10 +8,9 @@
 #include <ctime>
 #include <filesystem>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <thread>
-
-#include <nlohmann/json.hpp>
 
 #include "experiments/slurm_queue.h"
 #include "models/error.h"
@@ -25,8 +24,8 @@ namespace {
 
 constexpr const char* kExperimentRecord = "experiment.txt";
 constexpr const char* kProbeRecord = "probe.ok";
-constexpr int kFailureLines = 3;      // log lines quoted for a failed task
-constexpr double kProbePollMax = 2;   // seconds between polls of the probe job
+constexpr int kFailureLines = 3;     // log lines quoted for a failed task
+constexpr double kProbePollMax = 2;  // seconds between polls of the probe job
 
 std::string Quote(const std::string& s) {
   std::string out = "'";
@@ -74,7 +73,8 @@ std::string Submit(const std::vector<std::string>& args, const std::string& what
   std::string id = Trim(r.out);
   id = id.substr(0, id.find(';'));  // "<id>;<cluster>" on federated clusters
   if (id.empty() || id.find_first_not_of("0123456789") != std::string::npos) {
-    throw Error("sbatch accepted " + what + " but printed no job id (output: '" + Trim(r.out) + "')");
+    throw Error("sbatch accepted " + what + " but printed no job id (output: '" + Trim(r.out) +
+                "')");
   }
   return id;
 }
@@ -87,8 +87,8 @@ void Probe(const fs::path& out, const std::vector<std::string>& paths, const Slu
   const std::string token = std::to_string(getpid()) + "-" + std::to_string(std::time(nullptr));
   const fs::path log = fs::path(SlurmDir(out.string())) / ("probe-" + token + ".log");
   const fs::path ok = fs::path(SlurmDir(out.string())) / ("probe-" + token + ".ok");
-  std::string wrap = "exec " + Quote(exe) + " experiment-probe --out " + Quote(out.string()) +
-                     " --token " + token;
+  std::string wrap =
+      "exec " + Quote(exe) + " experiment-probe --out " + Quote(out.string()) + " --token " + token;
   for (const auto& p : paths) wrap += " --check " + Quote(p);
   std::vector<std::string> args = {"sbatch", "--parsable", "--job-name=artex-probe",
                                    "--output=" + log.string(), "--ntasks=1"};
@@ -122,8 +122,8 @@ void Probe(const fs::path& out, const std::vector<std::string>& paths, const Slu
   }
   if (!fs::exists(ok)) {
     throw Error("the probe job " + id + " could not run artex or write to " + out.string() +
-                " (state " + (state.empty() ? "unknown" : state) + "; log " + log.string() +
-                ": " + LastLines(log.string(), kFailureLines) +
+                " (state " + (state.empty() ? "unknown" : state) + "; log " + log.string() + ": " +
+                LastLines(log.string(), kFailureLines) +
                 "); the output folder and the artex binary must be on a filesystem the nodes "
                 "share");
   }
@@ -195,7 +195,8 @@ void Wait(std::vector<Watch>& watch, const std::vector<Submission>& subs,
       const Submission& s = subs[w.submission];
       const TaskState st = states.Of(s, w.index);
       const bool complete = RunIsComplete(w.task->run_folder);
-      if (!w.started && (st.state == "RUNNING" || st.state == "COMPLETING" || complete || !st.active)) {
+      if (!w.started &&
+          (st.state == "RUNNING" || st.state == "COMPLETING" || complete || !st.active)) {
         w.started = true;
         emit(event(RunnerEvent::Kind::kRunStarted, w));
       }
@@ -239,12 +240,18 @@ bool SlurmOptions::IsValid(std::string* error) const {
     if (error) *error = m;
     return false;
   };
-  if (cpus_per_task < 1) return fail("cpus_per_task: expected >= 1, found " + std::to_string(cpus_per_task));
-  if (max_array_size < 1) return fail("max_array_size: expected >= 1, found " + std::to_string(max_array_size));
-  if (max_parallel < 0) return fail("max_parallel: expected >= 0 (0: no throttle), found " + std::to_string(max_parallel));
-  if (!(poll_seconds > 0)) return fail("poll_seconds: expected > 0, found " + std::to_string(poll_seconds));
+  if (cpus_per_task < 1)
+    return fail("cpus_per_task: expected >= 1, found " + std::to_string(cpus_per_task));
+  if (max_array_size < 1)
+    return fail("max_array_size: expected >= 1, found " + std::to_string(max_array_size));
+  if (max_parallel < 0)
+    return fail("max_parallel: expected >= 0 (0: no throttle), found " +
+                std::to_string(max_parallel));
+  if (!(poll_seconds > 0))
+    return fail("poll_seconds: expected > 0, found " + std::to_string(poll_seconds));
   if (!(probe_timeout_seconds > 0)) {
-    return fail("probe_timeout_seconds: expected > 0, found " + std::to_string(probe_timeout_seconds));
+    return fail("probe_timeout_seconds: expected > 0, found " +
+                std::to_string(probe_timeout_seconds));
   }
   for (const auto& a : sbatch_args) {
     if (a.rfind("--array", 0) == 0 || a.rfind("--output", 0) == 0 || a == "-a" || a == "-o") {
@@ -301,7 +308,8 @@ RunBackend MakeSlurmBackend(const Experiment& experiment, const std::string& out
     const TaskStates states(subs, options.bin_dir);
     std::map<std::string, std::pair<std::size_t, int>> last;  // label -> latest task
     for (std::size_t i = 0; i < subs.size(); ++i) {
-      for (std::size_t j = 0; j < subs[i].tasks.size(); ++j) last[subs[i].tasks[j].label] = {i, static_cast<int>(j)};
+      for (std::size_t j = 0; j < subs[i].tasks.size(); ++j)
+        last[subs[i].tasks[j].label] = {i, static_cast<int>(j)};
     }
     std::vector<Watch> watch;
     Submission next;
@@ -310,6 +318,10 @@ RunBackend MakeSlurmBackend(const Experiment& experiment, const std::string& out
       auto it = last.find(p.label);
       if (it != last.end()) {
         const TaskState st = states.Of(subs[it->second.first], it->second.second);
+        if (RunIsComplete(p.run_folder)) {  // its task finished since RunExperiment looked
+          ++summary->runs_completed;
+          continue;
+        }
         if (st.active) {  // queued or running since an earlier invocation: wait for it
           Watch w;
           w.submission = it->second.first;
@@ -342,7 +354,8 @@ RunBackend MakeSlurmBackend(const Experiment& experiment, const std::string& out
     if (!next.tasks.empty()) {
       std::vector<std::string> paths = {next.tasks.front().template_path};
       for (const auto& t : next.tasks) {
-        if (std::find(paths.begin(), paths.end(), t.sequence_folder) == paths.end()) paths.push_back(t.sequence_folder);
+        if (std::find(paths.begin(), paths.end(), t.sequence_folder) == paths.end())
+          paths.push_back(t.sequence_folder);
       }
       Probe(out, paths, options, exe);
       // One job array per at most max_array_size runs (one array when they fit).
@@ -357,15 +370,18 @@ RunBackend MakeSlurmBackend(const Experiment& experiment, const std::string& out
         fs::create_directories(fs::path(part.dir) / "state");
         WriteTasks(part);
         const std::string script_path = (fs::path(part.dir) / "job.sh").string();
-        WriteFileAtomic(script_path, SlurmArrayScript(name, out.string(), part.name,
-                                                      static_cast<int>(part.tasks.size()), options, exe));
+        WriteFileAtomic(script_path,
+                        SlurmArrayScript(name, out.string(), part.name,
+                                         static_cast<int>(part.tasks.size()), options, exe));
         std::vector<std::string> args = {"sbatch", "--parsable"};
         for (const auto& a : options.sbatch_args) args.push_back(a);
         args.push_back(script_path);
-        const std::string what = "the job array " + script_path + " (" +
-                                 std::to_string(part.tasks.size()) + " tasks" +
-                                 (part.tasks.size() > 1000 ? "; more than Slurm's default MaxArraySize allows, see --max-array-size" : "") +
-                                 ")";
+        const std::string what =
+            "the job array " + script_path + " (" + std::to_string(part.tasks.size()) + " tasks" +
+            (part.tasks.size() > 1000
+                 ? "; more than Slurm's default MaxArraySize allows, see --max-array-size"
+                 : "") +
+            ")";
         part.job_id = Submit(args, what, options);
         WriteFileAtomic((fs::path(part.dir) / "job_id").string(), part.job_id + "\n");
         subs.push_back(part);
@@ -381,7 +397,8 @@ RunBackend MakeSlurmBackend(const Experiment& experiment, const std::string& out
       job_note = "submitted " + std::to_string(next.tasks.size()) + " run(s) as job array" +
                  (next.tasks.size() > chunk ? "s " : " ") + arrays;
       if (!resubmitted.empty()) {
-        job_note += "; resubmitted " + std::to_string(resubmitted.size()) + " whose task had ended without completing:";
+        job_note += "; resubmitted " + std::to_string(resubmitted.size()) +
+                    " whose task had ended without completing:";
         for (const auto& r : resubmitted) job_note += " " + r;
       }
     }
@@ -413,9 +430,11 @@ std::string RecordedExperimentFile(const std::string& out_dir) {
 SlurmStatus ReadSlurmStatus(const std::string& out_dir, const std::string& experiment_file,
                             const std::string& bin_dir) {
   SlurmStatus status;
-  status.experiment_file = experiment_file.empty() ? RecordedExperimentFile(out_dir) : experiment_file;
+  status.experiment_file =
+      experiment_file.empty() ? RecordedExperimentFile(out_dir) : experiment_file;
   if (status.experiment_file.empty()) {
-    throw Error(out_dir + ": no experiment recorded (" + SlurmDir(out_dir) + "/" + kExperimentRecord +
+    throw Error(out_dir + ": no experiment recorded (" + SlurmDir(out_dir) + "/" +
+                kExperimentRecord +
                 " missing); was it run with --backend slurm? Pass --experiment FILE");
   }
   const Experiment experiment = LoadExperiment(status.experiment_file);
@@ -473,9 +492,9 @@ SlurmStatus ReadSlurmStatus(const std::string& out_dir, const std::string& exper
 
 std::string FormatSlurmStatus(const SlurmStatus& status) {
   std::ostringstream s;
-  s << "experiment " << status.experiment_file << ": " << status.runs.size() << " runs: " << status.done
-    << " done, " << status.running << " running, " << status.pending << " pending, " << status.failed
-    << " failed, " << status.not_submitted << " not submitted\n";
+  s << "experiment " << status.experiment_file << ": " << status.runs.size()
+    << " runs: " << status.done << " done, " << status.running << " running, " << status.pending
+    << " pending, " << status.failed << " failed, " << status.not_submitted << " not submitted\n";
   std::size_t width = 0;
   for (const auto& r : status.runs) width = std::max(width, r.label.size());
   for (const auto& r : status.runs) {

@@ -18,11 +18,11 @@
 namespace artex {
 
 struct SlurmOptions {
-  std::string partition;                 // --partition ("" = the cluster's default)
-  std::string time;                      // --time per task ("" = the partition's default)
-  std::string mem;                       // --mem per task ("" = the partition's default)
-  int cpus_per_task = 1;                 // --cpus-per-task; also each run's worker threads
-  int max_parallel = 0;                  // array throttle %K; 0 = no throttle
+  std::string partition;  // --partition ("" = the cluster's default)
+  std::string time;       // --time per task ("" = the partition's default)
+  std::string mem;        // --mem per task ("" = the partition's default)
+  int cpus_per_task = 1;  // --cpus-per-task; also each run's worker threads
+  int max_parallel = 0;   // array throttle %K; 0 = no throttle
   // Runs per job array: more pending runs are split into several arrays (submissions). Slurm
   // refuses arrays whose largest index reaches its MaxArraySize (default 1001).
   int max_array_size = 1000;
@@ -32,10 +32,10 @@ struct SlurmOptions {
   // Before the first array of an output folder, a one-task probe job checks that the nodes
   // can run this artex and write to OUT (shared filesystem); false skips it.
   bool probe = true;
-  double probe_timeout_seconds = 900;    // the probe must have ended within this time
-  std::string job_name;                  // "" = artex-<experiment name>
-  std::string executable;                // artex binary the tasks run; "" = this one
-  std::string bin_dir;                   // folder of sbatch/squeue/sacct; "" = PATH
+  double probe_timeout_seconds = 900;  // the probe must have ended within this time
+  std::string job_name;                // "" = artex-<experiment name>
+  std::string executable;              // artex binary the tasks run; "" = this one
+  std::string bin_dir;                 // folder of sbatch/squeue/sacct; "" = PATH
   bool IsValid(std::string* error) const;
 };
 
@@ -46,8 +46,8 @@ RunBackend MakeSlurmBackend(const Experiment& experiment, const std::string& out
 
 // The job-array script of one submission (what `sbatch` gets; shown in docs/experiments.md).
 std::string SlurmArrayScript(const std::string& experiment_name, const std::string& out_dir,
-                             const std::string& submission, int tasks,
-                             const SlurmOptions& options, const std::string& executable);
+                             const std::string& submission, int tasks, const SlurmOptions& options,
+                             const std::string& executable);
 
 // State of every run of an output folder written by the Slurm backend.
 struct SlurmRunStatus {

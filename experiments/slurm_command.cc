@@ -1,13 +1,12 @@
 // `artex experiment collect OUT` and `artex experiment status OUT` (the Slurm backend's
 // companions, docs/experiments.md) and the hidden entry points of its jobs:
 // `artex experiment-task` (one array task) and `artex experiment-probe` (the probe job).
+#include <CLI/CLI.hpp>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <CLI/CLI.hpp>
 
 #include "experiments/commands.h"
 #include "experiments/runner.h"
@@ -30,16 +29,16 @@ void RegisterSlurmSubcommands(CLI::App* app, CLI::App* experiment) {
                           "Experiment file (default: the one recorded in OUT/slurm/)");
   collect_sub->add_flag("--no-plots", collect->no_plots, "Do not call scripts/plot_results.py");
   collect_sub->callback([collect]() {
-    const std::string file = collect->experiment_file.empty()
-                                 ? RecordedExperimentFile(collect->out)
-                                 : collect->experiment_file;
+    const std::string file = collect->experiment_file.empty() ? RecordedExperimentFile(collect->out)
+                                                              : collect->experiment_file;
     if (file.empty()) {
       throw Error(collect->out + ": no experiment recorded in " + collect->out +
                   "/slurm/experiment.txt; pass --experiment FILE");
     }
     const Experiment experiment = LoadExperiment(file);
     const int complete = WriteExperimentResults(experiment, collect->out);
-    std::fprintf(stderr, "experiment: %d of %zu runs complete; wrote %s/results.csv and %s/summary.md\n",
+    std::fprintf(stderr,
+                 "experiment: %d of %zu runs complete; wrote %s/results.csv and %s/summary.md\n",
                  complete, experiment.sequences.size() * experiment.combinations.size(),
                  collect->out.c_str(), collect->out.c_str());
     if (!collect->no_plots && complete > 0) MakeExperimentPlots(collect->out);
@@ -52,7 +51,8 @@ void RegisterSlurmSubcommands(CLI::App* app, CLI::App* experiment) {
   status_sub->add_option("--experiment", status->experiment_file,
                          "Experiment file (default: the one recorded in OUT/slurm/)");
   status_sub->callback([status]() {
-    std::printf("%s", FormatSlurmStatus(ReadSlurmStatus(status->out, status->experiment_file)).c_str());
+    std::printf("%s",
+                FormatSlurmStatus(ReadSlurmStatus(status->out, status->experiment_file)).c_str());
   });
 
   struct TaskArgs {

@@ -11,9 +11,8 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
-
 #include <nlohmann/json.hpp>
+#include <sstream>
 
 #include "models/error.h"
 #include "sensors/sequence.h"
@@ -76,7 +75,8 @@ std::string LastLines(const std::string& path, int count) {
     if (!Trim(line).empty() && line.rfind("progress ", 0) != 0) lines.push_back(line);
   }
   std::string out;
-  const std::size_t first = lines.size() > static_cast<std::size_t>(count) ? lines.size() - count : 0;
+  const std::size_t first =
+      lines.size() > static_cast<std::size_t>(count) ? lines.size() - count : 0;
   for (std::size_t i = first; i < lines.size(); ++i) out += (out.empty() ? "" : " | ") + lines[i];
   return out;
 }
@@ -96,7 +96,8 @@ CommandResult RunCommand(const std::vector<std::string>& args, const std::string
   CommandResult result;
   if (args.empty()) return result;
   int out_pipe[2], err_pipe[2];
-  if (pipe2(out_pipe, O_CLOEXEC) != 0) throw Error("cannot create a pipe: " + std::string(std::strerror(errno)));
+  if (pipe2(out_pipe, O_CLOEXEC) != 0)
+    throw Error("cannot create a pipe: " + std::string(std::strerror(errno)));
   if (pipe2(err_pipe, O_CLOEXEC) != 0) {
     close(out_pipe[0]);
     close(out_pipe[1]);
@@ -242,9 +243,9 @@ std::string MarkerPath(const Submission& s, int index, const std::string& kind) 
 }
 
 bool IsActiveState(const std::string& state) {
-  static const char* kActive[] = {"PENDING",   "RUNNING",    "CONFIGURING", "COMPLETING",
-                                  "SUSPENDED", "REQUEUED",   "REQUEUE_HOLD", "REQUEUE_FED",
-                                  "RESIZING",  "SIGNALING",  "STAGE_OUT",   "STOPPED",
+  static const char* kActive[] = {"PENDING",      "RUNNING",   "CONFIGURING",  "COMPLETING",
+                                  "SUSPENDED",    "REQUEUED",  "REQUEUE_HOLD", "REQUEUE_FED",
+                                  "RESIZING",     "SIGNALING", "STAGE_OUT",    "STOPPED",
                                   "RESV_DEL_HOLD"};
   for (const char* a : kActive) {
     if (state == a) return true;

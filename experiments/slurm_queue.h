@@ -31,9 +31,9 @@ using TaskEntry = PendingRun;
 // One `sbatch` of a job array: OUT/slurm/<name>/ holds job.sh, tasks.json, job_id, the Slurm
 // logs slurm-<job>_<task>.log and state/<task>.{started,exit,progress} written by the tasks.
 struct Submission {
-  std::string name;     // "submit-001"
-  std::string dir;      // OUT/slurm/submit-001
-  std::string job_id;   // "" while not submitted (or when sbatch failed)
+  std::string name;    // "submit-001"
+  std::string dir;     // OUT/slurm/submit-001
+  std::string job_id;  // "" while not submitted (or when sbatch failed)
   std::vector<TaskEntry> tasks;
 };
 
@@ -53,11 +53,11 @@ std::string MarkerPath(const Submission& s, int index, const std::string& kind);
 
 // State of one array task ("<job>_<index>").
 struct TaskState {
-  std::string state;   // Slurm's (PENDING, RUNNING, COMPLETED, CANCELLED, TIMEOUT, ...), or
-                       // KILLED (started, no exit marker, unknown to Slurm), LOST (never seen)
-  std::string source;  // squeue | sacct | markers
-  std::string exit;    // exit marker text ("" = none)
-  bool active = false; // queued or running
+  std::string state;    // Slurm's (PENDING, RUNNING, COMPLETED, CANCELLED, TIMEOUT, ...), or
+                        // KILLED (started, no exit marker, unknown to Slurm), LOST (never seen)
+  std::string source;   // squeue | sacct | markers
+  std::string exit;     // exit marker text ("" = none)
+  bool active = false;  // queued or running
 };
 
 // Queries squeue (all states, array tasks expanded) and sacct for these job ids; a task

@@ -8,7 +8,6 @@
 #include <cstdlib>
 #include <ctime>
 #include <filesystem>
-
 #include <nlohmann/json.hpp>
 
 #include "experiments/slurm_backend.h"
@@ -42,7 +41,8 @@ std::string EnvOr(const char* name, const std::string& fallback) {
 
 }  // namespace
 
-int RunSlurmTask(const std::string& out_dir, const std::string& submission, int index, int threads) {
+int RunSlurmTask(const std::string& out_dir, const std::string& submission, int index,
+                 int threads) {
   const Submission s = LoadSubmission((fs::path(SlurmDir(out_dir)) / submission).string());
   if (index < 0 || index >= static_cast<int>(s.tasks.size())) {
     std::fprintf(stderr, "artex experiment-task: index %d out of range (%s has %zu tasks)\n", index,
@@ -65,8 +65,8 @@ int RunSlurmTask(const std::string& out_dir, const std::string& submission, int 
   dup2(fd, STDOUT_FILENO);
   dup2(fd, STDERR_FILENO);
   close(fd);
-  std::fprintf(stderr, "artex experiment-task %s: %s on %s at %s\n", task_id.c_str(), t.label.c_str(),
-               HostName().c_str(), Now().c_str());
+  std::fprintf(stderr, "artex experiment-task %s: %s on %s at %s\n", task_id.c_str(),
+               t.label.c_str(), HostName().c_str(), Now().c_str());
   WriteFileAtomic(MarkerPath(s, index, "started"), HostName() + " " + Now() + "\n");
   const fs::path tmp = TaskTmpDir(t, job, index);
   try {
@@ -85,9 +85,11 @@ int RunSlurmTask(const std::string& out_dir, const std::string& submission, int 
     const std::string progress_path = MarkerPath(s, index, "progress");
     RunSingle(config, t.sequence_folder, t.template_path, tmp.string(), threads,
               [&](int done, int total) {
-                WriteFileAtomic(progress_path, std::to_string(done) + " " + std::to_string(total) + "\n");
+                WriteFileAtomic(progress_path,
+                                std::to_string(done) + " " + std::to_string(total) + "\n");
               });
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     std::fflush(stderr);
     fs::copy_file(log, tmp / "log.txt", fs::copy_options::overwrite_existing, ec);
     nlohmann::ordered_json info = nlohmann::ordered_json::parse(t.info_json);
@@ -101,7 +103,8 @@ int RunSlurmTask(const std::string& out_dir, const std::string& submission, int 
     if (fs::exists(t.run_folder) && !RunIsComplete(t.run_folder)) fs::remove_all(t.run_folder);
     const std::string error = CompleteRun(tmp.string(), t.run_folder, info.dump(2) + "\n");
     if (!error.empty()) throw Error(error);
-    std::fprintf(stderr, "artex experiment-task %s: complete in %.1f s\n", task_id.c_str(), seconds);
+    std::fprintf(stderr, "artex experiment-task %s: complete in %.1f s\n", task_id.c_str(),
+                 seconds);
     WriteFileAtomic(MarkerPath(s, index, "exit"), "0\n");
     return 0;
   } catch (const std::exception& e) {

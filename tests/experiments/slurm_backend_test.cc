@@ -3,6 +3,7 @@
 // answer, and which runs a rerun submits again. The real-Slurm run is tests/slurm/.
 #include "experiments/slurm_backend.h"
 
+#include <gtest/gtest.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -11,8 +12,6 @@
 #include <sstream>
 #include <string>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "experiments/slurm_queue.h"
 #include "models/error.h"
@@ -45,7 +44,8 @@ std::string ReadText(const fs::path& path) {
 // A fake Slurm command: a shell script in bin/ (its arguments are appended to bin/<name>.args).
 void FakeCommand(const fs::path& bin, const std::string& name, const std::string& body) {
   const fs::path path = bin / name;
-  WriteText(path, "#!/bin/sh\necho \"$@\" >> '" + (bin / (name + ".args")).string() + "'\n" + body + "\n");
+  WriteText(path, "#!/bin/sh\necho \"$@\" >> '" + (bin / (name + ".args")).string() + "'\n" + body +
+                      "\n");
   chmod(path.c_str(), 0755);
 }
 
@@ -90,20 +90,24 @@ TEST(SlurmBackendTest, ArrayScriptHasOneTaskPerRunThrottleAndResources) {
   o.mem = "4G";
   o.cpus_per_task = 3;
   o.max_parallel = 5;
-  const std::string script = SlurmArrayScript("abl", "/shared/out", "submit-002", 8, o, "/sw/artex");
+  const std::string script =
+      SlurmArrayScript("abl", "/shared/out", "submit-002", 8, o, "/sw/artex");
   EXPECT_NE(script.find("#SBATCH --array=0-7%5\n"), std::string::npos) << script;
   EXPECT_NE(script.find("#SBATCH --partition=short\n"), std::string::npos);
   EXPECT_NE(script.find("#SBATCH --time=00:20:00\n"), std::string::npos);
   EXPECT_NE(script.find("#SBATCH --mem=4G\n"), std::string::npos);
   EXPECT_NE(script.find("#SBATCH --cpus-per-task=3\n"), std::string::npos);
   EXPECT_NE(script.find("#SBATCH --job-name=artex-abl\n"), std::string::npos);
-  EXPECT_NE(script.find("#SBATCH --output=/shared/out/slurm/submit-002/slurm-%A_%a.log\n"), std::string::npos);
-  EXPECT_NE(script.find("exec '/sw/artex' experiment-task --out '/shared/out' --submission submit-002 "
-                        "--index \"$SLURM_ARRAY_TASK_ID\" --threads 3\n"),
-            std::string::npos)
+  EXPECT_NE(script.find("#SBATCH --output=/shared/out/slurm/submit-002/slurm-%A_%a.log\n"),
+            std::string::npos);
+  EXPECT_NE(
+      script.find("exec '/sw/artex' experiment-task --out '/shared/out' --submission submit-002 "
+                  "--index \"$SLURM_ARRAY_TASK_ID\" --threads 3\n"),
+      std::string::npos)
       << script;
   o.max_parallel = 0;
-  EXPECT_NE(SlurmArrayScript("abl", "/o", "s", 1, o, "a").find("#SBATCH --array=0-0\n"), std::string::npos);
+  EXPECT_NE(SlurmArrayScript("abl", "/o", "s", 1, o, "a").find("#SBATCH --array=0-0\n"),
+            std::string::npos);
 }
 
 TEST(SlurmBackendTest, OptionsRejectArraySetByHandAndBadCounts) {
@@ -122,7 +126,8 @@ TEST(SlurmBackendTest, OptionsRejectArraySetByHandAndBadCounts) {
 TEST(SlurmBackendTest, MissingSbatchIsAClearError) {
   const fs::path dir = FreshDir("missing");
   fs::create_directories(dir / "bin");  // empty: no sbatch
-  const RunBackend backend = MakeSlurmBackend(NamedExperiment(dir), (dir / "out").string(), FakeOptions(dir / "bin"));
+  const RunBackend backend =
+      MakeSlurmBackend(NamedExperiment(dir), (dir / "out").string(), FakeOptions(dir / "bin"));
   ExperimentSummary summary;
   const std::string msg = ErrorOf([&] { backend(Pending(dir / "out", 2), &summary, {}); });
   EXPECT_NE(msg.find("cannot run " + (dir / "bin" / "sbatch").string()), std::string::npos) << msg;
@@ -133,17 +138,19 @@ TEST(SlurmBackendTest, MissingSbatchIsAClearError) {
 TEST(SlurmBackendTest, RefusedSubmissionQuotesSlurm) {
   const fs::path dir = FreshDir("refused");
   fs::create_directories(dir / "bin");
-  FakeCommand(dir / "bin", "sbatch",
-              "echo 'sbatch: error: invalid partition specified: nope' >&2\n"
-              "echo 'sbatch: error: Batch job submission failed: Invalid partition name specified' >&2\n"
-              "exit 1");
+  FakeCommand(
+      dir / "bin", "sbatch",
+      "echo 'sbatch: error: invalid partition specified: nope' >&2\n"
+      "echo 'sbatch: error: Batch job submission failed: Invalid partition name specified' >&2\n"
+      "exit 1");
   SlurmOptions o = FakeOptions(dir / "bin");
   o.partition = "nope";
   const RunBackend backend = MakeSlurmBackend(NamedExperiment(dir), (dir / "out").string(), o);
   ExperimentSummary summary;
   const std::string msg = ErrorOf([&] { backend(Pending(dir / "out", 3), &summary, {}); });
   EXPECT_NE(msg.find("sbatch refused the job array"), std::string::npos) << msg;
-  EXPECT_NE(msg.find("exit 1: sbatch: error: invalid partition specified: nope"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("exit 1: sbatch: error: invalid partition specified: nope"), std::string::npos)
+      << msg;
   EXPECT_NE(ReadText(dir / "bin" / "sbatch.args").find("--parsable"), std::string::npos);
   fs::remove_all(dir);
 }
@@ -152,7 +159,9 @@ TEST(SlurmBackendTest, ProbeFailureSaysTheFolderMustBeShared) {
   const fs::path dir = FreshDir("probe");
   fs::create_directories(dir / "bin");
   // The probe job "runs" and ends without writing its file (as on a node without OUT).
-  FakeCommand(dir / "bin", "sbatch", "echo 'probe ran on node7: No such file or directory' > \"$(echo \"$@\" | sed -n 's/.*--output=\\([^ ]*\\).*/\\1/p')\"\necho 77");
+  FakeCommand(dir / "bin", "sbatch",
+              "echo 'probe ran on node7: No such file or directory' > \"$(echo \"$@\" | sed -n "
+              "'s/.*--output=\\([^ ]*\\).*/\\1/p')\"\necho 77");
   FakeCommand(dir / "bin", "squeue", "echo FAILED");
   SlurmOptions o = FakeOptions(dir / "bin");
   o.probe = true;
@@ -173,7 +182,8 @@ TEST(SlurmBackendTest, RerunSubmitsOnlyRunsWhoseTaskEndedWithoutCompleting) {
   fs::create_directories(dir / "bin");
   FakeCommand(dir / "bin", "sbatch", "echo '42;cluster'");
   FakeCommand(dir / "bin", "squeue", "exit 0");
-  FakeCommand(dir / "bin", "sacct", "echo 'sacct: error: Slurm accounting storage is disabled' >&2; exit 1");
+  FakeCommand(dir / "bin", "sacct",
+              "echo 'sacct: error: Slurm accounting storage is disabled' >&2; exit 1");
   const SlurmOptions o = FakeOptions(dir / "bin");
   ExperimentSummary first;
   MakeSlurmBackend(NamedExperiment(dir), out.string(), o)(Pending(out, 4), &first, {});
@@ -215,8 +225,9 @@ TEST(SlurmBackendTest, RunsBeyondMaxArraySizeAreSplitIntoSeveralArrays) {
   fs::create_directories(dir / "bin");
   // Job ids 100, 101, ... from a counter file.
   FakeCommand(dir / "bin", "sbatch",
-              "n=$(cat '" + (dir / "n").string() + "' 2>/dev/null || echo 100); echo $((n + 1)) > '" +
-                  (dir / "n").string() + "'; echo $n");
+              "n=$(cat '" + (dir / "n").string() +
+                  "' 2>/dev/null || echo 100); echo $((n + 1)) > '" + (dir / "n").string() +
+                  "'; echo $n");
   SlurmOptions o = FakeOptions(dir / "bin");
   o.max_array_size = 2;
   ExperimentSummary summary;

@@ -9,6 +9,7 @@
 
 SLURM_CLUSTER_PIDS=()
 SLURM_CLUSTER_WHY=""
+SLURM_CLUSTER_DIR=""
 
 # A free TCP port on 127.0.0.1.
 _slurm_free_port() {
@@ -28,6 +29,7 @@ slurm_cluster_start() {
       return 1
     fi
   done
+  SLURM_CLUSTER_DIR=$dir
   mkdir -p "$dir"/{munge,state,spool,log}
   chmod 700 "$dir/munge"
   mungekey --create --keyfile="$dir/munge/munge.key" --force >/dev/null 2>&1 ||
@@ -102,7 +104,15 @@ CONF
 }
 
 slurm_cluster_stop() {
-  local pid
+  local pid i
+  # Jobs first: a slurmstepd whose slurmd is gone keeps retrying forever.
+  if [[ -n ${SLURM_CLUSTER_DIR:-} && ${#SLURM_CLUSTER_PIDS[@]} -gt 1 ]]; then
+    squeue -h -o '%A' 2>/dev/null | sort -u | xargs -r scancel 2>/dev/null || true
+    for ((i = 0; i < 100; ++i)); do
+      [[ -z $(squeue -h -t running,completing,configuring -o '%A' 2>/dev/null) ]] && break
+      sleep 0.1
+    done
+  fi
   for pid in "${SLURM_CLUSTER_PIDS[@]}"; do
     kill "$pid" 2>/dev/null || true
   done
@@ -113,5 +123,13 @@ slurm_cluster_stop() {
     done
     kill -9 "$pid" 2>/dev/null || true
   done
+  # Any slurmstepd of this cluster still alive (it holds this cluster's slurmd.log open).
+  if [[ -n ${SLURM_CLUSTER_DIR:-} ]]; then
+    for pid in $(pgrep -x slurmstepd 2>/dev/null); do
+      if ls -l "/proc/$pid/fd" 2>/dev/null | grep -q -F "$SLURM_CLUSTER_DIR/log/"; then
+        kill -9 "$pid" 2>/dev/null || true
+      fi
+    done
+  fi
   SLURM_CLUSTER_PIDS=()
 }
