@@ -5,8 +5,10 @@
 
 #include <gtest/gtest.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -242,6 +244,38 @@ TEST(SlurmBackendTest, RunsBeyondMaxArraySizeAreSplitIntoSeveralArrays) {
   EXPECT_EQ(subs[2].tasks[0].label, "seq/texture.lambda=4");
   EXPECT_NE(ReadText(fs::path(subs[1].dir) / "job.sh").find("--array=0-1\n"), std::string::npos);
   EXPECT_NE(summary.note.find("as job arrays 100 ("), std::string::npos) << summary.note;
+  fs::remove_all(dir);
+}
+
+// The task entry point as a Slurm node runs it, on a run whose sequence does not exist: it fails
+// with exit status 1, logs why in its log, writes its exit marker and leaves no run folder.
+TEST(SlurmBackendTest, FailingTaskLogsAndMarksItsExit) {
+  const fs::path dir = FreshDir("task");
+  const fs::path out = dir / "out";
+  fs::create_directories(dir / "bin");
+  FakeCommand(dir / "bin", "sbatch", "echo 5");
+  ExperimentSummary summary;
+  MakeSlurmBackend(NamedExperiment(dir), out.string(), FakeOptions(dir / "bin"))(Pending(out, 1),
+                                                                                 &summary, {});
+  const std::string cmd = "SLURM_ARRAY_JOB_ID=5 '" + std::string(ARTEX_BINARY) +
+                          "' experiment-task --out '" + out.string() +
+                          "' --submission submit-001 --index 0 --threads 1";
+  const int status = std::system(cmd.c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 1);
+  const fs::path sub = out / "slurm" / "submit-001";
+  EXPECT_EQ(ReadText(sub / "state" / "0.exit").rfind("1 ", 0), 0u)
+      << ReadText(sub / "state" / "0.exit");
+  EXPECT_TRUE(fs::exists(sub / "state" / "0.started"));
+  const std::string log =
+      ReadText(out / "runs" / "seq" / "slurm-logs" / "texture.lambda=0" / "slurm-5_0.log");
+  EXPECT_NE(log.find("artex experiment-task 5_0: seq/texture.lambda=0 on "), std::string::npos)
+      << log;
+  EXPECT_NE(log.find("FAILED"), std::string::npos) << log;
+  EXPECT_FALSE(RunIsComplete((out / "runs" / "seq" / "texture.lambda=0").string()));
+  EXPECT_TRUE(fs::exists(out / "runs" / "seq" / ".failed-texture.lambda=0"));
+  const slurm::TaskStates states(slurm::LoadSubmissions(out.string()), (dir / "bin").string());
+  EXPECT_EQ(states.Of(slurm::LoadSubmission(sub.string()), 0).state, "FAILED");  // from markers
   fs::remove_all(dir);
 }
 
