@@ -125,9 +125,11 @@ slurm_cluster_stop() {
   done
   # Any slurmstepd of this cluster still alive (it holds this cluster's slurmd.log open).
   if [[ -n ${SLURM_CLUSTER_DIR:-} ]]; then
-    for pid in $(pgrep -x slurmstepd 2>/dev/null); do
-      if ls -l "/proc/$pid/fd" 2>/dev/null | grep -q -F "$SLURM_CLUSTER_DIR/log/"; then
-        kill -9 "$pid" 2>/dev/null || true
+    local proc
+    for proc in /proc/[0-9]*; do
+      [[ $(cat "$proc/comm" 2>/dev/null) == slurmstepd ]] || continue
+      if ls -l "$proc/fd" 2>/dev/null | grep -q -F "$SLURM_CLUSTER_DIR/log/"; then
+        kill -9 "${proc#/proc/}" 2>/dev/null || true
       fi
     done
   fi
