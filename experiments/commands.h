@@ -2,6 +2,8 @@
 // the callbacks throw artex::Error on bad input, which main() prints before exiting with 1.
 #pragma once
 
+#include <string>
+
 namespace CLI {
 class App;
 }
@@ -15,5 +17,11 @@ void RegisterRenderCommand(CLI::App* app);     // artex render
 void RegisterExperimentCommand(CLI::App* app); // artex experiment
 void RegisterImportCommand(CLI::App* app);     // artex import
 void RegisterOverlayCommand(CLI::App* app);    // artex overlay
+// artex experiment collect|status OUT and the Slurm tasks' hidden entry points
+// (slurm_command.cc); `experiment` is the experiment subcommand.
+void RegisterSlurmSubcommands(CLI::App* app, CLI::App* experiment);
+// Runs scripts/plot_results.py on an experiment's output folder (prints a hint when python3
+// with matplotlib is missing).
+void MakeExperimentPlots(const std::string& out);
 
 }  // namespace artex

@@ -18,6 +18,7 @@
 
 #include "experiments/commands.h"
 #include "experiments/runner.h"
+#include "experiments/slurm_backend.h"
 #include "models/error.h"
 
 namespace artex {
@@ -32,6 +33,9 @@ struct ExperimentCliOptions {
   bool dry_run = false;
   bool no_plots = false;
   bool replace_changed = false;
+  std::string backend = "local";  // local | slurm
+  bool no_wait = false;           // slurm: submit and return
+  SlurmOptions slurm;
 };
 
 // A python3 that can import matplotlib ("" when none).
@@ -89,6 +93,9 @@ class ProgressDisplay {
         active_.erase(e.label);
         Line("experiment: FAILED " + e.label + ": " + e.message);
         break;
+      case K::kNote:
+        Line("experiment: " + e.message);
+        break;
     }
   }
 
@@ -110,7 +117,12 @@ class ProgressDisplay {
       return;
     }
     std::string s = "[" + std::to_string(e.runs_done) + "/" + std::to_string(e.runs_total) +
-                    " done, " + std::to_string(active_.size()) + " running]";
+                    " done, " + std::to_string(active_.size()) + " running";
+    if (e.runs_pending >= 0) {
+      s += ", " + std::to_string(e.runs_pending) + " pending, " + std::to_string(e.runs_failed) +
+           " failed";
+    }
+    s += "]";
     for (const auto& kv : active_) s += "  " + kv.first + " " + kv.second;
     if (s.size() > 160) s = s.substr(0, 157) + "...";
     std::fprintf(stderr, "\r\033[K%s", s.c_str());
@@ -123,8 +135,32 @@ class ProgressDisplay {
   std::map<std::string, std::string> active_;
 };
 
+}  // namespace
+
+void MakeExperimentPlots(const std::string& out) {
+  const std::string script = (fs::path(SourceDirectory()) / "scripts" / "plot_results.py").string();
+  const std::string python = FindPlottingPython();
+  if (python.empty() || !fs::exists(script)) {
+    std::fprintf(stderr,
+                 "experiment: plots not made (needs python3 with matplotlib); run:\n"
+                 "  python3 %s %s\n",
+                 script.c_str(), out.c_str());
+    return;
+  }
+  const std::string cmd = python + " " + Quote(script) + " " + Quote(out);
+  if (std::system(cmd.c_str()) != 0) {
+    std::fprintf(stderr, "experiment: plotting failed; rerun: %s\n", cmd.c_str());
+  }
+}
+
+namespace {
+
 void RunExperimentCli(const ExperimentCliOptions& cli) {
+  if (cli.file.empty()) throw Error("experiment: an experiment file is required (or collect|status OUT)");
   if (cli.output.empty()) throw Error("-o/--output: an output folder is required");
+  if (cli.backend != "local" && cli.backend != "slurm") {
+    throw Error("--backend: expected local or slurm, found '" + cli.backend + "'");
+  }
   const Experiment experiment = LoadExperiment(cli.file);
   std::fprintf(stderr, "experiment %s: %zu sequences x %zu configurations (validated)\n",
                experiment.name.c_str(), experiment.sequences.size(),
@@ -141,6 +177,12 @@ void RunExperimentCli(const ExperimentCliOptions& cli) {
   options.threads_per_run = cli.threads;
   options.dry_run = cli.dry_run;
   options.replace_changed = cli.replace_changed;
+  if (cli.backend == "slurm") {
+    SlurmOptions slurm = cli.slurm;
+    slurm.wait = !cli.no_wait;
+    options.threads_per_run = slurm.cpus_per_task;
+    options.backend = MakeSlurmBackend(experiment, cli.output, slurm);
+  }
   ProgressDisplay display;
   const ExperimentSummary summary =
       RunExperiment(experiment, cli.output, options, [&](const RunnerEvent& e) { display.Handle(e); });
@@ -150,23 +192,15 @@ void RunExperimentCli(const ExperimentCliOptions& cli) {
                "%.1f s\n",
                summary.runs_total, summary.runs_completed, summary.runs_skipped, summary.runs_failed,
                summary.seconds);
+  if (summary.runs_unfinished > 0) {
+    std::fprintf(stderr,
+                 "experiment: %d run(s) queued or running; follow with `artex experiment status %s`, "
+                 "gather with `artex experiment collect %s`\n",
+                 summary.runs_unfinished, cli.output.c_str(), cli.output.c_str());
+  }
   std::fprintf(stderr, "experiment: wrote %s/results.csv and %s/summary.md\n", cli.output.c_str(),
                cli.output.c_str());
-  const std::string script = (fs::path(SourceDirectory()) / "scripts" / "plot_results.py").string();
-  if (!cli.no_plots && summary.runs_completed + summary.runs_skipped > 0) {
-    const std::string python = FindPlottingPython();
-    if (python.empty() || !fs::exists(script)) {
-      std::fprintf(stderr,
-                   "experiment: plots not made (needs python3 with matplotlib); run:\n"
-                   "  python3 %s %s\n",
-                   script.c_str(), cli.output.c_str());
-    } else {
-      const std::string cmd = python + " " + Quote(script) + " " + Quote(cli.output);
-      if (std::system(cmd.c_str()) != 0) {
-        std::fprintf(stderr, "experiment: plotting failed; rerun: %s\n", cmd.c_str());
-      }
-    }
-  }
+  if (!cli.no_plots && summary.runs_completed + summary.runs_skipped > 0) MakeExperimentPlots(cli.output);
   if (summary.runs_failed > 0) {
     std::string msg = std::to_string(summary.runs_failed) + " run(s) failed (rerun to retry):";
     for (const auto& f : summary.failures) msg += "\n  " + f;
@@ -188,9 +222,8 @@ void RegisterExperimentCommand(CLI::App* app) {
       "Run every sequence x configuration of an experiment file (resumable), then write "
       "results.csv, summary.md and plots");
   sub->add_option("file", cli->file, "Experiment file (YAML; docs/experiments.md)")
-      ->required()
       ->check(CLI::ExistingFile);
-  sub->add_option("-o,--output", cli->output, "Output folder (runs, sequences, results)")->required();
+  sub->add_option("-o,--output", cli->output, "Output folder (runs, sequences, results)");
   sub->add_option("-j,--jobs", cli->jobs, "Runs at a time (0: number of cores)")
       ->capture_default_str()
       ->check(CLI::Range(0, 256));
@@ -203,7 +236,35 @@ void RegisterExperimentCommand(CLI::App* app) {
   sub->add_flag("--replace-changed", cli->replace_changed,
                 "Recompute complete runs (and regenerate sequences) whose inputs changed instead of "
                 "stopping with an error");
-  sub->callback([cli]() { RunExperimentCli(*cli); });
+  sub->add_option("--backend", cli->backend,
+                  "Where runs execute: local (child processes here) or slurm (one job array)")
+      ->capture_default_str();
+  sub->add_flag("--no-wait", cli->no_wait, "slurm: submit and return (follow with status/collect)");
+  SlurmOptions& so = cli->slurm;
+  sub->add_option("--partition", so.partition, "slurm: partition (default: the cluster's)");
+  sub->add_option("--time", so.time, "slurm: time limit per run, e.g. 00:30:00");
+  sub->add_option("--mem", so.mem, "slurm: memory per run, e.g. 4G");
+  sub->add_option("--cpus-per-task", so.cpus_per_task, "slurm: CPUs (and worker threads) per run")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1024));
+  sub->add_option("--max-parallel", so.max_parallel, "slurm: array throttle %K (0: none)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 100000));
+  sub->add_option("--max-array-size", so.max_array_size,
+                  "slurm: runs per job array; more are split into several arrays (<= MaxArraySize - 1)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 4000000));
+  sub->add_option("--sbatch-arg", so.sbatch_args, "slurm: further sbatch argument (repeatable)")
+      ->allow_extra_args(false);
+  sub->add_option("--poll-seconds", so.poll_seconds, "slurm: seconds between squeue/sacct polls")
+      ->capture_default_str();
+  sub->add_flag("!--no-probe", so.probe,
+                "slurm: skip the probe job that checks OUT is writable from a task");
+  RegisterSlurmSubcommands(app, sub);
+  sub->callback([cli, sub]() {
+    if (sub->got_subcommand("collect") || sub->got_subcommand("status")) return;
+    RunExperimentCli(*cli);
+  });
 
   // Child entry points (not listed in the help).
   struct RunArgs {

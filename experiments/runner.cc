@@ -790,6 +790,23 @@ std::string RunFolder(const std::string& out_dir, const std::string& sequence,
   return (fs::path(out_dir) / "runs" / sequence / combination_id).string();
 }
 
+std::string CompleteRun(const std::string& tmp_dir, const std::string& run_folder,
+                        const std::string& run_json) {
+  const fs::path tmp(tmp_dir);
+  WriteFileAtomic((tmp / "run.json").string(), run_json);
+  WriteFileAtomic((tmp / kDoneMarker).string(), "complete\n");
+  std::error_code ec;
+  fs::rename(tmp, run_folder, ec);
+  if (ec) {
+    if (RunIsComplete(run_folder)) {
+      fs::remove_all(tmp, ec);
+      return "";
+    }
+    return "cannot rename " + tmp_dir + " to " + run_folder + ": " + ec.message();
+  }
+  return "";
+}
+
 bool RunIsComplete(const std::string& run_folder) {
   return fs::is_regular_file(fs::path(run_folder) / kDoneMarker);
 }
@@ -1080,6 +1097,7 @@ ExperimentSummary RunExperiment(const Experiment& experiment, const std::string&
   ExperimentSummary summary;
   summary.runs_total = static_cast<int>(sequences.size() * experiment.combinations.size());
   std::vector<Job> run_jobs;
+  std::vector<PendingRun> pending;
   int skipped = 0, would_run = 0;
   for (const auto& s : sequences) {
     const fs::path seq_runs = out / "runs" / s.name;
@@ -1113,18 +1131,6 @@ ExperimentSummary RunExperiment(const Experiment& experiment, const std::string&
         ++would_run;
         continue;
       }
-      if (fs::exists(final_dir)) fs::remove_all(final_dir);  // incomplete: rerun from scratch
-      const fs::path tmp = seq_runs / (kTmpPrefix + c.id + "." + std::to_string(getpid()));
-      fs::create_directories(tmp);
-      WriteFileAtomic((tmp / "run_config.yaml").string(), config_text);
-      WriteFileAtomic((tmp / kRunKeyFile).string(), key);
-      Job job;
-      job.label = label;
-      job.tmp_dir = tmp.string();
-      job.log_path = (tmp / "log.txt").string();
-      job.args = {exe, "experiment-run", "--config", (tmp / "run_config.yaml").string(),
-                  "--sequence", s.folder, "--template", template_path, "--out", tmp.string(),
-                  "--threads", std::to_string(threads)};
       nlohmann::ordered_json info;
       info["experiment"] = experiment.name;
       info["experiment_file"] = experiment.file;
@@ -1138,24 +1144,30 @@ ExperimentSummary RunExperiment(const Experiment& experiment, const std::string&
       info["git_revision"] = revision;
       info["threads"] = threads;
       info["jobs"] = jobs;
+      if (options.backend) {  // a remote backend creates the run's folder where it runs
+        pending.push_back({label, s.name, c.id, s.folder, template_path, final_dir.string(),
+                           config_text, key, info.dump()});
+        continue;
+      }
+      if (fs::exists(final_dir)) fs::remove_all(final_dir);  // incomplete: rerun from scratch
+      const fs::path tmp = seq_runs / (kTmpPrefix + c.id + "." + std::to_string(getpid()));
+      fs::create_directories(tmp);
+      WriteFileAtomic((tmp / "run_config.yaml").string(), config_text);
+      WriteFileAtomic((tmp / kRunKeyFile).string(), key);
+      Job job;
+      job.label = label;
+      job.tmp_dir = tmp.string();
+      job.log_path = (tmp / "log.txt").string();
+      job.args = {exe, "experiment-run", "--config", (tmp / "run_config.yaml").string(),
+                  "--sequence", s.folder, "--template", template_path, "--out", tmp.string(),
+                  "--threads", std::to_string(threads)};
       std::string command;
       for (const auto& a : job.args) command += (command.empty() ? "" : " ") + a;
       info["command"] = command;
       job.finish = [tmp, final_dir, info](double seconds) mutable -> std::string {
         if (!fs::exists(tmp / "results.json")) return "the run wrote no results.json";
         info["wall_seconds"] = seconds;
-        WriteFileAtomic((tmp / "run.json").string(), info.dump(2) + "\n");
-        WriteFileAtomic((tmp / kDoneMarker).string(), "complete\n");
-        std::error_code e2;
-        fs::rename(tmp, final_dir, e2);
-        if (e2) {
-          if (RunIsComplete(final_dir.string())) {
-            fs::remove_all(tmp, e2);
-            return "";
-          }
-          return "cannot rename " + tmp.string() + " to " + final_dir.string() + ": " + e2.message();
-        }
-        return "";
+        return CompleteRun(tmp.string(), final_dir.string(), info.dump(2) + "\n");
       };
       job.fail = [&summary, tmp, seq_runs, id = c.id, label](const std::string& message) {
         const fs::path failed = seq_runs / (kFailedPrefix + id);
@@ -1173,7 +1185,7 @@ ExperimentSummary RunExperiment(const Experiment& experiment, const std::string&
     e.kind = RunnerEvent::Kind::kPlan;
     e.runs_total = summary.runs_total;
     e.runs_skipped = skipped;
-    e.total = static_cast<int>(run_jobs.size()) + would_run;
+    e.total = static_cast<int>(run_jobs.size() + pending.size()) + would_run;
     emit(e);
   }
   int running = 0;
@@ -1203,7 +1215,11 @@ ExperimentSummary RunExperiment(const Experiment& experiment, const std::string&
     emit(e);
   };
   if (!options.dry_run) {
-    Schedule(run_jobs, jobs, run_report);
+    if (options.backend) {
+      options.backend(pending, &summary, [&](const RunnerEvent& e) { emit(e); });
+    } else {
+      Schedule(run_jobs, jobs, run_report);
+    }
     Experiment placed = experiment;
     placed.sequences = sequences;
     WriteExperimentResults(placed, out.string());

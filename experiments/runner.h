@@ -75,6 +75,29 @@ struct MetricInfo {
 const std::vector<MetricInfo>& Metrics();
 const MetricInfo* FindMetric(const std::string& name);
 
+struct ExperimentSummary;
+struct RunnerEvent;
+
+// One run that RunExperiment found pending (not complete), handed to a RunnerOptions::backend
+// (e.g. the Slurm backend, experiments/slurm_backend.h) instead of a local child process.
+struct PendingRun {
+  std::string label;            // "sequence/combination"
+  std::string sequence;         // sequence name
+  std::string combination;      // combination id
+  std::string sequence_folder;  // the (generated) sequence
+  std::string template_path;    // tracking template (.glb)
+  std::string run_folder;       // OUT/runs/<sequence>/<combination> (absolute)
+  std::string config_text;      // resolved configuration (run_config.yaml)
+  std::string key;              // stored inputs (run_key.txt)
+  std::string info_json;        // run.json without wall_seconds/command (JSON object text)
+};
+
+// Runs the pending runs elsewhere; fills summary's counts and failures and reports progress
+// through `emit` like the local scheduler (kPlan is already sent).
+using RunBackend = std::function<void(const std::vector<PendingRun>& pending,
+                                      ExperimentSummary* summary,
+                                      const std::function<void(const RunnerEvent&)>& emit)>;
+
 struct RunnerOptions {
   std::string executable;   // the artex binary for child processes; "" = /proc/self/exe
   int jobs = 0;             // runs at a time; 0 = hardware concurrency
@@ -83,6 +106,9 @@ struct RunnerOptions {
   // A complete run or generated sequence whose stored inputs differ from the experiment's is
   // an error (false) or deleted and recomputed (true).
   bool replace_changed = false;
+  // Set: the pending runs go to this backend instead of local child processes (sequences and
+  // the template are still generated here first). Empty: the local backend.
+  RunBackend backend;
 };
 
 // Progress of an experiment (for the CLI's display; the runner never prints).
@@ -96,11 +122,13 @@ struct RunnerEvent {
     kRunFinished,
     kRunSkipped,       // already complete
     kRunFailed,
+    kNote,             // a backend's message (message): the job ids it submitted
   } kind = Kind::kPlan;
   std::string label;   // "sequence/combination" or the sequence name
   int done = 0;        // frames (kRunProgress)
   int total = 0;
   int runs_total = 0, runs_done = 0, runs_skipped = 0, runs_failed = 0, runs_running = 0;
+  int runs_pending = -1;  // queued, not started (-1: not tracked, the local backend)
   double seconds = 0;  // run wall time (finished / failed)
   std::string message; // failure reason (last lines of the run's log)
 };
@@ -112,6 +140,12 @@ struct ExperimentSummary {
   int runs_failed = 0;
   std::vector<std::string> failures;  // "label: reason (log: path)"
   double seconds = 0;
+  // Remote backends (Slurm): tasks submitted now, of which runs whose earlier task had been
+  // killed or had failed, and runs still queued or running when the call returned (--no-wait).
+  int runs_submitted = 0;
+  int runs_resubmitted = 0;
+  int runs_unfinished = 0;
+  std::string note;  // what the backend wants the user to know (job ids, how to follow)
 };
 
 // Generates missing synthetic sequences and the tracking template, then runs every pending
@@ -126,6 +160,12 @@ ExperimentSummary RunExperiment(const Experiment& experiment, const std::string&
 // Writes OUT/results.csv and OUT/summary.md from the completed runs (atomically). Returns the
 // number of complete runs found.
 int WriteExperimentResults(const Experiment& experiment, const std::string& out_dir);
+
+// Completes a run executed in tmp_dir: writes run.json (run_json) and the DONE marker, then
+// renames tmp_dir to run_folder. When run_folder is already complete (another task finished
+// the same run first) tmp_dir is deleted and the complete one kept. Returns "" or an error.
+std::string CompleteRun(const std::string& tmp_dir, const std::string& run_folder,
+                        const std::string& run_json);
 
 // Folder of a run and its completion test.
 std::string RunFolder(const std::string& out_dir, const std::string& sequence,
