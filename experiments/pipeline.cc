@@ -212,6 +212,7 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   double init_seconds = 0.0, quality_seconds = 0.0;
   int lost = 0, evaluated = 0, tracked_frames = 0;
   bool need_init = true;
+  int doubtful_run = 0;  // consecutive doubtful frames
   double error_sum = 0.0, joint_sum = 0.0;
   if (options.export_meshes) {
     fs::create_directories(out_dir + "/meshes", ec);
@@ -280,10 +281,14 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
     // Tracking that loses the frame (or doubts it, by option) is followed by a
     // re-initialisation in the same frame; the better of the two by quality score is kept.
     const FitQualityLabel label = record.quality.label;
+    doubtful_run = label == FitQualityLabel::kDoubtful ? doubtful_run + 1 : 0;
+    const bool doubted_long = options.reinitialise_after_doubtful > 0 &&
+                              doubtful_run >= options.reinitialise_after_doubtful;
     if (!record.reinitialised && record.fit.ok() && enough_points &&
         (label == FitQualityLabel::kLost ||
          (label == FitQualityLabel::kDoubtful &&
-          options.reinitialise_on == ReinitialiseOn::kDoubtful))) {
+          (doubted_long || options.reinitialise_on == ReinitialiseOn::kDoubtful)))) {
+      doubtful_run = 0;
       tracked_pose = fitter.pose();
       const Scan tracked_scan = scan;
       FrameRecord retry = record;

@@ -44,6 +44,10 @@ struct PipelineOptions {
   // Texture doubtful frames too (lost frames never are).
   bool texture_doubtful_frames = true;
   ReinitialiseOn reinitialise_on = ReinitialiseOn::kLost;
+  // After this many consecutive doubtful frames the next doubtful one is initialised again in
+  // place too (the better fit kept): a wrong facing chosen at the start, which tracking keeps
+  // doubtful but never loses, is corrected. 0: never.
+  int reinitialise_after_doubtful = 10;
 
   bool IsValid(std::string* error) const;
 };

@@ -45,7 +45,7 @@ void BindPlanes(const Config& c, PlaneDetectionOptions* o) {
 
 void BindSegmentation(const Config& c, SubjectSegmentationOptions* o) {
   c.CheckKeys({"min_depth", "max_depth", "plane_margin", "plane_margin_growth", "connect_distance",
-               "connect_growth", "merge_relative", "fragment_height", "split_people", "head_bin", "head_top_range", "head_depth", "max_head_width", "shoulder_drop", "min_shoulder_width", "min_head_separation", "min_valley", "min_pixels", "min_height",
+               "connect_growth", "merge_relative", "fragment_height", "stacked_max_overlap", "stacked_max_gap", "split_people", "head_bin", "head_top_range", "head_depth", "max_head_width", "shoulder_drop", "min_shoulder_width", "min_head_separation", "min_valley", "min_pixels", "min_height",
                "max_height", "max_width", "subject", "pixel", "track_max_distance"});
   c.Get("min_depth", &o->min_depth);
   c.Get("max_depth", &o->max_depth);
@@ -55,6 +55,8 @@ void BindSegmentation(const Config& c, SubjectSegmentationOptions* o) {
   c.Get("connect_growth", &o->connect_growth);
   c.Get("merge_relative", &o->merge_relative);
   c.Get("fragment_height", &o->fragment_height);
+  c.Get("stacked_max_overlap", &o->stacked_max_overlap);
+  c.Get("stacked_max_gap", &o->stacked_max_gap);
   c.Get("split_people", &o->split_people);
   c.Get("head_bin", &o->head_bin);
   c.Get("head_top_range", &o->head_top_range);
@@ -322,7 +324,7 @@ void BindInput(const Config& c, FrameSourceOptions* o) {
 void BindPipeline(const Config& c, PipelineOptions* o) {
   c.CheckKeys({"texture", "colour_term", "first_frame", "max_frames", "export_meshes",
                "export_foreground", "export_glb", "lost_threshold_mm", "texture_doubtful_frames",
-               "reinitialise_on"});
+               "reinitialise_on", "reinitialise_after_doubtful"});
   c.Get("texture", &o->texture);
   c.Get("colour_term", &o->colour_term);
   c.Get("first_frame", &o->first_frame);
@@ -333,6 +335,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("lost_threshold_mm", &o->lost_threshold_mm);
   c.Get("texture_doubtful_frames", &o->texture_doubtful_frames);
   c.GetEnum("reinitialise_on", ReinitialiseOnNames(), &o->reinitialise_on);
+  c.Get("reinitialise_after_doubtful", &o->reinitialise_after_doubtful);
 }
 
 }  // namespace
@@ -360,6 +363,9 @@ bool PipelineOptions::IsValid(std::string* error) const {
     msg << "pipeline.first_frame: expected >= 0, found " << first_frame;
   else if (max_frames < 0)
     msg << "pipeline.max_frames: expected >= 0, found " << max_frames;
+  else if (reinitialise_after_doubtful < 0)
+    msg << "pipeline.reinitialise_after_doubtful: expected >= 0 (0: never), found "
+        << reinitialise_after_doubtful;
   else if (!(lost_threshold_mm > 0))
     msg << "pipeline.lost_threshold_mm: expected > 0, found " << lost_threshold_mm;
   if (msg.str().empty()) return true;

@@ -364,9 +364,10 @@ bool SubjectSegmentationOptions::IsValid(std::string* error) const {
     msg << "plane_margin/plane_margin_growth: expected >= 0, found " << plane_margin << " / "
         << plane_margin_growth;
   } else if (!(connect_distance > 0) || !(connect_growth >= 0) || !(merge_relative >= 0) ||
-             !(fragment_height >= 0)) {
-    msg << "connect_distance/connect_growth/merge_relative/fragment_height: expected > 0 / "
-           ">= 0 / >= 0 / >= 0";
+             !(fragment_height >= 0) || !(stacked_max_overlap >= 0 && stacked_max_overlap <= 1) ||
+             !(stacked_max_gap >= 0)) {
+    msg << "connect_distance/connect_growth/merge_relative/fragment_height/stacked_max_overlap/"
+           "stacked_max_gap: expected > 0 / >= 0 / >= 0 / >= 0 / in [0, 1] / >= 0";
   } else if (min_pixels < 1) {
     msg << "min_pixels: expected >= 1, found " << min_pixels;
   } else if (!(min_height >= 0) || !(max_height > min_height) || !(max_width > 0)) {
@@ -542,6 +543,7 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
       }
     }
   }
+  if (options_.fragment_height > 0 && options_.stacked_max_overlap > 0) JoinStackedParts(w, h);
   // Flatten: parent_[i] is the root of every candidate pixel.
   for (int i = 0; i < n; ++i)
     if (z_[i] != 0.0f) parent_[i] = Find(parent_, i);
@@ -673,6 +675,76 @@ void SubjectSegmenter::Segment(const cv::Mat& depth, cv::Mat* mask, Segmentation
     }
   }
   if (stats) *stats = local;
+}
+
+void SubjectSegmenter::JoinStackedParts(int w, int h) {
+  // Parts of one body that no pixel chain links (a band of dropped pixels along the near arm
+  // cuts a walking body seen from the side at the waist): one above the other, overlapping in
+  // image columns, at about one depth, one person's height in all.
+  struct Part {
+    int root = -1, pixels = 0, u_min = 1 << 30, u_max = -1;
+    float low = 1e30f, high = -1e30f, z_min = 1e30f, z_max = -1e30f;
+  };
+  std::vector<int> slot(parent_.size(), -1);
+  std::vector<Part> parts;
+  const Eigen::Vector3f up = up_.cast<float>();
+  for (int v = 0; v < h; ++v) {
+    const float* ray = RayRow(v);
+    for (int u = 0; u < w; ++u) {
+      const int i = v * w + u;
+      if (z_[i] == 0.0f) continue;
+      const int r = Find(parent_, i);
+      if (slot[r] < 0) {
+        slot[r] = static_cast<int>(parts.size());
+        parts.emplace_back();
+        parts.back().root = r;
+      }
+      Part& p = parts[slot[r]];
+      const float height = z_[i] * (up.x() * ray[2 * u] + up.y() * ray[2 * u + 1] + up.z());
+      ++p.pixels;
+      p.u_min = std::min(p.u_min, u);
+      p.u_max = std::max(p.u_max, u);
+      p.low = std::min(p.low, height);
+      p.high = std::max(p.high, height);
+      p.z_min = std::min(p.z_min, z_[i]);
+      p.z_max = std::max(p.z_max, z_[i]);
+    }
+  }
+  std::vector<int> big;
+  for (int k = 0; k < static_cast<int>(parts.size()); ++k) {
+    if (parts[k].pixels >= options_.min_pixels) big.push_back(k);
+  }
+  const float gap = static_cast<float>(options_.stacked_max_gap);
+  const double rel = options_.merge_relative;
+  for (size_t a = 0; a < big.size(); ++a) {
+    for (size_t b = a + 1; b < big.size(); ++b) {
+      Part& pa = parts[big[a]];
+      Part& pb = parts[big[b]];
+      const float overlap = std::min(pa.high, pb.high) - std::max(pa.low, pb.low);
+      const float shorter = std::min(pa.high - pa.low, pb.high - pb.low);
+      const float height = std::max(pa.high, pb.high) - std::min(pa.low, pb.low);
+      // Depth ranges that overlap, or nearly (merge_relative * z apart).
+      const float depth_gap = std::max(pa.z_min, pb.z_min) - std::min(pa.z_max, pb.z_max);
+      const float near = std::max(pa.z_min, pb.z_min);
+      const bool columns = std::min(pa.u_max, pb.u_max) > std::max(pa.u_min, pb.u_min);
+      if (!(columns && overlap > -gap && overlap < options_.stacked_max_overlap * shorter &&
+            height <= options_.max_height && depth_gap < rel * near)) {
+        continue;
+      }
+      const int ra = Find(parent_, pa.root), rb = Find(parent_, pb.root);
+      if (ra == rb) continue;
+      parent_[std::max(ra, rb)] = std::min(ra, rb);
+      // The joined part's extent, for the following pairs.
+      for (Part* p : {&pa, &pb}) {
+        p->low = std::min(pa.low, pb.low);
+        p->high = std::max(pa.high, pb.high);
+        p->u_min = std::min(pa.u_min, pb.u_min);
+        p->u_max = std::max(pa.u_max, pb.u_max);
+        p->z_min = std::min(pa.z_min, pb.z_min);
+        p->z_max = std::max(pa.z_max, pb.z_max);
+      }
+    }
+  }
 }
 
 void SubjectSegmenter::SplitPeople(int w, int h, int* splits) {

@@ -142,6 +142,14 @@ struct SubjectSegmentationOptions {
   double connect_growth = 0.003;
   double merge_relative = 0.08;
   double fragment_height = 0.9;
+  // Stacked parts: two components of at least min_pixels that no pixel chain links join when
+  // they share image columns, overlap along up by less than stacked_max_overlap of the shorter
+  // one (or leave a gap below stacked_max_gap, m), have depth ranges less than
+  // merge_relative * z apart and are at most max_height tall together: one stands on the other (a
+  // walking body seen from the side, cut at the waist by a band of dropped pixels along the
+  // near arm), not two people (people side by side overlap along up). 0: never.
+  double stacked_max_overlap = 0.5;
+  double stacked_max_gap = 0.1;
   // People touching in the image at one depth: a component with two or more heads is split
   // between them. A head is a profile peak (the highest point of each lateral bin of
   // head_bin m) within head_top_range of the component's top, narrower than max_head_width
@@ -226,6 +234,7 @@ class SubjectSegmenter {
   Eigen::Vector3d subject_centroid_ = Eigen::Vector3d::Zero();
   std::vector<int> parent_;        // union-find over pixels
   std::vector<float> low_, high_;  // extent along up per root (loose merging)
+  void JoinStackedParts(int w, int h);
   std::vector<float> z_;
 };
 

@@ -41,6 +41,10 @@ struct Condition {
   std::string name;
   std::vector<SynthCondition> presets;  // applied in order on top of the "room" basics
   bool full_body = true;                // joints of the whole body are observed
+  // The joint error and the good fraction are checked from this frame on: seen from the side,
+  // facing left or right is ambiguous in the first frame (a wrong start stays doubtful and is
+  // initialised again after pipeline.reinitialise_after_doubtful frames).
+  int settle_frames = 0;
 };
 
 void PrintTo(const Condition& c, std::ostream* os) { *os << c.name; }
@@ -95,7 +99,7 @@ TEST_P(ConditionsTrackingTest, UprightAccurateAndNeverLost) {
   EXPECT_LE(r.mean_vertex_error_mm, kMaxMeanErrorMm);
   EXPECT_EQ(r.lost_fraction, 0.0);  // mean vertex error <= 50 mm in every frame
   EXPECT_EQ(r.lost_frames, 0);      // and the quality measure agrees
-  EXPECT_EQ(r.initialisations, 1);
+  EXPECT_LE(r.initialisations, c.settle_frames > 0 ? 2 : 1);
   // Upright in every frame: the tracked chest -> head direction, taken into the sequence's
   // frame, within 25 degrees of the truth's (the pelvis may be out of view).
   const fs::path run = Root() / ("run_" + c.name);
@@ -124,18 +128,25 @@ TEST_P(ConditionsTrackingTest, UprightAccurateAndNeverLost) {
   }
   // The right way round: with the whole body in view, the mean joint error stays at the vertex
   // error's order (upside down or left/right swapped puts joints tens of centimetres off).
-  if (c.full_body) {
-    EXPECT_LE(r.mean_joint_error_mm, 45.0);
+  int good = 0, settled = 0;
+  double joint_sum = 0.0;
+  for (const FrameRecord& f : r.frames) {
+    if (f.frame < c.settle_frames) continue;
+    ++settled;
+    good += f.quality.label == FitQualityLabel::kGood;
+    joint_sum += f.mean_joint_error_mm;
   }
-  int good = 0;
-  for (const FrameRecord& f : r.frames) good += f.quality.label == FitQualityLabel::kGood;
-  EXPECT_GE(good, kFrames * 8 / 10);
+  if (c.full_body) {
+    EXPECT_LE(joint_sum / settled, 45.0);
+  }
+  EXPECT_GE(good, settled * 8 / 10);
 }
 
 INSTANTIATE_TEST_SUITE_P(
     Conditions, ConditionsTrackingTest,
     ::testing::Values(Condition{"camera_frame", {}}, Condition{"room", {SynthCondition::kRoom}},
                       Condition{"facing_away", {SynthCondition::kFacingAway}},
+                      Condition{"sideways", {SynthCondition::kSideways}, true, 15},
                       Condition{"upper_body", {SynthCondition::kUpperBody}, false},
                       Condition{"rolled", {SynthCondition::kRolled}},
                       Condition{"high_camera", {SynthCondition::kHighCamera}}),
