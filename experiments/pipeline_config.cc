@@ -47,7 +47,7 @@ void BindPrediction(const Config& c, PredictionOptions* o) {
   BindWeights(k.Section("initial_acceleration_std"), &o->kalman.initial_acceleration_std);
   const Config p = c.Section("particle");
   p.CheckKeys({"base", "trigger", "trigger_score", "step_scales", "hypotheses",
-               "hypothesis_iterations", "limb_rotation_std", "child_rotation_factor",
+               "hypothesis_iterations", "accept_margin", "limb_rotation_std", "child_rotation_factor",
                "max_limb_joints", "translation_std", "global_rotation_std", "seed"});
   p.GetEnum("base", PredictionModelNames(), &o->particle.base);
   p.GetEnum("trigger", ParticleTriggerNames(), &o->particle.trigger);
@@ -55,6 +55,7 @@ void BindPrediction(const Config& c, PredictionOptions* o) {
   p.Get("step_scales", &o->particle.step_scales);
   p.Get("hypotheses", &o->particle.hypotheses);
   p.Get("hypothesis_iterations", &o->particle.hypothesis_iterations);
+  p.Get("accept_margin", &o->particle.accept_margin);
   p.Get("limb_rotation_std", &o->particle.limb_rotation_std);
   p.Get("child_rotation_factor", &o->particle.child_rotation_factor);
   p.Get("max_limb_joints", &o->particle.max_limb_joints);

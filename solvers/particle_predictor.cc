@@ -149,7 +149,9 @@ FitSummary TrackFrame(EMFitter* fitter, const Scan& scan, const PinholeCamera& d
       const int index = ranked.index;
       Candidate refined = FitCandidate(fitter, scan, ranked.pose, 0, depth_camera, quality);
       iterations += refined.fit.iterations;
-      if (refined.fit.ok() && (!best.fit.ok() || refined.quality.score > best.quality.score)) {
+      if (refined.fit.ok() &&
+          (!best.fit.ok() ||
+           refined.quality.score > best.quality.score + options.accept_margin)) {
         best = std::move(refined);
         r.chosen = index;
       }

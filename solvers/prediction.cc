@@ -115,6 +115,8 @@ bool ParticleOptions::IsValid(std::string* error) const {
   } else if (std::any_of(step_scales.begin(), step_scales.end(),
                          [](double x) { return !std::isfinite(x); })) {
     msg << "step_scales: expected finite values";
+  } else if (!(accept_margin >= 0.0 && accept_margin <= 1.0)) {
+    msg << "accept_margin: expected a value in [0, 1], found " << accept_margin;
   } else if (hypotheses < 0) {
     msg << "hypotheses: expected >= 0, found " << hypotheses;
   } else if (hypothesis_iterations < 1) {

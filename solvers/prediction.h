@@ -47,6 +47,10 @@ struct ParticleOptions {
   std::vector<double> step_scales = {-2.0, 1.0};
   int hypotheses = 4;
   int hypothesis_iterations = 3;
+  // The refined best hypothesis replaces the base fit only when its quality score is higher
+  // by more than this (scores of near-equal fits differ by noise; switching on noise picks
+  // plausible wrong limbs).
+  double accept_margin = 0.02;
   // Per-limb perturbation: random hypothesis k rotates the root joint of limb k mod L by a
   // tangent vector with limb_rotation_std per component (rad), the limb's other joints with
   // child_rotation_factor times that. Limbs: the last max_limb_joints joints of every joint

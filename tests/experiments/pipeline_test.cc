@@ -340,6 +340,7 @@ TEST(PipelineTest, PredictionKeysAreReadAndTheOlderKeyMaps) {
             builtin.kalman.information_scale);
   EXPECT_EQ(defaults.fitting.prediction.particle.step_scales, builtin.particle.step_scales);
   EXPECT_EQ(defaults.fitting.prediction.particle.hypotheses, builtin.particle.hypotheses);
+  EXPECT_EQ(defaults.fitting.prediction.particle.accept_margin, builtin.particle.accept_margin);
   EXPECT_EQ(defaults.fitting.prediction.particle.trigger, builtin.particle.trigger);
   config.Set("fitting.prediction", "particle");
   config.Set("fitting.particle.base", "kalman");
