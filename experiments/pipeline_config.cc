@@ -47,8 +47,9 @@ void BindPrediction(const Config& c, PredictionOptions* o) {
   BindWeights(k.Section("initial_acceleration_std"), &o->kalman.initial_acceleration_std);
   const Config p = c.Section("particle");
   p.CheckKeys({"base", "trigger", "trigger_score", "step_scales", "hypotheses",
-               "hypothesis_iterations", "accept_margin", "limb_rotation_std", "child_rotation_factor",
-               "max_limb_joints", "translation_std", "global_rotation_std", "seed"});
+               "hypothesis_iterations", "accept_margin", "limb_rotation_std",
+               "child_rotation_factor", "max_limb_joints", "translation_std", "global_rotation_std",
+               "seed"});
   p.GetEnum("base", PredictionModelNames(), &o->particle.base);
   p.GetEnum("trigger", ParticleTriggerNames(), &o->particle.trigger);
   p.Get("trigger_score", &o->particle.trigger_score);

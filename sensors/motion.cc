@@ -228,7 +228,7 @@ class MotionBuilder {
     const int move = static_cast<int>(std::floor(cycle)) % 4;
     const double u = cycle - std::floor(cycle);
     const double a = options_.amplitude * kDegToRad;
-    const double out = std::pow(std::sin(M_PI * u), 2);         // out and back
+    const double out = std::pow(std::sin(M_PI * u), 2);            // out and back
     const double chamber = std::pow(std::sin(2.0 * M_PI * u), 2);  // twice: out and back
     auto punch = [&](const ArmAxes& axes, int shoulder, int elbow) {
       r[shoulder] = Rot(axes.shoulder_flexion, a * s.punch_shoulder_deg * out);

@@ -57,13 +57,13 @@ struct BendShape {
 // a squat jump (crouch, flight of jump_height, crouch on landing). Each move starts and ends
 // at rest with zero velocity.
 struct PunchKickShape {
-  double move_s = 1.0;                  // s per move
-  double punch_shoulder_deg = 80.0;     // peak shoulder flexion (arm forward)
-  double punch_elbow_deg = 90.0;        // peak elbow flexion while chambering
-  double kick_hip_deg = 70.0;           // peak hip flexion
-  double kick_knee_deg = 80.0;          // peak knee flexion while chambering
-  double jump_crouch_knee_deg = 60.0;   // knee flexion of the crouches (hips and ankles follow)
-  double jump_height_m = 0.15;          // peak lift of the whole body (m)
+  double move_s = 1.0;                 // s per move
+  double punch_shoulder_deg = 80.0;    // peak shoulder flexion (arm forward)
+  double punch_elbow_deg = 90.0;       // peak elbow flexion while chambering
+  double kick_hip_deg = 70.0;          // peak hip flexion
+  double kick_knee_deg = 80.0;         // peak knee flexion while chambering
+  double jump_crouch_knee_deg = 60.0;  // knee flexion of the crouches (hips and ankles follow)
+  double jump_height_m = 0.15;         // peak lift of the whole body (m)
 };
 
 struct MotionOptions {
@@ -92,8 +92,8 @@ struct MotionOptions {
   bool IsValid(std::string* error) const;
 };
 
-// Built-in names: "walk", "arm_raise", "turn", "bend", "still", "punch_kick". Throws artex::Error listing
-// the valid names for an unknown one.
+// Built-in names: "walk", "arm_raise", "turn", "bend", "still", "punch_kick". Throws artex::Error
+// listing the valid names for an unknown one.
 MotionType ParseMotionType(const std::string& name);
 const char* MotionTypeName(MotionType type);
 

@@ -107,8 +107,8 @@ bool SynthOptions::IsValid(std::string* error) const {
   if (!(motion.speed > 0.0 && motion.speed <= 8.0))
     return Fail(error, "motion.speed (--speed) must be in (0, 8], found " + Str(motion.speed));
   if (motion.frame_step < 1)
-    return Fail(error, "motion.frame_step (--frame-step) must be >= 1, found " +
-                           Str(motion.frame_step));
+    return Fail(error,
+                "motion.frame_step (--frame-step) must be >= 1, found " + Str(motion.frame_step));
   if (background_frames < 0)
     return Fail(error, "background_frames must be >= 0, found " + Str(background_frames));
   if (!subject_position_m.allFinite() || !std::isfinite(subject_yaw_deg))

@@ -690,8 +690,7 @@ FitSummary EMFitter::DiscardFrame(Pose* result) {
   return summary;
 }
 
-void EMFitter::AcceptPose(const Scan& scan, const Pose& pose,
-                          const Eigen::MatrixXd& information) {
+void EMFitter::AcceptPose(const Scan& scan, const Pose& pose, const Eigen::MatrixXd& information) {
   if (pose.num_joints() != skinning_->model().num_joints() || !pose.AllFinite()) {
     std::ostringstream msg;
     msg << "accepted pose: expected a finite pose with " << skinning_->model().num_joints()

@@ -150,8 +150,7 @@ FitSummary TrackFrame(EMFitter* fitter, const Scan& scan, const PinholeCamera& d
       Candidate refined = FitCandidate(fitter, scan, ranked.pose, 0, depth_camera, quality);
       iterations += refined.fit.iterations;
       if (refined.fit.ok() &&
-          (!best.fit.ok() ||
-           refined.quality.score > best.quality.score + options.accept_margin)) {
+          (!best.fit.ok() || refined.quality.score > best.quality.score + options.accept_margin)) {
         best = std::move(refined);
         r.chosen = index;
       }

@@ -336,8 +336,7 @@ TEST(PipelineTest, PredictionKeysAreReadAndTheOlderKeyMaps) {
   EXPECT_EQ(defaults.fitting.prediction.model, builtin.model);
   EXPECT_EQ(defaults.fitting.prediction.kalman.process_noise.joints,
             builtin.kalman.process_noise.joints);
-  EXPECT_EQ(defaults.fitting.prediction.kalman.information_scale,
-            builtin.kalman.information_scale);
+  EXPECT_EQ(defaults.fitting.prediction.kalman.information_scale, builtin.kalman.information_scale);
   EXPECT_EQ(defaults.fitting.prediction.particle.step_scales, builtin.particle.step_scales);
   EXPECT_EQ(defaults.fitting.prediction.particle.hypotheses, builtin.particle.hypotheses);
   EXPECT_EQ(defaults.fitting.prediction.particle.accept_margin, builtin.particle.accept_margin);
@@ -354,7 +353,8 @@ TEST(PipelineTest, PredictionKeysAreReadAndTheOlderKeyMaps) {
   EXPECT_TRUE(o.fitting.prediction.kalman.acceleration);
   EXPECT_EQ(o.fitting.prediction.kalman.process_noise.joints, 0.2);
   // The older boolean: false = previous pose, true = constant velocity; a contradiction fails.
-  const Config old = Config::FromString("fitting:\n  constant_velocity_prediction: false\n", "o.yaml");
+  const Config old =
+      Config::FromString("fitting:\n  constant_velocity_prediction: false\n", "o.yaml");
   EXPECT_EQ(LoadPipelineOptions(old).fitting.prediction.model, PredictionModel::kPrevious);
   const Config both = Config::FromString(
       "fitting:\n  constant_velocity_prediction: true\n  prediction: kalman\n", "b.yaml");

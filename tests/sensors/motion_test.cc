@@ -385,19 +385,22 @@ TEST(MotionTest, PunchKickPunchesKicksAndJumpsFast) {
   o.frames = 121;  // 4 moves of 1 s at 30 Hz = 120 frames
   const std::vector<Pose> poses = GenerateMotion(Model(), o);
   ASSERT_EQ(poses.size(), 121u);
-  auto joint_angle = [&](int f, const char* joint) { return Angle(poses[f].joint_rotations[J(joint)]); };
+  auto joint_angle = [&](int f, const char* joint) {
+    return Angle(poses[f].joint_rotations[J(joint)]);
+  };
   // Mid right punch (frame 15), mid left punch (45), mid kick (75), jump flight (105).
   EXPECT_GT(joint_angle(15, "r_shoulder"), 70 * kDeg);
   EXPECT_LT(joint_angle(15, "l_shoulder"), 1 * kDeg);
   EXPECT_GT(joint_angle(45, "l_shoulder"), 70 * kDeg);
   EXPECT_GT(joint_angle(75, "r_hip"), 60 * kDeg);
   const double floor_y = LowestFootHeight(Model(), poses[105]);
-  EXPECT_GT(floor_y, 0.12);  // in the air
+  EXPECT_GT(floor_y, 0.12);                                      // in the air
   EXPECT_NEAR(LowestFootHeight(Model(), poses[75]), 0.0, 1e-9);  // standing leg on the floor
   // Every move starts at rest.
   for (int f : {0, 30, 60, 90, 120}) {
     for (int j = 0; j < Model().num_joints(); ++j) {
-      EXPECT_LT(Angle(poses[f].joint_rotations[j]), 0.5 * kDeg) << f << " " << Model().joints[j].name;
+      EXPECT_LT(Angle(poses[f].joint_rotations[j]), 0.5 * kDeg)
+          << f << " " << Model().joints[j].name;
     }
   }
   // Fast: the wrist moves several times faster than in the walk's arm swing.
