@@ -27,6 +27,7 @@
 #include "sensors/frame_source.h"
 #include "sensors/scene_segmentation.h"
 #include "sensors/sequence.h"
+#include "solvers/particle_predictor.h"
 
 namespace artex {
 namespace {
@@ -271,7 +272,7 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
     if (need_init && enough_points) {
       initialise(&record);
     } else {
-      record.fit = fitter.FitFrame(scan);
+      record.fit = TrackFrame(&fitter, scan, calibration.depth, options.quality);
       fit_seconds += record.fit.total_seconds;
       ++tracked_frames;
     }

@@ -17,6 +17,57 @@ void BindWeights(const Config& c, PoseGroupWeights* w) {
   c.Get("joints", &w->joints);
 }
 
+// fitting.prediction and its sections (solvers/prediction.h); the older
+// constant_velocity_prediction: true|false means prediction: constant_velocity|previous.
+void BindPrediction(const Config& c, PredictionOptions* o) {
+  if (c.Has("constant_velocity_prediction")) {
+    bool cv = true;
+    c.Get("constant_velocity_prediction", &cv);
+    o->model = cv ? PredictionModel::kConstantVelocity : PredictionModel::kPrevious;
+    if (c.Has("prediction")) {
+      PredictionModel model = o->model;
+      c.GetEnum("prediction", PredictionModelNames(), &model);
+      if (model != o->model) {
+        throw Error(c.Path("constant_velocity_prediction") + ": expected no value or one that " +
+                    "agrees with prediction: " + PredictionModelName(model) + ", found " +
+                    (cv ? "true" : "false"));
+      }
+    }
+  }
+  c.GetEnum("prediction", PredictionModelNames(), &o->model);
+  c.Get("temporal_prior_on_prediction", &o->temporal_prior_on_prediction);
+  const Config k = c.Section("kalman");
+  k.CheckKeys({"acceleration", "process_noise", "information_scale", "measurement_noise",
+               "initial_velocity_std", "initial_acceleration_std"});
+  k.Get("acceleration", &o->kalman.acceleration);
+  BindWeights(k.Section("process_noise"), &o->kalman.process_noise);
+  k.Get("information_scale", &o->kalman.information_scale);
+  BindWeights(k.Section("measurement_noise"), &o->kalman.measurement_noise);
+  BindWeights(k.Section("initial_velocity_std"), &o->kalman.initial_velocity_std);
+  BindWeights(k.Section("initial_acceleration_std"), &o->kalman.initial_acceleration_std);
+  const Config p = c.Section("particle");
+  p.CheckKeys({"base", "trigger", "trigger_score", "step_scales", "hypotheses",
+               "hypothesis_iterations", "accept_margin", "limb_rotation_std",
+               "child_rotation_factor", "max_limb_joints", "translation_std", "global_rotation_std",
+               "seed"});
+  p.GetEnum("base", PredictionModelNames(), &o->particle.base);
+  p.GetEnum("trigger", ParticleTriggerNames(), &o->particle.trigger);
+  p.Get("trigger_score", &o->particle.trigger_score);
+  p.Get("step_scales", &o->particle.step_scales);
+  p.Get("hypotheses", &o->particle.hypotheses);
+  p.Get("hypothesis_iterations", &o->particle.hypothesis_iterations);
+  p.Get("accept_margin", &o->particle.accept_margin);
+  p.Get("limb_rotation_std", &o->particle.limb_rotation_std);
+  p.Get("child_rotation_factor", &o->particle.child_rotation_factor);
+  p.Get("max_limb_joints", &o->particle.max_limb_joints);
+  p.Get("translation_std", &o->particle.translation_std);
+  p.Get("global_rotation_std", &o->particle.global_rotation_std);
+  int seed = static_cast<int>(o->particle.seed);
+  p.Get("seed", &seed);
+  if (seed < 0) throw Error(p.Path("seed") + ": expected >= 0, found " + std::to_string(seed));
+  o->particle.seed = static_cast<uint64_t>(seed);
+}
+
 void BindPlanes(const Config& c, PlaneDetectionOptions* o) {
   c.CheckKeys({"sample_stride", "ransac_iterations", "score_points", "inlier_distance",
                "inlier_growth", "merge_angle_deg", "merge_distance", "max_planes",
@@ -183,7 +234,8 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
                "max_mean_motion", "max_scale_change", "ceres_max_iterations", "solver_threads",
                "candidate_margin", "normal_refresh_iterations", "tracking_tikhonov",
                "fit_vertex_selection", "scale_estimator", "scale_sample_max_distance",
-               "scale_sample_min_pair_fraction", "icp_init", "init", "quality"});
+               "scale_sample_min_pair_fraction", "icp_init", "init", "quality", "prediction",
+               "kalman", "particle", "temporal_prior_on_prediction"});
   c.GetEnum("correspondence", CorrespondenceModelNames(), &o->correspondence);
   c.GetEnum("solver", FitSolverTypeNames(), &o->solver.type);
   c.GetEnum("estep",
@@ -222,7 +274,7 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   c.Get("scale_max_radius", &o->scale_max_radius);
   c.Get("scale_prior_weight", &o->scale_prior_weight);
   c.Get("icp_first_frame", &o->icp_first_frame);
-  c.Get("constant_velocity_prediction", &o->constant_velocity_prediction);
+  BindPrediction(c, &o->prediction);
   c.Get("max_fit_vertices", &o->max_fit_vertices);
   c.Get("min_scan_points", &o->min_scan_points);
   c.Get("max_mean_motion", &o->max_mean_motion);

@@ -162,6 +162,8 @@ SynthSpec SynthSpecFromConfig(const Config& c) {
   c.Get("amplitude", &o.motion.amplitude);
   c.Get("period_s", &o.motion.period_s);
   c.Get("ramp_s", &o.motion.ramp_s);
+  c.Get("speed", &o.motion.speed);
+  c.Get("frame_step", &o.motion.frame_step);
   c.Get("background_frames", &o.background_frames);
   c.Get("color_width", &o.kinect.color_width);
   c.Get("color_height", &o.kinect.color_height);
@@ -278,6 +280,8 @@ std::string DefaultSequenceName(const YAML::Node& synth) {
   if (synth["seed"]) name += "_s" + synth["seed"].as<std::string>();
   if (synth["noise"]) name += "_" + synth["noise"].as<std::string>();
   if (synth["condition"]) name += "_" + synth["condition"].as<std::string>();
+  if (synth["speed"]) name += "_x" + synth["speed"].as<std::string>();
+  if (synth["frame_step"]) name += "_step" + synth["frame_step"].as<std::string>();
   return Sanitize(name);
 }
 
@@ -542,6 +546,7 @@ std::string CombinationLabel(const ExperimentCombination& c) {
 
 std::vector<std::string> SynthSpecKeys() {
   return {"motion", "bvh", "frames", "seed", "noise", "frame_rate", "amplitude", "period_s", "ramp_s",
+          "speed", "frame_step",
           "background_frames", "color_width", "color_height", "texture_size",
           "subject_resolution", "subject_height", "subject_girth", "yaw_deg", "depth_width",
           "depth_height", "disparity_noise_px", "random_dropout", "color_noise",

@@ -30,6 +30,8 @@ struct SynthCliOptions {
   int frames = 60;
   uint64_t seed = 1;
   double frame_rate = 30.0;
+  double speed = 1.0;  // playback speed of the motion
+  int frame_step = 1;  // every frame_step-th frame of the motion kept (frames dropped)
   int background_frames = 10;
   int color_width = 800;
   int color_height = 1016;
@@ -192,6 +194,8 @@ void Run(const SynthCliOptions& cli, const CLI::App& app) {
   }
   options.motion.frames = cli.frames;
   options.motion.frame_rate = cli.frame_rate;
+  options.motion.speed = cli.speed;
+  options.motion.frame_step = cli.frame_step;
   options.bvh_path = cli.bvh;
   options.kinect.seed = cli.seed;
   options.texture.seed = cli.seed;
@@ -296,7 +300,8 @@ void RegisterSynthCommand(CLI::App* app) {
   CLI::App* sub = app->add_subcommand(
       "synth", "Render a synthetic RGB-D sequence with ground truth (virtual Kinect)");
   sub->add_option("-o,--output", cli->output, "Output sequence folder");
-  sub->add_option("--motion", cli->motion, "Built-in motion: walk, arm_raise, turn, bend, still")
+  sub->add_option("--motion", cli->motion,
+                  "Built-in motion: walk, arm_raise, turn, bend, still, punch_kick")
       ->capture_default_str();
   sub->add_option("--bvh", cli->bvh, "Motion from a BVH file (retargeted; overrides --motion)")
       ->check(CLI::ExistingFile);
@@ -306,6 +311,14 @@ void RegisterSynthCommand(CLI::App* app) {
   sub->add_option("--frame-rate", cli->frame_rate, "Frame rate (Hz)")
       ->capture_default_str()
       ->check(CLI::Range(1.0, 240.0));
+  sub->add_option("--speed", cli->speed,
+                  "Playback speed of the motion or BVH clip (2: twice as fast)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.01, 8.0));
+  sub->add_option("--frame-step", cli->frame_step,
+                  "Keep every n-th frame of the motion (2: every second frame dropped)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 100));
   sub->add_option("--seed", cli->seed, "Seed of texture, noise and colour drift")
       ->capture_default_str();
   sub->add_option("--noise", cli->noise, "Sensor noise preset: off, default, high")

@@ -26,11 +26,12 @@ struct MotionName {
   MotionType type;
   const char* name;
 };
-constexpr std::array<MotionName, 5> kMotionNames = {{{MotionType::kWalk, "walk"},
+constexpr std::array<MotionName, 6> kMotionNames = {{{MotionType::kWalk, "walk"},
                                                      {MotionType::kArmRaise, "arm_raise"},
                                                      {MotionType::kTurn, "turn"},
                                                      {MotionType::kBend, "bend"},
-                                                     {MotionType::kStill, "still"}}};
+                                                     {MotionType::kStill, "still"},
+                                                     {MotionType::kPunchKick, "punch_kick"}}};
 
 // Indices of the default joints in a template, looked up by name.
 struct Skeleton {
@@ -123,10 +124,24 @@ class MotionBuilder {
       case MotionType::kBend:
         Bend(bump, &pose);
         break;
+      case MotionType::kPunchKick:
+        PunchKick(t, &pose);
+        break;
       case MotionType::kStill:
         break;
     }
     return pose;
+  }
+
+  // Lift of the whole body above the floor placement (m): the flight of the punch_kick jump.
+  double Lift(double t) const {
+    if (options_.type != MotionType::kPunchKick) return 0.0;
+    const PunchKickShape& s = options_.punch_kick;
+    const double cycle = t / s.move_s;
+    const int move = static_cast<int>(std::floor(cycle)) % 4;
+    const double u = cycle - std::floor(cycle);
+    if (move != 3 || u < 0.35 || u > 0.65) return 0.0;
+    return options_.amplitude * s.jump_height_m * std::sin(M_PI * (u - 0.35) / 0.3);
   }
 
  private:
@@ -205,6 +220,46 @@ class MotionBuilder {
     r[sk_.neck] = Rot(x, -u * s.neck_extension_deg * kDegToRad);
   }
 
+  void PunchKick(double t, Pose* pose) const {
+    const PunchKickShape& s = options_.punch_kick;
+    const Eigen::Vector3d x = Eigen::Vector3d::UnitX();
+    auto& r = pose->joint_rotations;
+    const double cycle = t / s.move_s;
+    const int move = static_cast<int>(std::floor(cycle)) % 4;
+    const double u = cycle - std::floor(cycle);
+    const double a = options_.amplitude * kDegToRad;
+    const double out = std::pow(std::sin(M_PI * u), 2);            // out and back
+    const double chamber = std::pow(std::sin(2.0 * M_PI * u), 2);  // twice: out and back
+    auto punch = [&](const ArmAxes& axes, int shoulder, int elbow) {
+      r[shoulder] = Rot(axes.shoulder_flexion, a * s.punch_shoulder_deg * out);
+      r[elbow] = Rot(axes.elbow_flexion, a * s.punch_elbow_deg * chamber);
+    };
+    switch (move) {
+      case 0:
+        punch(right_arm_, sk_.r_shoulder, sk_.r_elbow);
+        break;
+      case 1:
+        punch(left_arm_, sk_.l_shoulder, sk_.l_elbow);
+        break;
+      case 2:
+        r[sk_.r_hip] = Rot(x, -a * s.kick_hip_deg * out);
+        r[sk_.r_knee] = Rot(x, a * s.kick_knee_deg * chamber);
+        break;
+      default: {
+        // Crouch before take-off (u ~ 0.25) and after landing (u ~ 0.75), straight in flight.
+        const double crouch = a * s.jump_crouch_knee_deg * chamber;
+        for (auto [hip, knee, ankle] : {std::array<int, 3>{sk_.l_hip, sk_.l_knee, sk_.l_ankle},
+                                        std::array<int, 3>{sk_.r_hip, sk_.r_knee, sk_.r_ankle}}) {
+          r[hip] = Rot(x, -0.5 * crouch);
+          r[knee] = Rot(x, crouch);
+          r[ankle] = Rot(x, -0.5 * crouch);
+        }
+        r[sk_.pelvis] = Rot(x, 0.3 * crouch);  // the trunk leans forward a little
+        break;
+      }
+    }
+  }
+
   const Template& tmpl_;
   const MotionOptions& options_;
   Skeleton sk_;
@@ -227,6 +282,12 @@ bool MotionOptions::IsValid(std::string* error) const {
     msg << "motion.ramp_s: expected >= 0 s, found " << ramp_s;
   } else if (!(walk.ankle_compensation >= 0.0 && walk.ankle_compensation <= 1.0)) {
     msg << "motion.walk.ankle_compensation: expected in [0, 1], found " << walk.ankle_compensation;
+  } else if (!(speed > 0.0 && speed <= 8.0)) {
+    msg << "motion.speed: expected in (0, 8], found " << speed;
+  } else if (frame_step < 1) {
+    msg << "motion.frame_step: expected >= 1, found " << frame_step;
+  } else if (!(punch_kick.move_s > 0.0) || !std::isfinite(punch_kick.move_s)) {
+    msg << "motion.punch_kick.move_s: expected > 0 s, found " << punch_kick.move_s;
   } else if (!(bend.arm_hang >= 0.0 && bend.arm_hang <= 1.0)) {
     msg << "motion.bend.arm_hang: expected in [0, 1], found " << bend.arm_hang;
   } else {
@@ -258,8 +319,10 @@ std::vector<Pose> GenerateMotion(const Template& tmpl, const MotionOptions& opti
   const MotionBuilder builder(tmpl, options);
   std::vector<Pose> poses;
   poses.reserve(options.frames);
-  for (int f = 0; f < options.frames; ++f) poses.push_back(builder.At(f / options.frame_rate));
+  const double frame_time = options.frame_step * options.speed / options.frame_rate;
+  for (int f = 0; f < options.frames; ++f) poses.push_back(builder.At(f * frame_time));
   PlaceOnFloor(tmpl, options.floor, &poses);
+  for (int f = 0; f < options.frames; ++f) poses[f].translation.y() += builder.Lift(f * frame_time);
   return poses;
 }
 

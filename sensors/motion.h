@@ -11,7 +11,7 @@
 
 namespace artex {
 
-enum class MotionType { kWalk, kArmRaise, kTurn, kBend, kStill };
+enum class MotionType { kWalk, kArmRaise, kTurn, kBend, kStill, kPunchKick };
 
 // How the global translation's y is chosen from the lowest foot point (see LowestFootHeight):
 // kKeep leaves it, kPerFrame puts the lowest foot point on y = 0 in every frame,
@@ -51,6 +51,21 @@ struct BendShape {
   double neck_extension_deg = 10.0;  // head lifted against the trunk's flexion
 };
 
+// Fast moves, one after the other, each lasting move_s (the cycle of four is 4 move_s; period_s
+// is not used): a right punch, a left punch (shoulder flexion out and back, the elbow bending
+// on the way out and back), a right kick (hip flexion, the knee chambering and extending) and
+// a squat jump (crouch, flight of jump_height, crouch on landing). Each move starts and ends
+// at rest with zero velocity.
+struct PunchKickShape {
+  double move_s = 1.0;                 // s per move
+  double punch_shoulder_deg = 80.0;    // peak shoulder flexion (arm forward)
+  double punch_elbow_deg = 90.0;       // peak elbow flexion while chambering
+  double kick_hip_deg = 70.0;          // peak hip flexion
+  double kick_knee_deg = 80.0;         // peak knee flexion while chambering
+  double jump_crouch_knee_deg = 60.0;  // knee flexion of the crouches (hips and ankles follow)
+  double jump_height_m = 0.15;         // peak lift of the whole body (m)
+};
+
 struct MotionOptions {
   MotionType type = MotionType::kWalk;
   int frames = 60;           // number of frames; >= 1
@@ -66,13 +81,19 @@ struct MotionOptions {
   ArmRaiseShape arm_raise;
   TurnShape turn;
   BendShape bend;
+  PunchKickShape punch_kick;
+  // Playback: frame f shows the motion at time f * frame_step * speed / frame_rate (speed 2:
+  // twice as fast; frame_step 2: every second frame of the sequence dropped). speed in
+  // (0, 8], frame_step >= 1; BVH clips are resampled alike (sensors/synthesis.cc).
+  double speed = 1.0;
+  int frame_step = 1;
 
   // False (and a message naming the field, expected range and value) on invalid options.
   bool IsValid(std::string* error) const;
 };
 
-// Built-in names: "walk", "arm_raise", "turn", "bend", "still". Throws artex::Error listing
-// the valid names for an unknown one.
+// Built-in names: "walk", "arm_raise", "turn", "bend", "still", "punch_kick". Throws artex::Error
+// listing the valid names for an unknown one.
 MotionType ParseMotionType(const std::string& name);
 const char* MotionTypeName(MotionType type);
 

@@ -104,6 +104,11 @@ bool SynthOptions::IsValid(std::string* error) const {
                 "motion.frames must be >= 1 (>= 0 with a BVH file), found " + Str(motion.frames));
   if (!(motion.frame_rate > 0))
     return Fail(error, "motion.frame_rate must be > 0, found " + Str(motion.frame_rate));
+  if (!(motion.speed > 0.0 && motion.speed <= 8.0))
+    return Fail(error, "motion.speed (--speed) must be in (0, 8], found " + Str(motion.speed));
+  if (motion.frame_step < 1)
+    return Fail(error,
+                "motion.frame_step (--frame-step) must be >= 1, found " + Str(motion.frame_step));
   if (background_frames < 0)
     return Fail(error, "background_frames must be >= 0, found " + Str(background_frames));
   if (!subject_position_m.allFinite() || !std::isfinite(subject_yaw_deg))
@@ -146,7 +151,10 @@ SynthSubject PrepareSynthSubject(const SynthOptions& options) {
   s.texture_bgr = GenerateSubjectTexture(s.subject, options.texture);
   if (!options.bvh_path.empty()) {
     BvhRetargetOptions retarget;
-    retarget.frame_rate = options.motion.frame_rate;
+    // Playback speed and frame step as for the built-in motions (frame f at clip time
+    // f * frame_step * speed / frame_rate).
+    retarget.frame_rate =
+        options.motion.frame_rate / (options.motion.speed * options.motion.frame_step);
     s.poses = LoadBvhMotion(options.bvh_path, s.subject, retarget);
     if (options.motion.frames > 0 && static_cast<int>(s.poses.size()) > options.motion.frames) {
       s.poses.resize(options.motion.frames);

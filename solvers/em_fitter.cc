@@ -158,6 +158,8 @@ bool EMFitterOptions::IsValid(std::string* error) const {
     msg << "smoothness." << inner;
   } else if (!icp.IsValid(&inner)) {
     msg << "icp." << inner;
+  } else if (!prediction.IsValid(&inner)) {
+    msg << "prediction." << inner;
   } else if (estep.mode == EStepMode::kRadius &&
              (first_frame_radii.empty() || tracking_radii.empty())) {
     msg << "first_frame_radii/tracking_radii: expected at least one radius for the radius "
@@ -239,6 +241,7 @@ struct EMFitter::FrameState {
   Pose previous;  // temporal prior reference (valid when has_previous)
   bool has_previous = false;
   std::unique_ptr<PoseSmoothnessTerm> smoothness;
+  Eigen::MatrixXd information;  // data-term J^T J of the last M-step
 };
 
 EMFitter::EMFitter(const Template& tmpl, const EMFitterOptions& options) : options_(options) {
@@ -279,6 +282,7 @@ EMFitter::EMFitter(const Template& tmpl, const EMFitterOptions& options) : optio
     for (int i = 0; i < v; ++i) fit_vertices_.push_back(i);
   }
   solver_ = FitSolver::Create(options.solver);
+  predictor_ = PosePredictor::Create(options.prediction);
   initial_pose_ = Pose::Identity(tmpl.num_joints());
   pose_ = initial_pose_;
 }
@@ -314,6 +318,7 @@ void EMFitter::Reset(bool keep_scale) {
     scale_samples_.clear();
   }
   state_.reset();
+  predictor_->Reset();
   pose_ = initial_pose_;
 }
 
@@ -342,10 +347,7 @@ Pose EMFitter::PredictNextPose() const {
     }
     return guess;
   }
-  Pose guess = history_.back();
-  if (options_.constant_velocity_prediction && history_.size() >= 2) {
-    guess = ConstantVelocityPrediction(history_[history_.size() - 2], history_.back());
-  }
+  Pose guess = predictor_->Predict();
   if (options_.scale_mode == ScaleMode::kFixed ||
       (estimated && options_.scale_mode != ScaleMode::kFree)) {
     const double scale =
@@ -407,7 +409,8 @@ void EMFitter::BeginFrame(const Scan& scan, const Pose& initial_guess) {
   st.max_iterations = st.first_frame ? 2 * options_.max_iterations : options_.max_iterations;
   if (!radius_mode) st.iterations_per_stage = st.max_iterations;
   if (!history_.empty()) {
-    st.previous = history_.back();
+    st.previous =
+        options_.prediction.temporal_prior_on_prediction ? PredictNextPose() : history_.back();
     st.has_previous = true;
     if (history_.size() >= 2 && !options_.smoothness.AllZero()) {
       st.smoothness = std::make_unique<PoseSmoothnessTerm>(
@@ -518,6 +521,7 @@ EMIterationInfo EMFitter::Iterate() {
   FitProblem problem;
   problem.skinning = fit_skinning_;
   problem.anchor = pose_;
+  problem.information_terms = 1;  // the data term's J^T J: the frame's information
   problem.terms.push_back(data_term.get());
   problem.terms.push_back(&tikhonov);
   if (options_.joint_limits.weight > 0.0) problem.terms.push_back(&joint_limits);
@@ -534,6 +538,7 @@ EMIterationInfo EMFitter::Iterate() {
     pose_ = problem.anchor.Retracted(options_.over_relaxation * m.delta);
   }
   st.summary.mstep_seconds += m.seconds;
+  st.information = m.information;
   st.summary.skinning_seconds += m.skinning_seconds;
 
   info.cost = m.final_cost + constant;
@@ -608,11 +613,13 @@ FitSummary EMFitter::FinishFrame(bool* ok_out) {
                         : st.converged ? FrameTermination::kConverged
                                        : FrameTermination::kMaxIterations;
   summary.total_seconds = SecondsSince(st.start) + summary.icp_seconds;
+  frame_information_ = ok ? st.information : Eigen::MatrixXd();
   *ok_out = ok;
   return summary;
 }
 
-void EMFitter::Commit(const Scan& scan, const Pose& pose, bool scale_was_free) {
+void EMFitter::Commit(const Scan& scan, const Pose& pose, bool scale_was_free,
+                      const Eigen::MatrixXd& information) {
   pose_ = pose;
   if (scale_was_free && options_.scale_mode != ScaleMode::kFree &&
       scale_samples() < options_.scale_estimation_frames) {
@@ -642,6 +649,7 @@ void EMFitter::Commit(const Scan& scan, const Pose& pose, bool scale_was_free) {
     }
   }
   history_.push_back(pose_);
+  predictor_->Observe(pose_, information);
   ++accepted_frames_;
   if (history_.size() > 2) history_.erase(history_.begin(), history_.end() - 2);
   ++frame_;
@@ -653,7 +661,7 @@ FitSummary EMFitter::EndFrame() {
   const bool scale_free = state_->scale_free;
   const Pose initial_guess = std::move(state_->initial_guess);
   if (ok) {
-    Commit(state_->estep->scan(), pose_, scale_free);
+    Commit(state_->estep->scan(), pose_, scale_free, frame_information_);
     state_.reset();
     summary.scale = pose_.scale;
     return summary;
@@ -663,6 +671,7 @@ FitSummary EMFitter::EndFrame() {
   if (!history_.empty()) {
     pose_ = history_.back();
     history_.push_back(pose_);
+    predictor_->ObserveMissing(pose_);
   } else {
     pose_ = initial_guess;
   }
@@ -681,7 +690,7 @@ FitSummary EMFitter::DiscardFrame(Pose* result) {
   return summary;
 }
 
-void EMFitter::AcceptPose(const Scan& scan, const Pose& pose) {
+void EMFitter::AcceptPose(const Scan& scan, const Pose& pose, const Eigen::MatrixXd& information) {
   if (pose.num_joints() != skinning_->model().num_joints() || !pose.AllFinite()) {
     std::ostringstream msg;
     msg << "accepted pose: expected a finite pose with " << skinning_->model().num_joints()
@@ -689,7 +698,7 @@ void EMFitter::AcceptPose(const Scan& scan, const Pose& pose) {
     throw Error(msg.str());
   }
   state_.reset();
-  Commit(scan, pose, ScaleIsFree());
+  Commit(scan, pose, ScaleIsFree(), information);
 }
 
 FitSummary EMFitter::FitFrame(const Scan& scan) {

@@ -32,6 +32,7 @@
 #include "solvers/estep.h"
 #include "solvers/fit_solver.h"
 #include "solvers/icp_init.h"
+#include "solvers/prediction.h"
 
 namespace artex {
 
@@ -115,7 +116,9 @@ struct EMFitterOptions {
 
   bool icp_first_frame = true;  // pre-align the first frame's pose by similarity ICP
   IcpInitOptions icp;
-  bool constant_velocity_prediction = true;  // initial guess of frame f from f-1 and f-2
+  // Initial guess of a tracking frame (solvers/prediction.h): previous pose, constant
+  // velocity (the default), Kalman filter, or particle (multi-hypothesis, TrackFrame).
+  PredictionOptions prediction;
 
   // Fit on a uniform subset (index stride) of at most this many template vertices (0: all).
   // E-step, Jacobians and normal equations scale with it; normals use the full mesh.
@@ -214,8 +217,15 @@ class EMFitter {
   const Pose& initial_pose() const { return initial_pose_; }
   // Per-vertex template colours (T x 3, [0,1]) for the colour term; empty disables it.
   void SetTemplateColors(const Eigen::MatrixX3d& colors);
-  // The guess FitFrame would start the next frame from.
+  // The guess FitFrame would start the next frame from (options.prediction).
   Pose PredictNextPose() const;
+  // True when the next frame is a tracking frame (an accepted or kept pose exists).
+  bool tracking() const { return !history_.empty(); }
+  // Information of the data term, J^T J (P x P, in the pose tangent at the fitted pose) of the
+  // last M-step of the frame last finished by EndFrame/DiscardFrame; the Kalman measurement
+  // (solvers/kalman_predictor.h). Empty when the frame failed or the M-step backend does not
+  // build normal equations (Ceres).
+  const Eigen::MatrixXd& frame_information() const { return frame_information_; }
   // Forgets the history: the next frame is a first frame again. keep_scale: the scale
   // estimate (and the frames counted towards it) survives, e.g. a re-initialisation after a
   // lost frame of the same person.
@@ -230,7 +240,9 @@ class EMFitter {
   // frame (history, frame counter, scale estimate when the scale is still being estimated);
   // pose() becomes it. Throws artex::Error for a wrong joint count or a non-finite pose.
   // With ScaleEstimator::kIcp the scale sample is measured on `scan` (the frame's).
-  void AcceptPose(const Scan& scan, const Pose& pose);
+  // information: the pose's data-term information for the predictor (empty: none).
+  void AcceptPose(const Scan& scan, const Pose& pose,
+                  const Eigen::MatrixXd& information = Eigen::MatrixXd());
 
   // True when the scale is optimised in the next frame (ScaleMode, frames estimated so far).
   bool ScaleIsFree() const;
@@ -249,7 +261,8 @@ class EMFitter {
   // Robustness checks and summary of the frame begun by BeginFrame; sets *ok.
   FitSummary FinishFrame(bool* ok);
   // History, scale estimate and frame counter for an accepted pose (scan: of its frame).
-  void Commit(const Scan& scan, const Pose& pose, bool scale_was_free);
+  void Commit(const Scan& scan, const Pose& pose, bool scale_was_free,
+              const Eigen::MatrixXd& information);
 
   EMFitterOptions options_;
   std::unique_ptr<Skinning> skinning_;
@@ -266,6 +279,8 @@ class EMFitter {
   double scale_estimate_ = 1.0;
   std::vector<double> scale_samples_;  // scales of the estimation frames
   std::unique_ptr<FrameState> state_;
+  std::unique_ptr<PosePredictor> predictor_;
+  Eigen::MatrixXd frame_information_;
   std::function<void(const EMIterationInfo&)> callback_;
 };
 

@@ -46,6 +46,9 @@ struct FitProblem {
   Pose anchor;                               // theta at delta = 0
   std::vector<const FittingTerm*> terms;
   std::vector<int> constant_parameters;      // tangent indices held at 0 (e.g. kScaleIndex)
+  // > 0: FitSolverSummary::information receives J^T J of the first this many terms at the
+  // last linearisation point (Gauss-Newton only; constant parameters not removed).
+  int information_terms = 0;
 
   int num_parameters() const { return anchor.num_parameters(); }
   int num_residuals() const;
@@ -64,6 +67,7 @@ struct FitSolverSummary {
   double final_cost = 0.0;     // F(delta)
   std::vector<double> cost_trace;  // after each iteration
   Eigen::VectorXd delta;       // the accepted tangent offset
+  Eigen::MatrixXd information;  // FitProblem::information_terms > 0: P x P, else empty
   double seconds = 0.0;
   double skinning_seconds = 0.0;  // posing the template (with Jacobians) inside the solve
   std::string message;

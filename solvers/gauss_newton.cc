@@ -28,8 +28,9 @@ GaussNewtonSolver::IterationResult GaussNewtonSolver::Iterate(const FitProblem& 
   Eigen::MatrixXd jtj = Eigen::MatrixXd::Zero(p, p);
   Eigen::VectorXd jtr = Eigen::VectorXd::Zero(p);
   double cost = 0.0;
-  for (const FittingTerm* term : problem.terms) {
-    cost += term->AccumulateNormalEquations(eval_, &jtj, &jtr);
+  for (size_t t = 0; t < problem.terms.size(); ++t) {
+    cost += problem.terms[t]->AccumulateNormalEquations(eval_, &jtj, &jtr);
+    if (static_cast<int>(t) + 1 == problem.information_terms) information_ = jtj;
   }
   result.cost_before = cost;
   result.cost_after = cost;
@@ -99,6 +100,7 @@ FitSolverSummary GaussNewtonSolver::Solve(const FitProblem& problem, Pose* pose)
     }
   }
   summary.delta = delta;
+  if (problem.information_terms > 0) summary.information = information_;
   if (summary.termination != FitTermination::kFailure) *pose = problem.anchor.Retracted(delta);
   summary.seconds = SecondsSince(start);
   return summary;

@@ -29,6 +29,7 @@ class GaussNewtonSolver : public FitSolver {
   FitSolverOptions options_;
   FitEvaluation eval_;     // reused across iterations
   FitEvaluation trial_;
+  Eigen::MatrixXd information_;  // J^T J of the problem's information terms, last Iterate
 };
 
 }  // namespace artex

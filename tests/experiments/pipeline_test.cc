@@ -328,6 +328,46 @@ TEST(PipelineTest, InitialisationAndQualityKeysAreRead) {
   EXPECT_NE(msg2.find("inlier_distance"), std::string::npos) << msg2;
 }
 
+TEST(PipelineTest, PredictionKeysAreReadAndTheOlderKeyMaps) {
+  Config config = Config::Load(std::string(ARTEX_SOURCE_DIR) + "/configs/default.yaml");
+  const PipelineOptions defaults = LoadPipelineOptions(config);
+  // configs/default.yaml spells out the built-in prediction defaults.
+  const PredictionOptions builtin;
+  EXPECT_EQ(defaults.fitting.prediction.model, builtin.model);
+  EXPECT_EQ(defaults.fitting.prediction.kalman.process_noise.joints,
+            builtin.kalman.process_noise.joints);
+  EXPECT_EQ(defaults.fitting.prediction.kalman.information_scale, builtin.kalman.information_scale);
+  EXPECT_EQ(defaults.fitting.prediction.particle.step_scales, builtin.particle.step_scales);
+  EXPECT_EQ(defaults.fitting.prediction.particle.hypotheses, builtin.particle.hypotheses);
+  EXPECT_EQ(defaults.fitting.prediction.particle.accept_margin, builtin.particle.accept_margin);
+  EXPECT_EQ(defaults.fitting.prediction.particle.trigger, builtin.particle.trigger);
+  config.Set("fitting.prediction", "particle");
+  config.Set("fitting.particle.base", "kalman");
+  config.Set("fitting.particle.hypotheses", "7");
+  config.Set("fitting.kalman.acceleration", "true");
+  config.Set("fitting.kalman.process_noise.joints", "0.2");
+  const PipelineOptions o = LoadPipelineOptions(config);
+  EXPECT_EQ(o.fitting.prediction.model, PredictionModel::kParticle);
+  EXPECT_EQ(o.fitting.prediction.particle.base, PredictionModel::kKalman);
+  EXPECT_EQ(o.fitting.prediction.particle.hypotheses, 7);
+  EXPECT_TRUE(o.fitting.prediction.kalman.acceleration);
+  EXPECT_EQ(o.fitting.prediction.kalman.process_noise.joints, 0.2);
+  // The older boolean: false = previous pose, true = constant velocity; a contradiction fails.
+  const Config old =
+      Config::FromString("fitting:\n  constant_velocity_prediction: false\n", "o.yaml");
+  EXPECT_EQ(LoadPipelineOptions(old).fitting.prediction.model, PredictionModel::kPrevious);
+  const Config both = Config::FromString(
+      "fitting:\n  constant_velocity_prediction: true\n  prediction: kalman\n", "b.yaml");
+  const std::string msg = ErrorOf([&] { LoadPipelineOptions(both); });
+  EXPECT_NE(msg.find("constant_velocity_prediction"), std::string::npos) << msg;
+  const Config bad = Config::FromString("fitting:\n  prediction: magic\n", "p.yaml");
+  const std::string msg2 = ErrorOf([&] { LoadPipelineOptions(bad); });
+  EXPECT_NE(msg2.find("kalman"), std::string::npos) << msg2;
+  const Config base = Config::FromString("fitting:\n  particle: {base: particle}\n", "q.yaml");
+  const std::string msg3 = ErrorOf([&] { LoadPipelineOptions(base); });
+  EXPECT_NE(msg3.find("particle.base"), std::string::npos) << msg3;
+}
+
 TEST(PipelineTest, WrongTypeNamesFileAndKey) {
   const Config c = Config::FromString("texture:\n  atlas_size: large\n", "typed.yaml");
   const std::string msg = ErrorOf([&] { LoadPipelineOptions(c); });

@@ -50,7 +50,7 @@ Eigen::Matrix3d Mirror(const Eigen::Matrix3d& r) {
 
 TEST(MotionTest, NamesRoundTripAndUnknownNameListsValidOnes) {
   for (MotionType t : {MotionType::kWalk, MotionType::kArmRaise, MotionType::kTurn,
-                       MotionType::kBend, MotionType::kStill}) {
+                       MotionType::kBend, MotionType::kStill, MotionType::kPunchKick}) {
     EXPECT_EQ(ParseMotionType(MotionTypeName(t)), t);
   }
   try {
@@ -354,6 +354,65 @@ TEST(MotionTest, GeneratedTemplateKeepsFeetOnTheFloorWithSmallSteps) {
     }
     EXPECT_LT(max_step, 0.06);
   }
+}
+
+TEST(MotionTest, SpeedAndFrameStepResampleTheMotionInTime) {
+  // Frame f at speed s with step n is frame f * s * n of the 1x motion (same time).
+  MotionOptions base;
+  base.type = MotionType::kWalk;
+  base.frames = 61;
+  const std::vector<Pose> slow = GenerateMotion(Model(), base);
+  MotionOptions fast = base;
+  fast.frames = 11;
+  fast.speed = 2.0;
+  fast.frame_step = 3;
+  const std::vector<Pose> quick = GenerateMotion(Model(), fast);
+  for (int f = 0; f < fast.frames; ++f) {
+    EXPECT_LT(slow[6 * f].LocalCoordinates(quick[f]).norm(), 1e-9) << f;
+  }
+  MotionOptions bad = base;
+  bad.speed = 0.0;
+  EXPECT_THROW(GenerateMotion(Model(), bad), Error);
+  bad = base;
+  bad.frame_step = 0;
+  EXPECT_THROW(GenerateMotion(Model(), bad), Error);
+}
+
+TEST(MotionTest, PunchKickPunchesKicksAndJumpsFast) {
+  const Skinning skinning(Model());
+  MotionOptions o;
+  o.type = MotionType::kPunchKick;
+  o.frames = 121;  // 4 moves of 1 s at 30 Hz = 120 frames
+  const std::vector<Pose> poses = GenerateMotion(Model(), o);
+  ASSERT_EQ(poses.size(), 121u);
+  auto joint_angle = [&](int f, const char* joint) {
+    return Angle(poses[f].joint_rotations[J(joint)]);
+  };
+  // Mid right punch (frame 15), mid left punch (45), mid kick (75), jump flight (105).
+  EXPECT_GT(joint_angle(15, "r_shoulder"), 70 * kDeg);
+  EXPECT_LT(joint_angle(15, "l_shoulder"), 1 * kDeg);
+  EXPECT_GT(joint_angle(45, "l_shoulder"), 70 * kDeg);
+  EXPECT_GT(joint_angle(75, "r_hip"), 60 * kDeg);
+  const double floor_y = LowestFootHeight(Model(), poses[105]);
+  EXPECT_GT(floor_y, 0.12);                                      // in the air
+  EXPECT_NEAR(LowestFootHeight(Model(), poses[75]), 0.0, 1e-9);  // standing leg on the floor
+  // Every move starts at rest.
+  for (int f : {0, 30, 60, 90, 120}) {
+    for (int j = 0; j < Model().num_joints(); ++j) {
+      EXPECT_LT(Angle(poses[f].joint_rotations[j]), 0.5 * kDeg)
+          << f << " " << Model().joints[j].name;
+    }
+  }
+  // Fast: the wrist moves several times faster than in the walk's arm swing.
+  double max_wrist_step = 0.0;
+  Eigen::MatrixX3d prev, cur, pj, cj;
+  for (int f = 1; f < 30; ++f) {
+    skinning.PosedJointCenters(poses[f - 1], &pj);
+    skinning.PosedJointCenters(poses[f], &cj);
+    max_wrist_step = std::max(max_wrist_step, (cj.row(J("r_wrist")) - pj.row(J("r_wrist"))).norm());
+  }
+  EXPECT_GT(max_wrist_step, 0.04);  // m per frame at 30 Hz
+  EXPECT_LT(max_wrist_step, 0.15);
 }
 
 }  // namespace
