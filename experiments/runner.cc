@@ -801,7 +801,7 @@ std::string SourceDirectory() {
 
 std::string SourceRevision() {
   const std::string dir = SourceDirectory();
-  if (!fs::is_directory(fs::path(dir) / ".git")) return "unknown";
+  if (!fs::exists(fs::path(dir) / ".git")) return "unknown";  // a folder, or a file in a worktree
   auto run = [](const std::string& cmd) {
     std::string out;
     FILE* p = popen(cmd.c_str(), "r");
@@ -1034,6 +1034,7 @@ ExperimentSummary RunExperiment(const Experiment& experiment, const std::string&
     RunnerEvent e;
     e.kind = kind == RunnerEvent::Kind::kRunStarted    ? RunnerEvent::Kind::kSequenceStarted
              : kind == RunnerEvent::Kind::kRunFinished ? RunnerEvent::Kind::kSequenceReady
+             : kind == RunnerEvent::Kind::kRunProgress ? RunnerEvent::Kind::kSequenceProgress
                                                        : kind;
     e.label = job.label;
     e.done = done;
