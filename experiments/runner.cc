@@ -795,8 +795,13 @@ bool RunIsComplete(const std::string& run_folder) {
 }
 
 std::string SourceDirectory() {
-  // This file is experiments/runner.cc inside the source tree it was compiled from.
-  return fs::path(__FILE__).parent_path().parent_path().string();
+#ifdef ARTEX_SOURCE_TREE
+  return ARTEX_SOURCE_TREE;  // absolute (experiments/CMakeLists.txt)
+#else
+  // This file is experiments/runner.cc inside the source tree it was compiled from (__FILE__ is
+  // relative to the build folder when compiled through ccache with a base directory).
+  return fs::absolute(fs::path(__FILE__)).parent_path().parent_path().string();
+#endif
 }
 
 std::string SourceRevision() {
