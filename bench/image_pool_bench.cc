@@ -1,4 +1,4 @@
-// The image pool stage of on-the-fly texturing (DESIGN.md "Texture", paper sec. 4) on realistic
+// The image pool stage of on-the-fly texturing (docs/design.md "Texture", paper sec. 4) on realistic
 // inputs: the default template posed by a walk (GenerateMotion + Skinning) and seen by the
 // virtual Kinect's colour camera (800 x 1016), as in texture_bench.
 //

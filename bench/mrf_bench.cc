@@ -1,4 +1,4 @@
-// MRF solvers on a texturing-like view-selection problem (DESIGN.md "Texture", eq. 14): the
+// MRF solvers on a texturing-like view-selection problem (docs/design.md "Texture", eq. 14): the
 // 25,088 triangles of a 112 x 112 x 2 triangulated grid (37,408 shared edges), 10 images, each
 // triangle visible in ~4 of them (+inf elsewhere). D = beta (1 - W) + (1 - beta) age with W a
 // smooth random viewing-quality field per image; V_ij = 0 if equal, else edge length times

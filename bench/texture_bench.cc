@@ -1,4 +1,4 @@
-// On-the-fly texturing (DESIGN.md "Texture", paper sec. 4) on realistic inputs: the default
+// On-the-fly texturing (docs/design.md "Texture", paper sec. 4) on realistic inputs: the default
 // template (GenerateTemplate(), ~12.5k vertices, ~25k triangles) posed by a walk
 // (GenerateMotion + Skinning), seen by the virtual Kinect's colour camera (800 x 1016, 2.5 m in
 // front; procedural subject texture, Lambert shading, exposure drift, sensor noise, floor and

@@ -1,15 +1,25 @@
+include(GNUInstallDirs)
+
 # Helpers shared by every module: warnings per target, never global flags.
 function(artex_set_warnings target)
   target_compile_options(${target} PRIVATE -Wall -Wextra -Wno-unused-parameter
                          -Wno-deprecated-declarations)
 endfunction()
 
-# artex_add_library(NAME name SOURCES ... DEPS ...): library artex_<name>, alias artex::<name>.
+# artex_add_library(NAME name SOURCES ... DEPS ...): library artex_<name>, alias artex::<name>;
+# installed with its headers (include/artex/<name>/*.h) and exported as artex::<name>
+# (cmake/artexConfig.cmake.in).
 function(artex_add_library)
   cmake_parse_arguments(ARG "" "NAME" "SOURCES;PUBLIC_DEPS;PRIVATE_DEPS" ${ARGN})
   add_library(artex_${ARG_NAME} STATIC ${ARG_SOURCES})
   add_library(artex::${ARG_NAME} ALIAS artex_${ARG_NAME})
-  target_include_directories(artex_${ARG_NAME} PUBLIC ${PROJECT_SOURCE_DIR})
+  set_target_properties(artex_${ARG_NAME} PROPERTIES EXPORT_NAME ${ARG_NAME})
+  target_include_directories(artex_${ARG_NAME} PUBLIC $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}>
+                             $<INSTALL_INTERFACE:${CMAKE_INSTALL_INCLUDEDIR}/artex>)
+  install(TARGETS artex_${ARG_NAME} EXPORT artexTargets
+          ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR} COMPONENT devel)
+  install(DIRECTORY ${CMAKE_CURRENT_SOURCE_DIR}/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/artex/${ARG_NAME}
+          COMPONENT devel FILES_MATCHING PATTERN "*.h")
   target_link_libraries(artex_${ARG_NAME} PUBLIC ${ARG_PUBLIC_DEPS} PRIVATE ${ARG_PRIVATE_DEPS})
   artex_set_warnings(artex_${ARG_NAME})
 endfunction()

@@ -1,4 +1,4 @@
-// The common contract of the kinematic fitting terms (paper eq. 3-5, DESIGN.md "Fitting
+// The common contract of the kinematic fitting terms (paper eq. 3-5, docs/design.md "Fitting
 // energy"). Every term is a residual vector r(delta) of a tangent offset `delta` (P = 7 + 3 J
 // entries, layout of models/pose.h) around an anchor pose: theta(delta) = anchor.Retracted(delta).
 // Its cost is |r|^2 (no factor 1/2; Ceres reports half of it). Work shared by all terms of one

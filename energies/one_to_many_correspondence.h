@@ -1,4 +1,4 @@
-// One-to-many probabilistic correspondence of the paper (eq. 3-4, DESIGN.md "Fitting energy"):
+// One-to-many probabilistic correspondence of the paper (eq. 3-4, docs/design.md "Fitting energy"):
 //   Q(theta) = sum_s sum_t p_st |v_s - S(v_t; theta)|^2,
 //   p_st = max(0, n_s . n'_t) / (|v_s - v'_t|^2 + lambda_c |rgb_s - rgb'_t|^2 + eps).
 // For p fixed by the E-step (solvers/estep.h), sum_s p_st |v_s - x|^2 = P_t |x - mu_t|^2 + c_t

@@ -1,4 +1,4 @@
-// Texture MRF terms of the paper (eq. 6-14, DESIGN.md "Texture") for per-triangle view
+// Texture MRF terms of the paper (eq. 6-14, docs/design.md "Texture") for per-triangle view
 // selection: quality W, the data term D with its lifetime part, the seam colour cost Pi, the
 // temporal seam cost Psi, and V = (1 - alpha) Pi + alpha Psi. Pure functions of their inputs;
 // the image sampling that produces Pi's colour differences lives in texture/.

@@ -1,15 +1,21 @@
 // The `artex` command-line tool: one subcommand per pipeline stage.
 #include <cstdio>
 #include <exception>
+#include <string>
 
 #include <CLI/CLI.hpp>
 
 #include "experiments/commands.h"
+#include "experiments/runner.h"
 #include "models/error.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"artex: articulated 3D model tracking with on-the-fly texturing"};
   app.require_subcommand(1);
+  // "artex 0.1.0 (<git revision of the source tree>)"; --version works without a subcommand.
+  app.set_version_flag("--version",
+                       std::string("artex ") + ARTEX_VERSION + " (" + artex::SourceRevision() + ")",
+                       "print the version and the source revision, then exit");
   artex::RegisterTemplateCommands(&app);
   artex::RegisterSynthCommand(&app);
   artex::RegisterTrackCommand(&app);

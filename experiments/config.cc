@@ -13,9 +13,24 @@ struct Config::Impl {
   YAML::Node node;
   std::string source;  // file name
   std::string prefix;  // dotted key path of this node, "" at the root
+  std::vector<std::string> overrides;  // dotted keys given to Set (messages name them)
+
+  // The override that set `full_key` (itself or a key below it), "" when none did.
+  std::string OverrideOf(const std::string& full_key) const {
+    for (const auto& o : overrides) {
+      if (o == full_key || o.rfind(full_key + ".", 0) == 0) return o;
+    }
+    return "";
+  }
 };
 
-Config::Config() : impl_(std::make_unique<Impl>()) { impl_->node = YAML::Node(YAML::NodeType::Map); }
+// The name of a configuration built in code (no file): default options plus overrides.
+constexpr const char* kDefaultSource = "built-in defaults";
+
+Config::Config() : impl_(std::make_unique<Impl>()) {
+  impl_->node = YAML::Node(YAML::NodeType::Map);
+  impl_->source = kDefaultSource;
+}
 Config::~Config() = default;
 Config::Config(const Config& other) : impl_(std::make_unique<Impl>(*other.impl_)) {}
 Config& Config::operator=(const Config& other) {
@@ -52,7 +67,10 @@ Config Config::FromString(const std::string& yaml, const std::string& source_nam
 }
 
 std::string Config::Path(const std::string& key) const {
-  return impl_->source + ": " + (impl_->prefix.empty() ? key : impl_->prefix + "." + key);
+  const std::string full = impl_->prefix.empty() ? key : impl_->prefix + "." + key;
+  const std::string override_key = key.empty() ? "" : impl_->OverrideOf(full);
+  if (!override_key.empty()) return "override " + override_key;
+  return impl_->source + ": " + full;
 }
 
 namespace {
@@ -72,6 +90,7 @@ bool Config::Has(const std::string& key) const {
 Config Config::Section(const std::string& key) const {
   Config c;
   c.impl_->source = impl_->source;
+  c.impl_->overrides = impl_->overrides;
   c.impl_->prefix = impl_->prefix.empty() ? key : impl_->prefix + "." + key;
   if (!Has(key)) return c;
   YAML::Node n = Lookup(impl_->node, key);
@@ -145,8 +164,10 @@ void Config::ThrowInvalidChoice(const std::string& key, const std::string& found
                                 const std::vector<std::string>& valid) const {
   std::ostringstream msg;
   if (key.empty()) {
-    msg << impl_->source << ": unknown key '"
-        << (impl_->prefix.empty() ? found : impl_->prefix + "." + found) << "'; valid keys:";
+    const std::string full = impl_->prefix.empty() ? found : impl_->prefix + "." + found;
+    const std::string override_key = impl_->OverrideOf(full);
+    msg << (override_key.empty() ? impl_->source : "override " + override_key) << ": unknown key '"
+        << full << "'; valid keys:";
   } else {
     msg << Path(key) << ": unknown value '" << found << "'; valid choices:";
   }
@@ -177,6 +198,7 @@ void Config::Set(const std::string& dotted_key, const std::string& yaml_value) {
     node.reset(node[parts[i]]);
   }
   node[parts.back()] = value;
+  impl_->overrides.push_back(dotted_key);
 }
 
 std::string Config::ToYaml() const {

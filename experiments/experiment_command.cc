@@ -17,6 +17,7 @@
 #include <CLI/CLI.hpp>
 
 #include "experiments/commands.h"
+#include "experiments/progress_display.h"
 #include "experiments/runner.h"
 #include "experiments/slurm_backend.h"
 #include "models/error.h"
@@ -52,88 +53,6 @@ std::string Quote(const std::string& s) {
   for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
   return out + "'";
 }
-
-// Status display: one rewritten line on a terminal, one line per event otherwise.
-class ProgressDisplay {
- public:
-  ProgressDisplay() : tty_(isatty(STDERR_FILENO)) {}
-
-  void Handle(const RunnerEvent& e) {
-    using K = RunnerEvent::Kind;
-    switch (e.kind) {
-      case K::kPlan:
-        Line("experiment: " + std::to_string(e.runs_total) + " runs, " +
-             std::to_string(e.runs_skipped) + " already complete (skipped), " +
-             std::to_string(e.total) + " to run");
-        break;
-      case K::kSequenceStarted:
-        Line("experiment: generating sequence " + e.label);
-        break;
-      case K::kSequenceReady:
-        Line("experiment: sequence " + e.label + " ready" +
-             (e.seconds > 0 ? " (" + Seconds(e.seconds) + ")" : " (reused)"));
-        break;
-      case K::kRunStarted:
-        active_[e.label] = "start";
-        Status(e);
-        break;
-      case K::kRunProgress:
-        active_[e.label] = std::to_string(e.done) + "/" + std::to_string(e.total);
-        Status(e);
-        break;
-      case K::kRunSkipped:
-        if (!tty_) Line("experiment: skip " + e.label + " (complete)");
-        break;
-      case K::kRunFinished:
-        active_.erase(e.label);
-        Line("experiment: [" + std::to_string(e.runs_done) + "/" + std::to_string(e.runs_total) +
-             "] done " + e.label + " in " + Seconds(e.seconds));
-        break;
-      case K::kRunFailed:
-        active_.erase(e.label);
-        Line("experiment: FAILED " + e.label + ": " + e.message);
-        break;
-      case K::kNote:
-        Line("experiment: " + e.message);
-        break;
-    }
-  }
-
- private:
-  static std::string Seconds(double s) {
-    char buf[32];
-    std::snprintf(buf, sizeof(buf), "%.1f s", s);
-    return buf;
-  }
-  void Line(const std::string& text) {
-    if (tty_ && status_shown_) std::fprintf(stderr, "\r\033[K");
-    std::fprintf(stderr, "%s\n", text.c_str());
-    status_shown_ = false;
-    std::fflush(stderr);
-  }
-  void Status(const RunnerEvent& e) {
-    if (!tty_) {
-      if (e.kind == RunnerEvent::Kind::kRunStarted) std::fprintf(stderr, "experiment: start %s\n", e.label.c_str());
-      return;
-    }
-    std::string s = "[" + std::to_string(e.runs_done) + "/" + std::to_string(e.runs_total) +
-                    " done, " + std::to_string(active_.size()) + " running";
-    if (e.runs_pending >= 0) {
-      s += ", " + std::to_string(e.runs_pending) + " pending, " + std::to_string(e.runs_failed) +
-           " failed";
-    }
-    s += "]";
-    for (const auto& kv : active_) s += "  " + kv.first + " " + kv.second;
-    if (s.size() > 160) s = s.substr(0, 157) + "...";
-    std::fprintf(stderr, "\r\033[K%s", s.c_str());
-    status_shown_ = true;
-    std::fflush(stderr);
-  }
-
-  bool tty_;
-  bool status_shown_ = false;
-  std::map<std::string, std::string> active_;
-};
 
 }  // namespace
 
@@ -183,7 +102,7 @@ void RunExperimentCli(const ExperimentCliOptions& cli) {
     options.threads_per_run = slurm.cpus_per_task;
     options.backend = MakeSlurmBackend(experiment, cli.output, slurm);
   }
-  ProgressDisplay display;
+  ExperimentProgressDisplay display(stderr, isatty(STDERR_FILENO));
   const ExperimentSummary summary =
       RunExperiment(experiment, cli.output, options, [&](const RunnerEvent& e) { display.Handle(e); });
   if (cli.dry_run) return;

@@ -80,6 +80,13 @@ void RunOverlay(const OverlayCli& cli) {
   std::string sequence = cli.paths.size() == 2 ? cli.paths[0] : "";
   if (sequence.empty()) sequence = JsonField(run_json, "sequence_folder");
   if (sequence.empty()) sequence = JsonField(summary, "sequence");
+  // Runs of older versions stored the recording as given on the command line: a relative path
+  // is tried from here, then next to the run folder.
+  if (!sequence.empty() && cli.paths.size() == 1 && fs::path(sequence).is_relative() &&
+      !fs::exists(sequence, ec)) {
+    const fs::path beside = fs::path(run).parent_path() / sequence;
+    if (fs::exists(beside, ec)) sequence = beside.string();
+  }
   if (sequence.empty()) {
     throw Error(run +
                 ": the run names no recording (no run.json / summary.json); give it: "

@@ -23,6 +23,7 @@
 #include "models/skinning.h"
 #include "models/template_generator.h"
 #include "models/template_io.h"
+#include "sensors/bvh_export.h"
 #include "sensors/calibration.h"
 #include "sensors/frame_source.h"
 #include "sensors/scene_segmentation.h"
@@ -374,7 +375,7 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
     if (options.export_meshes) {
       char name[64];
       std::snprintf(name, sizeof(name), "/meshes/%06d.ply", i);
-      WritePosedMesh(out_dir + name, posed, tmpl.triangles);
+      WritePosedMesh(out_dir + name, ToUpAxis(posed, options.mesh_up_axis), tmpl.triangles);
     }
     if (result.has_ground_truth) {
       const GroundTruthFrame truth = sequence->ReadGroundTruth(i);
@@ -447,24 +448,49 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
 
   WritePoseCsv(out_dir + "/poses.csv", tmpl, pose_frames, poses);
 
+  GlbTexture texture;
+  if (texturer) {
+    texture.png = WritePng(out_dir + "/texture.png", texturer->Atlas());
+    WritePng(out_dir + "/labels.png", texturer->LabelMap());
+  }
+  if (options.export_glb && !poses.empty()) {
+    AnimatedGlbOptions glb;
+    glb.exact = options.glb_exact &&
+                (options.glb_exact_max_frames == 0 ||
+                 static_cast<int>(poses.size()) <= options.glb_exact_max_frames);
+    if (options.glb_exact && !glb.exact) {
+      result.warnings.push_back("tracked.glb: " + std::to_string(poses.size()) +
+                                " frames exceed pipeline.glb_exact_max_frames (" +
+                                std::to_string(options.glb_exact_max_frames) +
+                                "): written with glTF's plain LBS, without exact correctives");
+    }
+    WriteAnimatedGlb(out_dir + "/tracked.glb", tmpl, poses, calibration.frame_rate,
+                     texturer ? &texture : nullptr, glb, &result.glb);
+    result.glb_written = true;
+  }
+  if (options.export_bvh && !poses.empty()) {
+    WriteBvh(out_dir + "/tracked.bvh", tmpl, poses, calibration.frame_rate);
+  }
+  if (options.export_textured_mesh && !poses.empty()) {
+    Eigen::MatrixX3d last;
+    Skinning(tmpl).Apply(poses.back(), &last);
+    TexturedMeshOptions mesh;
+    mesh.up = options.mesh_up_axis;
+    mesh.texture_file = texturer ? "texture.png" : "";
+    WriteTexturedMesh(out_dir + "/tracked.obj", tmpl, last, mesh);
+    WriteTexturedMesh(out_dir + "/tracked.ply", tmpl, last, mesh);
+  }
+
   PipelineOutputInfo info;
-  info.sequence = sequence_dir;
+  // Absolute, so that `artex overlay RUN` and `artex render RUN` find the recording from any
+  // working directory.
+  info.sequence = fs::absolute(sequence_dir).lexically_normal().string();
   info.template_name = template_path.empty() ? "default" : template_path;
   info.texture = texturer != nullptr;
   info.world = world.estimate ? &*world.estimate : nullptr;
   WriteFramesCsv(out_dir + "/frames.csv", result);
   WriteSummaryJson(out_dir + "/summary.json", result, info);
   WriteMetricsJson(out_dir + "/metrics.json", result);
-  if (texturer) {
-    GlbTexture texture;
-    texture.png = WritePng(out_dir + "/texture.png", texturer->Atlas());
-    WritePng(out_dir + "/labels.png", texturer->LabelMap());
-    if (options.export_glb) {
-      WriteAnimatedGlb(out_dir + "/tracked.glb", tmpl, poses, calibration.frame_rate, &texture);
-    }
-  } else if (options.export_glb) {
-    WriteAnimatedGlb(out_dir + "/tracked.glb", tmpl, poses, calibration.frame_rate);
-  }
   return result;
 }
 

@@ -9,6 +9,8 @@
 #include <vector>
 
 #include "experiments/config.h"
+#include "models/template_io.h"
+#include "models/textured_mesh_export.h"
 #include "sensors/frame_source.h"
 #include "sensors/preprocess.h"
 #include "solvers/em_fitter.h"
@@ -39,6 +41,19 @@ struct PipelineOptions {
   bool export_meshes = false;     // posed meshes per frame (meshes/NNNNNN.ply)
   bool export_foreground = false;  // foreground masks per frame (foreground/NNNNNN.png)
   bool export_glb = true;         // animated, textured tracked.glb at the end
+  // tracked.glb reproduces artex's LBS+SLERP fitted geometry in any glTF viewer (one corrective
+  // morph target per frame, models/template_io.h AnimatedGlbOptions); false: glTF's plain LBS
+  // only (differs by up to several cm at blended joints), a smaller file.
+  bool glb_exact = true;
+  // Longer runs get the plain LBS glb (with a warning): the correctives cost 12 bytes per glTF
+  // vertex and frame (~160 KB per frame on the default template). 0: no limit.
+  int glb_exact_max_frames = 600;
+  bool export_bvh = true;  // tracked.bvh: the fitted motion as BVH (sensors/bvh_export.h), cm
+  // tracked.obj (+ tracked.mtl) and tracked.ply: the last fitted frame with UVs and texture.png
+  bool export_textured_mesh = true;
+  // Up axis of the exported PLY/OBJ meshes (tracked.*, meshes/): y (artex) or z (Blender: the
+  // mesh stands upright after a plain import).
+  UpAxis mesh_up_axis = UpAxis::kY;
   std::vector<int> atlas_frames;  // also write the atlas after these frames
   double lost_threshold_mm = 50.0;  // a frame is lost when its mean vertex error exceeds this
   // Texture doubtful frames too (lost frames never are).
@@ -93,6 +108,8 @@ struct PipelineResult {
   double texture_ms_per_frame = 0.0;
   double stream_kbit_per_s = 0.0;  // pose + texture updates, compressed, at the frame rate
   std::vector<std::string> warnings;
+  bool glb_written = false;
+  AnimatedGlbSummary glb;  // tracked.glb against artex's skinning (residuals in mm)
 };
 
 struct PipelineProgress {

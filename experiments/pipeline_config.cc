@@ -375,8 +375,9 @@ void BindInput(const Config& c, FrameSourceOptions* o) {
 
 void BindPipeline(const Config& c, PipelineOptions* o) {
   c.CheckKeys({"texture", "colour_term", "first_frame", "max_frames", "export_meshes",
-               "export_foreground", "export_glb", "lost_threshold_mm", "texture_doubtful_frames",
-               "reinitialise_on", "reinitialise_after_doubtful"});
+               "export_foreground", "export_glb", "glb_exact", "glb_exact_max_frames", "export_bvh",
+               "export_textured_mesh", "mesh_up_axis", "lost_threshold_mm",
+               "texture_doubtful_frames", "reinitialise_on", "reinitialise_after_doubtful"});
   c.Get("texture", &o->texture);
   c.Get("colour_term", &o->colour_term);
   c.Get("first_frame", &o->first_frame);
@@ -384,6 +385,11 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("export_meshes", &o->export_meshes);
   c.Get("export_foreground", &o->export_foreground);
   c.Get("export_glb", &o->export_glb);
+  c.Get("glb_exact", &o->glb_exact);
+  c.Get("glb_exact_max_frames", &o->glb_exact_max_frames);
+  c.Get("export_bvh", &o->export_bvh);
+  c.Get("export_textured_mesh", &o->export_textured_mesh);
+  c.GetEnum("mesh_up_axis", UpAxisNames(), &o->mesh_up_axis);
   c.Get("lost_threshold_mm", &o->lost_threshold_mm);
   c.Get("texture_doubtful_frames", &o->texture_doubtful_frames);
   c.GetEnum("reinitialise_on", ReinitialiseOnNames(), &o->reinitialise_on);
@@ -420,6 +426,8 @@ bool PipelineOptions::IsValid(std::string* error) const {
         << reinitialise_after_doubtful;
   else if (!(lost_threshold_mm > 0))
     msg << "pipeline.lost_threshold_mm: expected > 0, found " << lost_threshold_mm;
+  else if (glb_exact_max_frames < 0)
+    msg << "pipeline.glb_exact_max_frames: expected >= 0, found " << glb_exact_max_frames;
   if (msg.str().empty()) return true;
   if (error) *error = msg.str();
   return false;

@@ -135,6 +135,19 @@ void WriteSummaryJson(const std::string& path, const PipelineResult& result,
                   {"camera_roll_deg", e.camera_roll_deg},
                   {"planes", planes}};
   }
+  nlohmann::json glb = nullptr;
+  if (result.glb_written) {
+    const AnimatedGlbSummary& g = result.glb;
+    glb = {{"frames", g.frames},
+           {"exact", g.morph_targets > 0},
+           {"morph_targets", g.morph_targets},
+           {"lbs_max_residual_mm", g.lbs_max_residual_mm},
+           {"lbs_mean_residual_mm", g.lbs_mean_residual_mm},
+           {"max_residual_mm", g.exact_max_residual_mm},
+           {"mean_residual_mm", g.exact_mean_residual_mm},
+           {"singular_vertices", g.singular_vertices},
+           {"bytes", g.bytes}};
+  }
   WriteJson(path, {{"sequence", info.sequence},
                    {"world_frame", world_json},
                    {"template", info.template_name},
@@ -145,6 +158,7 @@ void WriteSummaryJson(const std::string& path, const PipelineResult& result,
                      {"failed", result.failed_frames},
                      {"initialisations", result.initialisations}}},
                    {"frames", summary_frames},
+                   {"tracked_glb", glb},
                    {"warnings", result.warnings}});
 }
 

@@ -817,13 +817,18 @@ bool RunIsComplete(const std::string& run_folder) {
 }
 
 std::string SourceDirectory() {
-  // This file is experiments/runner.cc inside the source tree it was compiled from.
-  return fs::path(__FILE__).parent_path().parent_path().string();
+#ifdef ARTEX_SOURCE_TREE
+  return ARTEX_SOURCE_TREE;  // absolute (experiments/CMakeLists.txt)
+#else
+  // This file is experiments/runner.cc inside the source tree it was compiled from (__FILE__ is
+  // relative to the build folder when compiled through ccache with a base directory).
+  return fs::absolute(fs::path(__FILE__)).parent_path().parent_path().string();
+#endif
 }
 
 std::string SourceRevision() {
   const std::string dir = SourceDirectory();
-  if (!fs::is_directory(fs::path(dir) / ".git")) return "unknown";
+  if (!fs::exists(fs::path(dir) / ".git")) return "unknown";  // a folder, or a file in a worktree
   auto run = [](const std::string& cmd) {
     std::string out;
     FILE* p = popen(cmd.c_str(), "r");
@@ -1056,6 +1061,7 @@ ExperimentSummary RunExperiment(const Experiment& experiment, const std::string&
     RunnerEvent e;
     e.kind = kind == RunnerEvent::Kind::kRunStarted    ? RunnerEvent::Kind::kSequenceStarted
              : kind == RunnerEvent::Kind::kRunFinished ? RunnerEvent::Kind::kSequenceReady
+             : kind == RunnerEvent::Kind::kRunProgress ? RunnerEvent::Kind::kSequenceProgress
                                                        : kind;
     e.label = job.label;
     e.done = done;

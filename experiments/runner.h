@@ -117,6 +117,7 @@ struct RunnerEvent {
     kPlan,             // total runs / skipped known
     kSequenceStarted,  // synthetic sequence generation started
     kSequenceReady,    // generated (or reused)
+    kSequenceProgress, // frames done / total of a sequence being generated
     kRunStarted,
     kRunProgress,      // frames done / total of a running run
     kRunFinished,

@@ -1,4 +1,4 @@
-// Skinning S(v; theta) of the paper (eq. 1-2, DESIGN.md "Skinning") for all template vertices,
+// Skinning S(v; theta) of the paper (eq. 1-2, docs/design.md "Skinning") for all template vertices,
 // and its analytic Jacobian with respect to the pose's tangent perturbations (models/pose.h):
 //   v' = s0 R0 T_root o ... o T_parent(k) ( B_k(v) ) + t0,  T_i(x) = R_i (x - t_i) + t_i,
 //   B_k: LBS blend (w_l) of the swing part and cylindrical SLERP (tau) of the twist part of R_k

@@ -1,4 +1,4 @@
-// The rigged template of the paper (sec. 3, eq. 1-2; DESIGN.md "Skinning"): a triangle mesh
+// The rigged template of the paper (sec. 3, eq. 1-2; docs/design.md "Skinning"): a triangle mesh
 // with per-corner UVs, a joint tree, and per-vertex skinning constants (joint k, LBS weight
 // w_l, SLERP parameter tau). Units: metres. Frame: Y up, the body faces +Z, feet at y = 0.
 #pragma once

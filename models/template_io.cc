@@ -15,9 +15,11 @@
 #include <tiny_gltf.h>
 
 #include "models/error.h"
+#include "models/gltf_skinning.h"
 #include "models/makehuman_import.h"
 #include "models/mesh_export.h"
 #include "models/normals.h"
+#include "models/skinning.h"
 
 // PNG encoding of RGB8 textures: stb_image_write compiled privately into this file.
 #pragma GCC diagnostic push
@@ -176,9 +178,12 @@ void AppendQuaternion(const Eigen::Quaterniond& q, std::vector<float>* out) {
   out->push_back(static_cast<float>(q.w()));
 }
 
-// Builds the glTF model of a template; poses non-empty adds the animation.
+// Builds the glTF model of a template; poses non-empty adds the animation; correctives
+// (one V x 3 rest-space displacement per pose, or null) add one morph target per pose, weighted
+// 1 at its own keyframe (models/gltf_skinning.h).
 tinygltf::Model BuildModel(const Template& tmpl, const std::vector<Pose>& poses,
-                           double frame_rate, const GlbTexture* texture) {
+                           double frame_rate, const GlbTexture* texture,
+                           const std::vector<Eigen::MatrixX3d>* correctives = nullptr) {
   std::string error;
   if (!tmpl.IsValid(&error)) throw Error("template: " + error);
   const int num_vertices = tmpl.num_vertices();
@@ -286,6 +291,20 @@ tinygltf::Model BuildModel(const Template& tmpl, const std::vector<Pose>& poses,
       builder.AddFloats(lbs_values, TINYGLTF_TYPE_SCALAR, TINYGLTF_TARGET_ARRAY_BUFFER, false);
   primitive.attributes[kTauAttribute] =
       builder.AddFloats(tau_values, TINYGLTF_TYPE_SCALAR, TINYGLTF_TARGET_ARRAY_BUFFER, false);
+  const int num_targets = correctives ? static_cast<int>(correctives->size()) : 0;
+  for (int t = 0; t < num_targets; ++t) {
+    const Eigen::MatrixX3d& d = (*correctives)[t];
+    if (d.rows() != num_vertices) throw Error("correctives: wrong vertex count");
+    std::vector<float> displacement;
+    displacement.reserve(3 * num_gltf_vertices);
+    for (const auto& pair : pairs) {
+      for (int c = 0; c < 3; ++c) displacement.push_back(static_cast<float>(d(pair.first, c)));
+    }
+    // glTF requires min/max on morph-target POSITION accessors.
+    primitive.targets.push_back({{"POSITION", builder.AddFloats(displacement, TINYGLTF_TYPE_VEC3,
+                                                                TINYGLTF_TARGET_ARRAY_BUFFER,
+                                                                true)}});
+  }
 
   // Material (and the optional embedded base-colour texture).
   tinygltf::Material material;
@@ -338,7 +357,19 @@ tinygltf::Model BuildModel(const Template& tmpl, const std::vector<Pose>& poses,
         tinygltf::Value(builder.AddUnsignedInts(charts, 0));
   }
   mesh.extras = tinygltf::Value(std::move(mesh_extras));
-  model.meshes.push_back(mesh);
+  if (num_targets > 0) {
+    model.meshes.push_back(mesh);
+    model.meshes.back().weights.assign(num_targets, 0.0);
+    tinygltf::Value::Array names;
+    for (int t = 0; t < num_targets; ++t) {
+      names.push_back(tinygltf::Value("artex_frame_" + std::to_string(t)));
+    }
+    tinygltf::Value::Object extras = model.meshes.back().extras.Get<tinygltf::Value::Object>();
+    extras["targetNames"] = tinygltf::Value(names);  // shape-key names in Blender
+    model.meshes.back().extras = tinygltf::Value(extras);
+  } else {
+    model.meshes.push_back(mesh);
+  }
 
   // Nodes: 0 = skinned mesh, 1 = global similarity, 2 + j = joint j.
   constexpr int kMeshNode = 0;
@@ -452,6 +483,15 @@ tinygltf::Model BuildModel(const Template& tmpl, const std::vector<Pose>& poses,
       add_channel(joint_node(j), "rotation",
                   rotation_track([j](const Pose& p) { return p.joint_rotations[j]; }),
                   TINYGLTF_TYPE_VEC4);
+    }
+    if (num_targets > 0) {
+      // Keyframe f: weight 1 on frame f's corrective, 0 on the others (blended in between).
+      if (num_targets != num_frames) throw Error("correctives: expected one per pose");
+      std::vector<float> morph_weights(static_cast<size_t>(num_frames) * num_targets, 0.0f);
+      for (int f = 0; f < num_frames; ++f) {
+        morph_weights[static_cast<size_t>(f) * num_targets + f] = 1.0f;
+      }
+      add_channel(kMeshNode, "weights", morph_weights, TINYGLTF_TYPE_SCALAR);
     }
     model.animations.push_back(animation);
   }
@@ -1127,6 +1167,76 @@ std::string EncodeAnimatedGlb(const Template& tmpl, const std::vector<Pose>& pos
                               double frame_rate, const GlbTexture* texture) {
   if (poses.empty()) throw Error("poses: expected at least one pose for an animation, found none");
   return Serialize(BuildModel(tmpl, poses, frame_rate, texture));
+}
+
+bool AnimatedGlbOptions::IsValid(std::string* error) const {
+  return corrective.IsValid(error);
+}
+
+std::string EncodeAnimatedGlb(const Template& tmpl, const std::vector<Pose>& poses,
+                              double frame_rate, const GlbTexture* texture,
+                              const AnimatedGlbOptions& options, AnimatedGlbSummary* summary) {
+  if (poses.empty()) throw Error("poses: expected at least one pose for an animation, found none");
+  std::string why;
+  if (!options.IsValid(&why)) throw Error("animated glb options: " + why);
+  std::string error;
+  if (!tmpl.IsValid(&error)) throw Error("template: " + error);
+  AnimatedGlbSummary s;
+  s.frames = static_cast<int>(poses.size());
+  const Skinning skinning(tmpl);
+  std::vector<Eigen::MatrixX3d> correctives;
+  double lbs_sum = 0.0, exact_sum = 0.0;
+  long long count = 0;
+  for (std::size_t f = 0; f < poses.size(); ++f) {
+    if (poses[f].num_joints() != tmpl.num_joints() || !poses[f].AllFinite()) {
+      break;  // BuildModel reports the bad pose
+    }
+    Eigen::MatrixX3d artex_positions, lbs_positions;
+    skinning.Apply(poses[f], &artex_positions);
+    GltfSkinnedPositions(tmpl, poses[f], nullptr, &lbs_positions);
+    const Eigen::VectorXd lbs_error = (lbs_positions - artex_positions).rowwise().norm();
+    s.lbs_max_residual_mm = std::max(s.lbs_max_residual_mm, 1e3 * lbs_error.maxCoeff());
+    lbs_sum += lbs_error.sum();
+    count += lbs_error.size();
+    if (!options.exact) continue;
+    Eigen::MatrixX3d offsets;
+    GltfCorrectiveStats stats;
+    GltfCorrectiveOffsets(tmpl, poses[f], artex_positions, options.corrective, &offsets, &stats);
+    s.singular_vertices += stats.singular_vertices;
+    // The residual of what the file holds: offsets rounded to float as written.
+    const Eigen::MatrixX3d stored = offsets.cast<float>().cast<double>();
+    Eigen::MatrixX3d exact_positions;
+    GltfSkinnedPositions(tmpl, poses[f], &stored, &exact_positions);
+    const Eigen::VectorXd exact_error = (exact_positions - artex_positions).rowwise().norm();
+    s.exact_max_residual_mm = std::max(s.exact_max_residual_mm, 1e3 * exact_error.maxCoeff());
+    exact_sum += exact_error.sum();
+    correctives.push_back(stored);
+  }
+  if (count > 0) s.lbs_mean_residual_mm = 1e3 * lbs_sum / static_cast<double>(count);
+  if (options.exact && count > 0) {
+    s.exact_mean_residual_mm = 1e3 * exact_sum / static_cast<double>(count);
+  } else {
+    s.exact_max_residual_mm = s.lbs_max_residual_mm;
+    s.exact_mean_residual_mm = s.lbs_mean_residual_mm;
+  }
+  s.morph_targets = options.exact ? static_cast<int>(correctives.size()) : 0;
+  const std::string bytes = Serialize(
+      BuildModel(tmpl, poses, frame_rate, texture, options.exact ? &correctives : nullptr));
+  s.bytes = bytes.size();
+  if (summary) *summary = s;
+  return bytes;
+}
+
+void WriteAnimatedGlb(const std::string& path, const Template& tmpl,
+                      const std::vector<Pose>& poses, double frame_rate, const GlbTexture* texture,
+                      const AnimatedGlbOptions& options, AnimatedGlbSummary* summary) {
+  std::string bytes;
+  try {
+    bytes = EncodeAnimatedGlb(tmpl, poses, frame_rate, texture, options, summary);
+  } catch (const Error& e) {
+    Fail(path, e.what());
+  }
+  WriteFileAtomically(path, bytes);
 }
 
 void WriteTemplateGlb(const std::string& path, const Template& tmpl, const GlbTexture* texture) {

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "models/gltf_skinning.h"
 #include "models/pose.h"
 #include "models/template.h"
 
@@ -48,10 +49,43 @@ void WriteAnimatedGlb(const std::string& path, const Template& tmpl,
                       const std::vector<Pose>& poses, double frame_rate,
                       const GlbTexture* texture = nullptr);
 
+// The animated glb's skin is glTF's plain linear blend, which differs from artex's LBS+SLERP
+// wherever a joint twists or a vertex blends two joints (up to several cm at the hips on a
+// walk). With `exact`, every pose also gets a morph target holding the rest-space corrective
+// displacement (models/gltf_skinning.h), weighted 1 at its own keyframe, so that any glTF
+// viewer reproduces artex's fitted geometry at every keyframe (to float precision); between
+// keyframes the correctives blend linearly. Cost: 12 bytes per glTF vertex and frame.
+struct AnimatedGlbOptions {
+  bool exact = true;
+  GltfCorrectiveOptions corrective;
+  bool IsValid(std::string* error) const;
+};
+
+// What an animated glb reproduces: the distance (mm) between a glTF viewer's skinned vertices
+// and artex's Skinning::Apply at the keyframes, over all frames and vertices.
+struct AnimatedGlbSummary {
+  int frames = 0;
+  int morph_targets = 0;
+  double lbs_max_residual_mm = 0.0;    // plain glTF LBS (no correctives)
+  double lbs_mean_residual_mm = 0.0;
+  double exact_max_residual_mm = 0.0;  // as written (equal to lbs_* without `exact`)
+  double exact_mean_residual_mm = 0.0;
+  int singular_vertices = 0;  // (frame, vertex) pairs left uncorrected (GltfCorrectiveOptions)
+  std::size_t bytes = 0;      // file size
+};
+
+void WriteAnimatedGlb(const std::string& path, const Template& tmpl,
+                      const std::vector<Pose>& poses, double frame_rate, const GlbTexture* texture,
+                      const AnimatedGlbOptions& options, AnimatedGlbSummary* summary = nullptr);
+
 // In-memory encoders behind the two writers (GLB bytes).
 std::string EncodeTemplateGlb(const Template& tmpl, const GlbTexture* texture = nullptr);
 std::string EncodeAnimatedGlb(const Template& tmpl, const std::vector<Pose>& poses,
                               double frame_rate, const GlbTexture* texture = nullptr);
+std::string EncodeAnimatedGlb(const Template& tmpl, const std::vector<Pose>& poses,
+                              double frame_rate, const GlbTexture* texture,
+                              const AnimatedGlbOptions& options,
+                              AnimatedGlbSummary* summary = nullptr);
 
 // Reads a file written by WriteTemplateGlb / WriteAnimatedGlb (animations are ignored). The
 // embedded base-colour image, if any and if `texture` is non-null, is returned as PNG bytes

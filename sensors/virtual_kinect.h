@@ -1,4 +1,4 @@
-// The synthetic "virtual Kinect" (DESIGN.md "Ground truth"): renders a textured, articulated
+// The synthetic "virtual Kinect" (docs/design.md "Ground truth"): renders a textured, articulated
 // subject in a static scene (floor, back wall, boxes; sensors/virtual_scene.h), optionally
 // with a second person, into a Kinect-like depth camera (disparity
 // quantisation and noise, drop-outs at depth discontinuities and grazing angles, the IR

@@ -1,4 +1,4 @@
-// EM fitting of the template to one scan per frame (paper sec. 3, eq. 3-5; DESIGN.md
+// EM fitting of the template to one scan per frame (paper sec. 3, eq. 3-5; docs/design.md
 // "Fitting energy"). Per EM iteration: pose the template (S(v; theta), normals), E-step
 // (P_t, mu_t; solvers/estep.h) or nearest-neighbour pairs (ICP baseline), then an M-step
 // (FitSolver: Gauss-Newton or Ceres LM) over the data term plus priors (Tikhonov update,

@@ -1,4 +1,4 @@
-// E-step of the EM fitting (paper eq. 3-4, DESIGN.md "Fitting energy"): the correspondence
+// E-step of the EM fitting (paper eq. 3-4, docs/design.md "Fitting energy"): the correspondence
 // weights p_st between scan points s and posed template vertices t, reduced per template vertex
 // to P_t = sum_s p_st and mu_t = sum_s p_st v_s / P_t (energies/one_to_many_correspondence.h).
 //   dense:     every (s, t) pair, O(S T) (the paper's cost; the exact reference)

@@ -1,4 +1,4 @@
-// M-step solvers of the kinematic fitting (paper eq. 3-5, DESIGN.md "Fitting energy"): minimise
+// M-step solvers of the kinematic fitting (paper eq. 3-5, docs/design.md "Fitting energy"): minimise
 // F(delta) = sum over terms |r(anchor (+) delta)|^2 over the P-dim pose tangent delta, starting
 // at delta = 0. Backends (selected by FitSolverOptions::type, created by FitSolver::Create):
 //   Gauss-Newton:   (J^T J) step = -J^T r with the Tikhonov term inside J (the paper's

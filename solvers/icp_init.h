@@ -1,4 +1,4 @@
-// First-frame initialisation (DESIGN.md "First frame"): the template in a predefined pose
+// First-frame initialisation (docs/design.md "First frame"): the template in a predefined pose
 // (rest pose by default), pre-aligned to the scan by a similarity transform:
 //   1. coarse: yaw from the mean scan normal (the subject faces the camera; the template faces
 //      +Z), the initial pose's (nominal) scale or, on request, the ratio of the vertical

@@ -1,5 +1,5 @@
 // Pairwise MRF problems with per-node candidate labels and the solver interface that minimises
-// them (view selection for texturing, DESIGN.md "Texture", paper eq. 14):
+// them (view selection for texturing, docs/design.md "Texture", paper eq. 14):
 //   E(x) = sum_i D_i(x_i) + lambda * sum_{e=(i,j)} w_e * c_e(x_i, x_j),
 // D_i = +inf outside node i's candidate set (a triangle not visible in image l). Layout,
 // costs and the guarantees of each backend: docs/mrf.md.

@@ -105,6 +105,32 @@ TEST(ConfigTest, NonFiniteNumberIsRejected) {
   EXPECT_THROW(c.Get("x", &x), Error);
 }
 
+// Issue 17: a bad override on the built-in defaults (no file) named an empty file name
+// (": unknown key ..."); messages now name the override, or "built-in defaults".
+TEST(ConfigTest, OverrideErrorsNameTheOverrideNotAnEmptyFileName) {
+  Config c;
+  c.Set("fitting.no_such_option", "1");
+  std::string msg = ErrorOf([&] { c.Section("fitting").CheckKeys({"solver", "max_iterations"}); });
+  EXPECT_EQ(msg.rfind("override fitting.no_such_option: unknown key 'fitting.no_such_option'", 0),
+            0u)
+      << msg;
+  EXPECT_NE(msg.find("max_iterations"), std::string::npos) << msg;
+
+  Config typed;
+  typed.Set("fitting.max_iterations", "many");
+  int it = 0;
+  msg = ErrorOf([&] { typed.Section("fitting").Get("max_iterations", &it); });
+  EXPECT_EQ(msg.rfind("override fitting.max_iterations: expected an integer", 0), 0u) << msg;
+
+  // Keys from a file keep naming the file, also next to overrides.
+  Config file = Config::FromString("fitting: {bad_key: 1}\n", "run.yaml");
+  file.Set("fitting.solver", "gauss_newton");
+  msg = ErrorOf([&] { file.Section("fitting").CheckKeys({"solver"}); });
+  EXPECT_EQ(msg.rfind("run.yaml: unknown key 'fitting.bad_key'", 0), 0u) << msg;
+  // A configuration without a file or overrides is called "built-in defaults".
+  EXPECT_EQ(Config().Path("texture"), "built-in defaults: texture");
+}
+
 }  // namespace
 }  // namespace artex
 

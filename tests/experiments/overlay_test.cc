@@ -199,5 +199,22 @@ TEST_F(OverlayTest, CommandWritesFramesAndAContactSheet) {
   EXPECT_EQ(s.rows, 120);
 }
 
+// Issue 17: `artex overlay RUN` on `artex track` output found no recording when the track
+// command was given a relative path and overlay ran from another directory; the run now names
+// the recording by its absolute path (summary.json "sequence").
+TEST_F(OverlayTest, RecordingDefaultsFromATrackRunFromAnyDirectory) {
+  const std::string run = (*dir_ / "track_run").string();
+  const std::string track =
+      "cd '" + dir_->string() + "' && '" + std::string(ARTEX_BINARY) +
+      "' track sequence -o track_run -q --no-texture --max-frames 2 "
+      "--set fitting.max_fit_vertices=800 --set preprocess.background.min_valid_samples=2 > '" +
+      (*dir_ / "out.txt").string() + "' 2>&1";
+  const int raw = std::system(track.c_str());
+  ASSERT_TRUE(WIFEXITED(raw) && WEXITSTATUS(raw) == 0) << CliOutput();
+  const std::string out = (*dir_ / "overlay_from_track").string();
+  ASSERT_EQ(Cli("overlay -q '" + run + "' -o '" + out + "' --frames 1"), 0) << CliOutput();
+  EXPECT_TRUE(fs::exists(out + "/000001.png"));
+}
+
 }  // namespace
 }  // namespace artex

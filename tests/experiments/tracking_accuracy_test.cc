@@ -1,4 +1,4 @@
-// End-to-end tracking accuracy on the virtual Kinect (DESIGN.md "Ground truth";
+// End-to-end tracking accuracy on the virtual Kinect (docs/design.md "Ground truth";
 // docs/results-tracking.md): for each built-in motion (walk, arm_raise, turn, bend) a 60-frame
 // sequence with default sensor noise and a subject shaped differently from the template is
 // synthesised once per process and tracked by RunPipeline with configs/default.yaml (texturing

@@ -134,7 +134,7 @@ Eigen::Vector3d RigidChainReference(const Template& t, const Pose& pose, int ver
   return (m * x).head<3>();
 }
 
-// Literal eq. 1-2 of DESIGN.md with the SLERP weights w_s, wbar_s (no cylinder shortcut).
+// Literal eq. 1-2 of docs/design.md with the SLERP weights w_s, wbar_s (no cylinder shortcut).
 Eigen::Vector3d LiteralReference(const Template& t, const Pose& pose, int vertex) {
   const int k = t.vertex_joint[vertex];
   const Joint& joint = t.joints[k];

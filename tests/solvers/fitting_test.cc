@@ -2,7 +2,7 @@
 // a depth-camera-like scan sampled from its front-facing surface with noise, a perturbed
 // start; the EM fitter must recover the pose (Gauss-Newton and Ceres LM), both M-step backends
 // must reach the same cost, the ICP baseline and the dense E-step are reported, and the
-// literal energy with a free scale must show the scale collapse of DESIGN.md.
+// literal energy with a free scale must show the scale collapse of docs/design.md.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -227,7 +227,7 @@ TEST_F(FittingTest, OneToOneBaselineRunsAndIsReported) {
 TEST_F(FittingTest, TruncatedVersusDenseEStep) {
   // Per-vertex position difference after fitting, truncated (default) vs the dense exact
   // E-step (same options otherwise, scale fixed). The dense weights' far field pulls every
-  // mu_t towards the scan centroid (DESIGN.md), so even with a fixed scale the limbs fold in:
+  // mu_t towards the scan centroid (docs/design.md), so even with a fixed scale the limbs fold in:
   // the truncated fit must be the accurate one.
   EMFitterOptions truncated = DefaultOptions();
   EMFitterOptions dense = truncated;
@@ -251,7 +251,7 @@ TEST_F(FittingTest, TruncatedVersusDenseEStep) {
 }
 
 TEST_F(FittingTest, LiteralEnergyWithFreeScaleShrinksTheScale) {
-  // DESIGN.md: the dense, unnormalised eq. 4 with a free global scale is degenerate (the far
+  // docs/design.md: the dense, unnormalised eq. 4 with a free global scale is degenerate (the far
   // field pulls every mu_t towards the scan centroid); the robust default is not.
   EMFitterOptions literal = DefaultOptions();
   literal.estep.mode = EStepMode::kDense;

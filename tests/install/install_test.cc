@@ -1,0 +1,71 @@
+// `cmake --install` of this build into a temporary prefix, then a tiny external CMake project
+// (tests/install/consumer) configured with find_package(artex), built against the installed
+// tree and run; also imports the installed Python package when it was built.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// Runs `command` through the shell, returns its exit status and its output (stdout+stderr).
+int RunCommand(const std::string& command, std::string* output) {
+  output->clear();
+  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
+  if (!pipe) return -1;
+  char buffer[4096];
+  while (fgets(buffer, sizeof(buffer), pipe)) *output += buffer;
+  const int status = pclose(pipe);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+std::string Quoted(const fs::path& p) { return "'" + p.string() + "'"; }
+
+TEST(InstallTest, ExternalProjectBuildsAndRunsAgainstInstalledTree) {
+  const fs::path root =
+      fs::temp_directory_path() / ("artex-install-test-" + std::to_string(getpid()));
+  fs::remove_all(root);
+  const fs::path prefix = root / "prefix";
+  std::string out;
+  ASSERT_EQ(RunCommand("cmake --install " + Quoted(ARTEX_BUILD_DIR) + " --prefix " + Quoted(prefix),
+                       &out),
+            0)
+      << out;
+  EXPECT_TRUE(fs::exists(prefix / "lib" / "cmake" / "artex" / "artexConfig.cmake"));
+  EXPECT_TRUE(fs::exists(prefix / "include" / "artex" / "models" / "skinning.h"));
+  EXPECT_TRUE(fs::exists(prefix / "lib" / "libartex_solvers.a"));
+  EXPECT_TRUE(fs::exists(prefix / "bin" / "artex"));
+
+  const fs::path build = root / "consumer-build";
+  ASSERT_EQ(RunCommand("cmake -S " +
+                           Quoted(fs::path(ARTEX_SOURCE_DIR) / "tests" / "install" / "consumer") +
+                           " -B " + Quoted(build) + " -G Ninja -DCMAKE_BUILD_TYPE=Release" +
+                           " -DCMAKE_PREFIX_PATH=" + Quoted(prefix),
+                       &out),
+            0)
+      << out;
+  ASSERT_EQ(RunCommand("cmake --build " + Quoted(build), &out), 0) << out;
+  ASSERT_EQ(RunCommand(Quoted(build / "artex_consumer"), &out), 0) << out;
+  EXPECT_NE(out.find("artex consumer:"), std::string::npos) << out;
+  EXPECT_NE(out.find("converged"), std::string::npos) << out;
+
+  // The installed tool runs from the prefix.
+  ASSERT_EQ(RunCommand(Quoted(prefix / "bin" / "artex") + " --version", &out), 0) << out;
+
+  const std::string python_dir = ARTEX_PYTHON_INSTALL_DIR;
+  if (!python_dir.empty()) {
+    ASSERT_EQ(RunCommand("cd / && PYTHONPATH=" + Quoted(prefix / python_dir) + " " + ARTEX_PYTHON +
+                             " -c 'import artex; print(artex.__file__)'",
+                         &out),
+              0)
+        << out;
+    EXPECT_NE(out.find(prefix.string()), std::string::npos) << out;
+  }
+  fs::remove_all(root);
+}
+
+}  // namespace
