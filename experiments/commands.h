@@ -15,5 +15,6 @@ void RegisterRenderCommand(CLI::App* app);     // artex render
 void RegisterExperimentCommand(CLI::App* app); // artex experiment
 void RegisterImportCommand(CLI::App* app);     // artex import
 void RegisterOverlayCommand(CLI::App* app);    // artex overlay
+void RegisterStreamCommands(CLI::App* app);    // artex stream encode|play
 
 }  // namespace artex
