@@ -127,8 +127,10 @@ void BM_AtlasEncode(benchmark::State& state) {
 }
 BENCHMARK(BM_AtlasEncode)
     ->ArgNames({"codec", "kbps"})
-    ->Args({1, 900})
-    ->Args({2, 900})
+    ->Args({1, 600})
+    ->Args({2, 600})
+    ->Args({1, 1500})
+    ->Args({2, 1500})
     ->Unit(benchmark::kMillisecond)
     ->Iterations(kFrames);
 
