@@ -80,9 +80,9 @@ void WriteFramesCsv(const std::string& path, const PipelineResult& result) {
                << Fixed(r.texture.seam_rms_before) << "," << Fixed(r.texture.seam_rms_after) << ","
                << Fixed(r.mean_vertex_error_mm) << "," << Fixed(r.max_vertex_error_mm) << ","
                << Fixed(r.mean_joint_error_mm) << ","
-               << (r.texture_quality.views ? Fixed(r.texture_quality.psnr_db) : "") << ","
-               << (r.texture_quality.views ? Fixed(r.texture_quality.ssim) : "") << ","
-               << (r.texture_quality.views ? Fixed(r.texture_quality.coverage) : "") << "\n";
+               << (r.texture_quality.views ? Fixed(r.texture_quality.psnr_db) : "nan") << ","
+               << (r.texture_quality.views ? Fixed(r.texture_quality.ssim) : "nan") << ","
+               << (r.texture_quality.views ? Fixed(r.texture_quality.coverage) : "nan") << "\n";
   }
   WriteFileAtomically(path, frames_csv.str());
 }
