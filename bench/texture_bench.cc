@@ -133,7 +133,7 @@ void BM_AddFrame(benchmark::State& state) {
   // Identifies the sequence of labellings (equal hashes: identical view selection).
   state.counters["labels_hash"] = static_cast<double>(labels_hash % 1000000007ull);
 }
-// Arguments: TextureTermOptions::switch_cost in thousandths (0: the paper's energy, default);
+// Arguments: TextureTermOptions::switch_cost in thousandths (0: the paper's energy; 20: the default);
 // surface-aware sampling (1: default, 0: plain bilinear sampling and vertex colours wherever a
 // triangle around the vertex is visible); alpha-expansion sweeps per frame (0: the default, one;
 // 50: converge every frame). energy_gap: median (max) over the frames of (E - E*) / E*, E* the

@@ -22,14 +22,15 @@ struct TextureTermOptions {
   double seam_distance_scale = 0.10;
   // Views with W below this are treated as not visible (grazing views give smeared texels).
   double min_quality = 0.05;
-  // Hysteresis (not in the paper; 0 = the paper's energy): added to D(f, l) for every label l
-  // other than f's previous image while that image is still pooled, so a triangle keeps its
-  // source until another image is better by more than this. With the lifetime term alone the
-  // newest image is cheaper by (1 - beta) / t_max per frame of age for every triangle, and a
-  // whole region relabelled at once keeps its seams (docs/texturing.md): without hysteresis
-  // most visible triangles move to the newest image every frame. One frame of age costs
-  // (1 - beta) / t_max (0.005 at the defaults). >= 0.
-  double switch_cost = 0.0;
+  // Hysteresis (not in the paper; 0 = the paper's energy, configs/paper/texturing.yaml):
+  // added to D(f, l) for every label l other than f's previous image while that image is still
+  // pooled, so a triangle keeps its source until another image is better by more than this.
+  // With the lifetime term alone the newest image is cheaper by (1 - beta) / t_max per frame
+  // of age for every triangle, and a whole region relabelled at once keeps its seams
+  // (docs/texturing.md): without hysteresis most visible triangles move to the newest image
+  // every frame. One frame of age costs (1 - beta) / t_max (0.005 at the defaults), so the
+  // default 0.02 (incremental texturing) is four frames of age. >= 0.
+  double switch_cost = 0.02;
 
   bool IsValid(std::string* error) const;
 };

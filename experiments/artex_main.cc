@@ -23,6 +23,7 @@ int main(int argc, char** argv) {
   artex::RegisterExperimentCommand(&app);
   artex::RegisterImportCommand(&app);
   artex::RegisterOverlayCommand(&app);
+  artex::RegisterStreamCommands(&app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -23,5 +23,6 @@ void RegisterSlurmSubcommands(CLI::App* app, CLI::App* experiment);
 // Runs scripts/plot_results.py on an experiment's output folder (prints a hint when python3
 // with matplotlib is missing).
 void MakeExperimentPlots(const std::string& out);
+void RegisterStreamCommands(CLI::App* app);    // artex stream encode|play
 
 }  // namespace artex

@@ -17,6 +17,8 @@
 
 #include "experiments/pipeline_output.h"
 #include "experiments/pose_csv.h"
+#include "experiments/stream_sinks.h"
+#include "experiments/texture_evaluation.h"
 #include "models/error.h"
 #include "models/mesh_export.h"
 #include "models/normals.h"
@@ -202,6 +204,19 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
       if (s >= 0) joint_pairs.emplace_back(j, s);
     }
   }
+  // Novel-view texture quality needs the true texture as well.
+  std::unique_ptr<TruthScene> truth_scene;
+  if (result.has_ground_truth && texturer && options.texture_quality_every > 0 &&
+      subject->has_uvs() && !sequence->GroundTruthTexturePath().empty()) {
+    truth_scene = std::make_unique<TruthScene>();
+    truth_scene->subject = subject.get();
+    truth_scene->texture = cv::imread(sequence->GroundTruthTexturePath(), cv::IMREAD_COLOR);
+    truth_scene->camera = reader.calibration().color;
+    if (truth_scene->texture.empty()) truth_scene.reset();
+  }
+  FrameSinks sinks(options, tmpl, calibration, texturer.get(), out_dir);
+  double quality_psnr_sum = 0.0, quality_ssim_sum = 0.0;
+  int quality_evaluations = 0;
 
   std::vector<Pose> poses;
   std::vector<int> pose_frames;
@@ -372,6 +387,7 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
         }
       }
     }
+    sinks.AddFrame(i, frame_pose);
     if (options.export_meshes) {
       char name[64];
       std::snprintf(name, sizeof(name), "/meshes/%06d.ply", i);
@@ -399,6 +415,22 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
       // Lost: too far from the truth, or a failed fit (its kept pose is no measurement).
       lost += record.mean_vertex_error_mm > options.lost_threshold_mm || !record.fit.ok();
       ++evaluated;
+      const int every = options.texture_quality_every;
+      if (truth_scene && ((i - begin + 1) % every == 0 || i == end - 1)) {
+        truth_scene->vertices = truth.vertices;
+        record.texture_quality =
+            EvaluateNovelViews(tmpl, tracked_in_truth, texturer->Atlas(),
+                               texturer->triangle_frames(), *truth_scene, options.held_out);
+        const NovelViewQuality& q = record.texture_quality;
+        if (std::isfinite(q.psnr_db) && std::isfinite(q.ssim)) {
+          result.novel_view_psnr_db = q.psnr_db;
+          result.novel_view_ssim = q.ssim;
+          result.texture_coverage = q.coverage;
+          quality_psnr_sum += q.psnr_db;
+          quality_ssim_sum += q.ssim;
+          ++quality_evaluations;
+        }
+      }
     } else {
       record.mean_vertex_error_mm = record.max_vertex_error_mm = record.mean_joint_error_mm =
           std::numeric_limits<double>::quiet_NaN();
@@ -437,6 +469,15 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   }
   result.texture_ms_per_frame = 1000.0 * texture_seconds / fitted;
   result.stream_kbit_per_s = 8.0 * stream_bytes / fitted * calibration.frame_rate / 1000.0;
+  if (quality_evaluations > 0) {
+    result.mean_novel_view_psnr_db = quality_psnr_sum / quality_evaluations;
+    result.mean_novel_view_ssim = quality_ssim_sum / quality_evaluations;
+  } else {
+    result.novel_view_psnr_db = result.novel_view_ssim = result.texture_coverage =
+        result.mean_novel_view_psnr_db = result.mean_novel_view_ssim =
+            std::numeric_limits<double>::quiet_NaN();
+  }
+  sinks.Finish(&result);
   if (evaluated > 0) {
     result.mean_vertex_error_mm = error_sum / evaluated;
     result.mean_joint_error_mm = joint_sum / evaluated;

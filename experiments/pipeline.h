@@ -16,6 +16,8 @@
 #include "solvers/em_fitter.h"
 #include "solvers/fit_quality.h"
 #include "solvers/initializer.h"
+#include "stream/stream_sender.h"
+#include "texture/texture_quality.h"
 #include "texture/texturer.h"
 
 namespace artex {
@@ -63,6 +65,15 @@ struct PipelineOptions {
   // place too (the better fit kept): a wrong facing chosen at the start, which tracking keeps
   // doubtful but never loses, is corrected. 0: never.
   int reinitialise_after_doubtful = 10;
+  // With ground truth: novel-view texture quality (texture/texture_quality.h) every n-th frame
+  // and at the last frame; 0: off.
+  int texture_quality_every = 10;
+  HeldOutViewOptions held_out;  // pipeline.texture_quality_yaws_deg, _height
+  // Write the atlas after every fitted frame (atlases/NNNNNN.png, and the textured triangles
+  // as atlases/NNNNNN_textured.png, one row): the input of `artex stream encode RUN/`.
+  bool export_atlases = false;
+  std::string stream_path;  // also write the tele-presence stream here (.artx; "" none)
+  StreamOptions stream;     // section stream
 
   bool IsValid(std::string* error) const;
 };
@@ -81,6 +92,8 @@ struct FrameRecord {
   std::string init_report;       // the initialisation's hypotheses and choice
   SegmentationStats segmentation;  // foreground segmentation (no background frames)
   TextureFrameSummary texture;
+  // Novel-view texture quality at this frame (views == 0: not evaluated).
+  NovelViewQuality texture_quality;
   double preprocess_seconds = 0.0;
   int scan_points = 0;
   // Ground truth metrics (NaN without ground truth).
@@ -107,6 +120,12 @@ struct PipelineResult {
   double fit_ms_per_frame = 0.0;  // tracking frames (initialisations apart)
   double texture_ms_per_frame = 0.0;
   double stream_kbit_per_s = 0.0;  // pose + texture updates, compressed, at the frame rate
+  // Novel-view texture quality with ground truth (NaN without): at the last evaluated frame,
+  // and the mean over the evaluated frames.
+  double novel_view_psnr_db = 0.0, novel_view_ssim = 0.0, texture_coverage = 0.0;
+  double mean_novel_view_psnr_db = 0.0, mean_novel_view_ssim = 0.0;
+  bool has_stream = false;
+  StreamSummary stream;  // with options.stream_path
   std::vector<std::string> warnings;
   bool glb_written = false;
   AnimatedGlbSummary glb;  // tracked.glb against artex's skinning (residuals in mm)

@@ -377,7 +377,9 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.CheckKeys({"texture", "colour_term", "first_frame", "max_frames", "export_meshes",
                "export_foreground", "export_glb", "glb_exact", "glb_exact_max_frames", "export_bvh",
                "export_textured_mesh", "mesh_up_axis", "lost_threshold_mm",
-               "texture_doubtful_frames", "reinitialise_on", "reinitialise_after_doubtful"});
+               "texture_doubtful_frames", "reinitialise_on", "reinitialise_after_doubtful",
+               "texture_quality_every", "texture_quality_yaws_deg", "texture_quality_height",
+               "export_atlases", "stream"});
   c.Get("texture", &o->texture);
   c.Get("colour_term", &o->colour_term);
   c.Get("first_frame", &o->first_frame);
@@ -394,6 +396,46 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("texture_doubtful_frames", &o->texture_doubtful_frames);
   c.GetEnum("reinitialise_on", ReinitialiseOnNames(), &o->reinitialise_on);
   c.Get("reinitialise_after_doubtful", &o->reinitialise_after_doubtful);
+  c.Get("texture_quality_every", &o->texture_quality_every);
+  c.Get("texture_quality_yaws_deg", &o->held_out.yaws_deg);
+  c.Get("texture_quality_height", &o->held_out.height);
+  c.Get("export_atlases", &o->export_atlases);
+  c.Get("stream", &o->stream_path);
+}
+
+void BindStream(const Config& c, StreamOptions* o) {
+  c.CheckKeys({"codec", "texture_kbps", "buffer_ms", "speed", "threads", "min_quantizer",
+               "keyframe_interval", "video_size", "pose_scale_step", "pose_translation_step",
+               "pose_rotation_step", "pose_prediction", "measure_pose_error"});
+  if (c.Has("codec")) {
+    std::string name;
+    c.Get("codec", &name);
+    try {
+      o->video.codec = ParseVideoCodec(name);
+    } catch (const Error& e) {
+      throw Error(c.Path("codec") + ": " + e.what());
+    }
+  }
+  c.Get("texture_kbps", &o->video.bitrate_kbps);
+  c.Get("buffer_ms", &o->video.buffer_ms);
+  c.Get("speed", &o->video.speed);
+  c.Get("threads", &o->video.threads);
+  c.Get("min_quantizer", &o->video.min_quantizer);
+  c.Get("keyframe_interval", &o->keyframe_interval);
+  c.Get("video_size", &o->video_size);
+  c.Get("pose_scale_step", &o->pose.scale_step);
+  c.Get("pose_translation_step", &o->pose.translation_step);
+  c.Get("pose_rotation_step", &o->pose.rotation_step);
+  if (c.Has("pose_prediction")) {
+    std::string name;
+    c.Get("pose_prediction", &name);
+    try {
+      o->pose.prediction = ParsePosePrediction(name);
+    } catch (const Error& e) {
+      throw Error(c.Path("pose_prediction") + ": " + e.what());
+    }
+  }
+  c.Get("measure_pose_error", &o->measure_pose_error);
 }
 
 }  // namespace
@@ -416,6 +458,11 @@ bool PipelineOptions::IsValid(std::string* error) const {
     return false;
   }
   if (texture && !texturing.IsValid(error)) return false;
+  if (!held_out.IsValid(&inner)) {
+    if (error) *error = "pipeline.texture_quality_*: " + inner;
+    return false;
+  }
+  if (!stream.IsValid(error)) return false;
   std::ostringstream msg;
   if (first_frame < 0)
     msg << "pipeline.first_frame: expected >= 0, found " << first_frame;
@@ -428,13 +475,15 @@ bool PipelineOptions::IsValid(std::string* error) const {
     msg << "pipeline.lost_threshold_mm: expected > 0, found " << lost_threshold_mm;
   else if (glb_exact_max_frames < 0)
     msg << "pipeline.glb_exact_max_frames: expected >= 0, found " << glb_exact_max_frames;
+  else if (texture_quality_every < 0)
+    msg << "pipeline.texture_quality_every: expected >= 0, found " << texture_quality_every;
   if (msg.str().empty()) return true;
   if (error) *error = msg.str();
   return false;
 }
 
 PipelineOptions LoadPipelineOptions(const Config& config) {
-  config.CheckKeys({"input", "preprocess", "fitting", "texture", "pipeline"});
+  config.CheckKeys({"input", "preprocess", "fitting", "texture", "pipeline", "stream"});
   PipelineOptions o;
   BindInput(config.Section("input"), &o.input);
   BindPreprocess(config.Section("preprocess"), &o.preprocess);
@@ -444,6 +493,7 @@ PipelineOptions LoadPipelineOptions(const Config& config) {
   o.initializer.quality = o.quality;  // the initialiser ranks and labels with the same options
   BindTexture(config.Section("texture"), &o.texturing);
   BindPipeline(config.Section("pipeline"), &o);
+  BindStream(config.Section("stream"), &o.stream);
   std::string why;
   if (!o.IsValid(&why)) throw Error(config.Path("") + " " + why);
   return o;

@@ -33,6 +33,22 @@ nlohmann::json QualityJson(const FitQuality& q) {
           {"score", q.score}};
 }
 
+nlohmann::json StreamJson(const PipelineResult& result) {
+  if (!result.has_stream) return nullptr;
+  const StreamSummary& s = result.stream;
+  return {{"frames", s.frames},
+          {"keyframes", s.keyframes},
+          {"header_bytes", s.header_bytes},
+          {"template_glb_bytes", s.glb_bytes},
+          {"pose_kbit_per_s", s.pose_kbps},
+          {"texture_kbit_per_s", s.texture_kbps},
+          {"total_kbit_per_s", s.total_kbps},
+          {"max_hand_error_mm", s.max_hand_error_mm},
+          {"mean_hand_error_mm", s.mean_hand_error_mm},
+          {"encode_ms_per_frame", s.mean_encode_ms},
+          {"max_encode_ms", s.max_encode_ms}};
+}
+
 }  // namespace
 
 void WriteFramesCsv(const std::string& path, const PipelineResult& result) {
@@ -43,7 +59,8 @@ void WriteFramesCsv(const std::string& path, const PipelineResult& result) {
                 "too_few_points,non_finite,diverged,scale,preprocess_ms,estep_ms,mstep_ms,fit_ms,"
                 "texture_ms,texture_mrf_ms,texture_energy,texture_lower_bound,pool_size,"
                 "seam_edges,changed_triangles,seam_rms_before,seam_rms_after,"
-                "mean_vertex_error_mm,max_vertex_error_mm,mean_joint_error_mm\n";
+                "mean_vertex_error_mm,max_vertex_error_mm,mean_joint_error_mm,novel_view_psnr_db,"
+                "novel_view_ssim,texture_coverage\n";
   for (const FrameRecord& r : result.frames) {
     frames_csv << r.frame << "," << r.skipped << "," << r.scan_points << ","
                << r.segmentation.subject_pixels << "," << r.segmentation.tracked << ","
@@ -62,7 +79,10 @@ void WriteFramesCsv(const std::string& path, const PipelineResult& result) {
                << r.texture.seam_edges << "," << r.texture.changed_triangles << ","
                << Fixed(r.texture.seam_rms_before) << "," << Fixed(r.texture.seam_rms_after) << ","
                << Fixed(r.mean_vertex_error_mm) << "," << Fixed(r.max_vertex_error_mm) << ","
-               << Fixed(r.mean_joint_error_mm) << "\n";
+               << Fixed(r.mean_joint_error_mm) << ","
+               << (r.texture_quality.views ? Fixed(r.texture_quality.psnr_db) : "nan") << ","
+               << (r.texture_quality.views ? Fixed(r.texture_quality.ssim) : "nan") << ","
+               << (r.texture_quality.views ? Fixed(r.texture_quality.coverage) : "nan") << "\n";
   }
   WriteFileAtomically(path, frames_csv.str());
 }
@@ -180,7 +200,13 @@ void WriteMetricsJson(const std::string& path, const PipelineResult& result) {
                    {"init_ms_per_initialisation", result.init_ms_per_initialisation},
                    {"quality_ms_per_frame", result.quality_ms_per_frame},
                    {"texture_ms_per_frame", result.texture_ms_per_frame},
-                   {"stream_kbit_per_s", result.stream_kbit_per_s}});
+                   {"stream_kbit_per_s", result.stream_kbit_per_s},
+                   {"novel_view_psnr_db", Number(result.novel_view_psnr_db)},
+                   {"novel_view_ssim", Number(result.novel_view_ssim)},
+                   {"texture_coverage", Number(result.texture_coverage)},
+                   {"mean_novel_view_psnr_db", Number(result.mean_novel_view_psnr_db)},
+                   {"mean_novel_view_ssim", Number(result.mean_novel_view_ssim)},
+                   {"stream", StreamJson(result)}});
 }
 
 }  // namespace artex

@@ -575,6 +575,10 @@ const std::vector<MetricInfo>& Metrics() {
       {"mrf_iterations", true, false, "view-selection (MRF) solver iterations per frame (mean; warm-started)"},
       {"pool_size", true, false, "images in the pool (mean over frames)"},
       {"stream_kbit_per_s", true, false, "compressed pose + texture update stream at the frame rate"},
+      {"novel_view_psnr_db", false, false, "ground truth: PSNR (dB) of the textured model against the true render from held-out views (last evaluated frame)"},
+      {"novel_view_ssim", false, false, "ground truth: SSIM of the same renders (last evaluated frame)"},
+      {"texture_coverage", false, false, "ground truth: fraction of the true visible surface the model textures (held-out views)"},
+      {"mean_novel_view_psnr_db", false, false, "novel-view PSNR averaged over the evaluated frames"},
       {"preprocess_ms", true, true, "preprocessing per frame (ms)"},
       {"estep_ms", true, true, "E-step per frame (ms)"},
       {"mstep_ms", true, true, "M-step per frame (ms)"},
@@ -966,6 +970,10 @@ void RunSingle(const std::string& config_path, const std::string& sequence_dir,
     put("mrf_iterations", Mean(mrf_iterations));
     put("pool_size", Mean(pool));
     put("stream_kbit_per_s", result.stream_kbit_per_s);
+    put("novel_view_psnr_db", result.novel_view_psnr_db);
+    put("novel_view_ssim", result.novel_view_ssim);
+    put("texture_coverage", result.texture_coverage);
+    put("mean_novel_view_psnr_db", result.mean_novel_view_psnr_db);
   }
   if (fitted > 0) {
     put("preprocess_ms", Mean(pre));

@@ -45,7 +45,7 @@ std::string IntrinsicsConfigValue(const std::string& name_or_file) {
 
 void RegisterTrackCommand(CLI::App* app) {
   struct Args {
-    std::string sequence, config, out, template_path, intrinsics, subject;
+    std::string sequence, config, out, template_path, intrinsics, subject, stream;
     std::vector<std::string> overrides;
     bool export_meshes = false;
     bool no_texture = false;
@@ -75,6 +75,9 @@ void RegisterTrackCommand(CLI::App* app) {
                   "TUM RGB-D intrinsics: a YAML file or a preset fr1|fr2|fr3|kinect (default: "
                   "<folder>/camera.yaml; config key input.intrinsics)");
   cmd->add_flag("-q,--quiet", args->quiet, "no progress line");
+  cmd->add_option("--stream", args->stream,
+                  "also write the tele-presence stream (.artx, docs/streaming.md; config key "
+                  "pipeline.stream, options in the stream section)");
   cmd->add_option("--subject", args->subject,
                   "who to track without background frames: central (default), nearest, largest, "
                   "or the person at pixel X,Y (config keys preprocess.segmentation.subject, "
@@ -108,6 +111,7 @@ void RegisterTrackCommand(CLI::App* app) {
     }
     if (args->export_meshes) config.Set("pipeline.export_meshes", "true");
     if (args->no_texture) config.Set("pipeline.texture", "false");
+    if (!args->stream.empty()) config.Set("pipeline.stream", YamlQuoted(args->stream));
     if (args->max_frames > 0) config.Set("pipeline.max_frames", std::to_string(args->max_frames));
     if (!args->intrinsics.empty())
       config.Set("input.intrinsics", IntrinsicsConfigValue(args->intrinsics));
@@ -144,7 +148,23 @@ void RegisterTrackCommand(CLI::App* app) {
     std::printf("EM iterations per frame: %.1f\n", result.mean_em_iterations);
     std::printf("fitting: %.1f ms/frame, texturing: %.1f ms/frame\n", result.fit_ms_per_frame,
                 result.texture_ms_per_frame);
-    std::printf("stream: %.1f kbit/s (pose + texture updates)\n", result.stream_kbit_per_s);
+    std::printf("stream estimate: %.1f kbit/s (raw pose + JPEG of the changed atlas patch)\n",
+                result.stream_kbit_per_s);
+    if (result.has_stream) {
+      const StreamSummary& s = result.stream;
+      std::printf(
+          "stream: %s: pose %.2f kbit/s, texture %.1f kbit/s, total %.1f kbit/s, %d "
+          "keyframes, hand error <= %.3f mm, encoding %.1f ms/frame\n",
+          args->stream.c_str(), s.pose_kbps, s.texture_kbps, s.total_kbps, s.keyframes,
+          s.max_hand_error_mm, s.mean_encode_ms);
+    }
+    if (result.has_ground_truth && result.novel_view_psnr_db == result.novel_view_psnr_db) {
+      std::printf(
+          "texture vs ground truth (held-out views): PSNR %.2f dB, SSIM %.4f, coverage "
+          "%.1f%% (last evaluation; mean PSNR %.2f dB)\n",
+          result.novel_view_psnr_db, result.novel_view_ssim, 100.0 * result.texture_coverage,
+          result.mean_novel_view_psnr_db);
+    }
     if (result.has_ground_truth) {
       std::printf(
           "mean vertex error: %.2f mm (max %.2f mm), mean joint error: %.2f mm, lost: %.1f%%\n",

@@ -241,10 +241,14 @@ cv::Mat Texturer::LabelMap() const {
 
 void RenderTextured(const Template& tmpl, const Eigen::MatrixX3d& posed_vertices,
                     const cv::Mat& atlas, const PinholeCamera& camera, cv::Mat* image,
-                    cv::Mat* mask) {
+                    cv::Mat* mask, const std::vector<int>* triangle_frames) {
   if (atlas.type() != CV_8UC3 || atlas.empty())
     throw Error("RenderTextured: expected an 8-bit 3-channel atlas image");
   if (!tmpl.has_uvs()) throw Error("RenderTextured: the template has no UV atlas");
+  if (triangle_frames && static_cast<int>(triangle_frames->size()) != tmpl.num_triangles())
+    throw Error("RenderTextured: expected one source frame per triangle (" +
+                std::to_string(tmpl.num_triangles()) + "), found " +
+                std::to_string(triangle_frames->size()));
   RasterBuffers buffers;
   Rasterize(posed_vertices, tmpl.triangles, camera, RasterOptions(), &buffers);
   *image = cv::Mat(camera.height, camera.width, CV_8UC3, cv::Scalar(0, 0, 0));
@@ -253,7 +257,7 @@ void RenderTextured(const Template& tmpl, const Eigen::MatrixX3d& posed_vertices
     for (int u = 0; u < camera.width; ++u) {
       const int i = buffers.index(u, v);
       const int f = buffers.triangle_id[i];
-      if (f < 0) continue;
+      if (f < 0 || (triangle_frames && (*triangle_frames)[f] < 0)) continue;
       const Eigen::Vector2f b = buffers.barycentric[i];
       const Eigen::Vector2d uv = (1.0 - b.x() - b.y()) * tmpl.uvs.row(tmpl.uv_triangles(f, 0)) +
                                  b.x() * tmpl.uvs.row(tmpl.uv_triangles(f, 1)) +

@@ -113,9 +113,11 @@ class Texturer {
 };
 
 // Renders a textured template (per-corner UVs into `atlas`, bilinear) through a camera: the
-// image (CV_8UC3, BGR) and a coverage mask (CV_8UC1). Background pixels are black.
+// image (CV_8UC3, BGR) and a coverage mask (CV_8UC1). Background pixels are black. With
+// `triangle_frames` (F, as Texturer::triangle_frames), triangles with a negative entry are
+// left out of the mask (and black): the mask then marks the textured surface.
 void RenderTextured(const Template& tmpl, const Eigen::MatrixX3d& posed_vertices,
                     const cv::Mat& atlas, const PinholeCamera& camera, cv::Mat* image,
-                    cv::Mat* mask);
+                    cv::Mat* mask, const std::vector<int>* triangle_frames = nullptr);
 
 }  // namespace artex

@@ -21,6 +21,7 @@
 #include "render/rasterizer.h"
 #include "sensors/sequence.h"
 #include "sensors/virtual_kinect.h"
+#include "texture/texture_quality.h"
 #include "texture/texturer.h"
 
 namespace artex {
@@ -125,40 +126,6 @@ PinholeCamera HeldOutCamera(const PinholeCamera& training) {
       Eigen::Vector3d(0.0, 0.4, 0.0);
   camera.world_to_camera = PinholeCamera::LookAt(rotated, target, Eigen::Vector3d::UnitY());
   return camera;
-}
-
-// Mean SSIM (Wang et al. 2004; 11 x 11 Gaussian window, sigma 1.5) of the grey images over the
-// pixels whose whole window lies in the mask.
-double MaskedSsim(const cv::Mat& a_bgr, const cv::Mat& b_bgr, const cv::Mat& mask) {
-  cv::Mat a, b;
-  cv::cvtColor(a_bgr, a, cv::COLOR_BGR2GRAY);
-  cv::cvtColor(b_bgr, b, cv::COLOR_BGR2GRAY);
-  a.convertTo(a, CV_64F);
-  b.convertTo(b, CV_64F);
-  const cv::Size window(11, 11);
-  const double sigma = 1.5;
-  const double c1 = std::pow(0.01 * 255, 2), c2 = std::pow(0.03 * 255, 2);
-  cv::Mat mu_a, mu_b, aa, bb, ab;
-  cv::GaussianBlur(a, mu_a, window, sigma);
-  cv::GaussianBlur(b, mu_b, window, sigma);
-  cv::GaussianBlur(a.mul(a), aa, window, sigma);
-  cv::GaussianBlur(b.mul(b), bb, window, sigma);
-  cv::GaussianBlur(a.mul(b), ab, window, sigma);
-  cv::Mat inner;
-  cv::erode(mask, inner, cv::Mat::ones(window, CV_8UC1));
-  double sum = 0.0;
-  int n = 0;
-  for (int y = 0; y < a.rows; ++y) {
-    for (int x = 0; x < a.cols; ++x) {
-      if (!inner.at<uint8_t>(y, x)) continue;
-      const double ma = mu_a.at<double>(y, x), mb = mu_b.at<double>(y, x);
-      const double va = aa.at<double>(y, x) - ma * ma, vb = bb.at<double>(y, x) - mb * mb;
-      const double cov = ab.at<double>(y, x) - ma * mb;
-      sum += ((2 * ma * mb + c1) * (2 * cov + c2)) / ((ma * ma + mb * mb + c1) * (va + vb + c2));
-      ++n;
-    }
-  }
-  return n > 0 ? sum / n : 0.0;
 }
 
 TEST_F(TexturingSequenceTest, HeldOutViewMatchesTheTrueTexture) {

@@ -447,6 +447,7 @@ TEST(TexturingTest, SeamLevellerSolvesFragmentedLabellings) {
 TEST(TexturingTest, SwitchCostKeepsSources) {
   Scene scene;
   TexturingOptions plain = SmallOptions(), sticky = SmallOptions();
+  plain.selection.terms.switch_cost = 0.0;  // the paper's energy
   sticky.selection.terms.switch_cost = 0.05;
   Texturer a(scene.sphere, plain), b(scene.sphere, sticky);
   long changed_plain = 0, changed_sticky = 0;

@@ -1,0 +1,135 @@
+// The stream through the pipeline: `artex track --stream` (pipeline.stream) with exported
+// atlases and texture quality against ground truth in metrics.json, `artex stream encode RUN/`
+// of the same run, and `artex stream play` against the sender's run and the ground truth.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "experiments/config.h"
+#include "experiments/pipeline.h"
+#include "experiments/stream_evaluation.h"
+#include "models/template_generator.h"
+#include "models/template_io.h"
+#include "sensors/virtual_kinect.h"
+
+namespace artex {
+namespace {
+
+namespace fs = std::filesystem;
+
+class StreamPipelineTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    root_ = new fs::path(fs::temp_directory_path() /
+                         ("artex_stream_pipeline_test_" + std::to_string(::getpid())));
+    fs::remove_all(*root_);
+    fs::create_directories(*root_);
+    SynthOptions options;
+    options.motion.type = MotionType::kWalk;
+    options.motion.frames = 8;
+    PinholeCamera& depth = options.kinect.depth_intrinsics;
+    depth.width = 320;
+    depth.height = 240;
+    depth.fx = depth.fy = 262.5;
+    depth.cx = 159.5;
+    depth.cy = 119.5;
+    options.kinect.color_width = 320;
+    options.kinect.color_height = 406;
+    options.texture.size = 256;
+    options.subject_shape.resolution = 0;
+    options.background_frames = 5;
+    SynthesizeSequence(options, (*root_ / "sequence").string());
+    BodyShapeOptions shape;
+    shape.resolution = 0;
+    WriteTemplateGlb((*root_ / "template.glb").string(), GenerateTemplate(shape));
+
+    Config config;
+    config.Set("texture.atlas_size", "256");
+    config.Set("pipeline.export_atlases", "true");
+    config.Set("pipeline.texture_quality_every", "4");
+    config.Set("pipeline.stream", "'" + (*root_ / "track.artx").string() + "'");
+    config.Set("stream.keyframe_interval", "4");
+    config.Set("stream.texture_kbps", "600");
+    result_ = new PipelineResult(
+        RunPipeline((*root_ / "sequence").string(), (*root_ / "template.glb").string(),
+                    LoadPipelineOptions(config), config, (*root_ / "run").string()));
+  }
+  static void TearDownTestSuite() {
+    fs::remove_all(*root_);
+    delete root_;
+    delete result_;
+  }
+  static fs::path* root_;
+  static PipelineResult* result_;
+};
+
+fs::path* StreamPipelineTest::root_ = nullptr;
+PipelineResult* StreamPipelineTest::result_ = nullptr;
+
+TEST_F(StreamPipelineTest, MetricsHaveTextureQualityAndStreamRates) {
+  std::ifstream in(*root_ / "run" / "metrics.json");
+  std::stringstream s;
+  s << in.rdbuf();
+  const nlohmann::json m = nlohmann::json::parse(s.str());
+  const double psnr = m.at("novel_view_psnr_db").get<double>();
+  const double coverage = m.at("texture_coverage").get<double>();
+  std::printf("novel view: PSNR %.2f dB, SSIM %.3f, coverage %.3f; stream %.1f kbit/s\n", psnr,
+              m.at("novel_view_ssim").get<double>(), coverage,
+              m.at("stream").at("total_kbit_per_s").get<double>());
+  EXPECT_GT(psnr, 10.0);
+  EXPECT_LT(psnr, 60.0);
+  EXPECT_GT(coverage, 0.3);
+  EXPECT_LE(coverage, 1.0);
+  ASSERT_TRUE(result_->has_stream);
+  EXPECT_EQ(result_->stream.frames, 8);
+  EXPECT_EQ(result_->stream.keyframes, 2);
+  EXPECT_GT(m.at("stream").at("pose_kbit_per_s").get<double>(), 0.0);
+  EXPECT_LT(result_->stream.max_hand_error_mm, 1.0);
+  // Evaluated every 4th frame and at the last: frames 3 and 7.
+  int evaluated = 0;
+  for (const FrameRecord& r : result_->frames) evaluated += r.texture_quality.views > 0;
+  EXPECT_EQ(evaluated, 2);
+}
+
+TEST_F(StreamPipelineTest, PlayedStreamMatchesTheSender) {
+  // The track's stream and a re-encoding of the run's exported atlases are the same frames.
+  StreamOptions o;
+  o.keyframe_interval = 4;
+  o.video.bitrate_kbps = 600;
+  const StreamSummary again =
+      EncodeRunStream((*root_ / "run").string(), "", (*root_ / "encoded.artx").string(), o);
+  EXPECT_EQ(again.frames, result_->stream.frames);
+  EXPECT_EQ(again.pose_bytes, result_->stream.pose_bytes);
+  PlaybackOptions p;
+  p.out_dir = (*root_ / "play").string();
+  p.evaluate_every = 1;
+  p.reference_run = (*root_ / "run").string();
+  p.sequence = (*root_ / "sequence").string();
+  const PlaybackReport r = PlayStream((*root_ / "track.artx").string(), p);
+  std::printf(
+      "receiver: vs sender PSNR %.2f dB SSIM %.3f (atlas %.2f dB, vertices %.3f mm); vs "
+      "truth %.2f dB (sender %.2f dB)\n",
+      r.psnr_vs_sender_db, r.ssim_vs_sender, r.atlas_psnr_db, r.max_vertex_error_mm,
+      r.receiver_psnr_db, r.sender_psnr_db);
+  EXPECT_EQ(r.frames, 8);
+  EXPECT_TRUE(r.issues.empty());
+  EXPECT_GT(r.psnr_vs_sender_db, 25.0);  // 4:2:0 video of a 256^2 atlas (docs/streaming.md)
+  EXPECT_LT(r.max_vertex_error_mm, 1.0);
+  EXPECT_LT(std::abs(r.receiver_psnr_db - r.sender_psnr_db), 1.0);
+  EXPECT_TRUE(fs::exists(*root_ / "play" / "atlas.png"));
+  EXPECT_TRUE(fs::exists(*root_ / "play" / "report.json"));
+  // Joining at frame 2 starts at the keyframe of frame 4.
+  p.from_frame = 2;
+  p.out_dir.clear();
+  const PlaybackReport joined = PlayStream((*root_ / "track.artx").string(), p);
+  EXPECT_EQ(joined.first_frame, 4);
+  EXPECT_EQ(joined.frames, 4);
+}
+
+}  // namespace
+}  // namespace artex
