@@ -551,12 +551,13 @@ std::vector<std::string> SynthSpecKeys() {
 
 const std::vector<MetricInfo>& Metrics() {
   static const std::vector<MetricInfo> kMetrics = {
-      {"mean_vertex_error_mm", true, false, "mean over frames of the mean per-vertex distance to ground truth"},
+      {"mean_vertex_error_mm", true, false, "mean over evaluated frames (fitted, not failed) of the mean per-vertex distance to ground truth"},
       {"max_vertex_error_mm", true, false, "largest per-vertex distance to ground truth over all frames"},
-      {"mean_joint_error_mm", true, false, "mean over frames of the mean joint-centre distance to ground truth"},
-      {"final_vertex_error_mm", true, false, "mean per-vertex error of the last frame (drift)"},
-      {"lost_frames", true, false, "frames whose mean vertex error exceeds pipeline.lost_threshold_mm"},
-      {"lost_fraction", true, false, "lost_frames / fitted frames"},
+      {"mean_joint_error_mm", true, false, "mean over evaluated frames of the mean joint-centre distance to ground truth"},
+      {"final_vertex_error_mm", true, false, "mean per-vertex error of the last evaluated frame (drift)"},
+      {"lost_frames", true, false, "failed fits and frames whose mean vertex error exceeds pipeline.lost_threshold_mm"},
+      {"lost_fraction", true, false, "lost_frames / fitted frames (failed fits included)"},
+      {"evaluated_frames", false, false, "frames the ground-truth errors average over (fitted, not failed)"},
       {"failed_frames", true, false, "frames flagged too few points, non-finite or diverged"},
       {"skipped_frames", true, false, "unreadable input frames"},
       {"mean_em_iterations", true, false, "EM iterations per frame (mean)"},
@@ -858,10 +859,11 @@ void RunSingle(const std::string& config_path, const std::string& sequence_dir,
   std::vector<double> iterations, errors, seam_before, seam_after, changed, pool, pre, estep,
       mstep, fit, tex, mrf, lev, mrf_iterations;
   const FrameRecord* last_textured = nullptr;
-  const FrameRecord* last_fitted = nullptr;
+  const FrameRecord* last_evaluated = nullptr;  // fitted, not failed
   for (const FrameRecord& r : result.frames) {
+    // A failed fit is lost whatever its kept pose shows, and no measurement for the errors.
     const bool is_lost = result.has_ground_truth && !r.skipped &&
-                         !(r.mean_vertex_error_mm <= options.lost_threshold_mm);
+                         (!r.fit.ok() || !(r.mean_vertex_error_mm <= options.lost_threshold_mm));
     trace << r.frame << "," << (r.skipped ? 1 : 0) << "," << (r.fit.ok() ? 1 : 0) << ","
           << FrameTerminationName(r.fit.termination) << "," << r.fit.iterations << ","
           << r.scan_points << "," << FormatNumber(r.mean_vertex_error_mm) << ","
@@ -887,12 +889,14 @@ void RunSingle(const std::string& config_path, const std::string& sequence_dir,
     }
     if (r.skipped) continue;
     ++fitted;
-    last_fitted = &r;
     if (is_lost) ++lost;
     if (!r.fit.ok()) ++failed;
     if (r.fit.termination == FrameTermination::kConverged) ++converged;
     iterations.push_back(r.fit.iterations);
-    if (result.has_ground_truth) errors.push_back(r.mean_vertex_error_mm);
+    if (result.has_ground_truth && r.fit.ok()) {
+      errors.push_back(r.mean_vertex_error_mm);
+      last_evaluated = &r;
+    }
     pre.push_back(1e3 * r.preprocess_seconds);
     estep.push_back(1e3 * r.fit.estep_seconds);
     mstep.push_back(1e3 * r.fit.mstep_seconds);
@@ -919,7 +923,8 @@ void RunSingle(const std::string& config_path, const std::string& sequence_dir,
     put("mean_vertex_error_mm", result.mean_vertex_error_mm);
     put("max_vertex_error_mm", result.max_vertex_error_mm);
     put("mean_joint_error_mm", result.mean_joint_error_mm);
-    put("final_vertex_error_mm", last_fitted->mean_vertex_error_mm);
+    if (last_evaluated) put("final_vertex_error_mm", last_evaluated->mean_vertex_error_mm);
+    put("evaluated_frames", result.evaluated_frames);
     put("lost_frames", lost);
     put("lost_fraction", static_cast<double>(lost) / fitted);
   }

@@ -147,9 +147,10 @@ void RegisterTrackCommand(CLI::App* app) {
     std::printf("stream: %.1f kbit/s (pose + texture updates)\n", result.stream_kbit_per_s);
     if (result.has_ground_truth) {
       std::printf(
-          "mean vertex error: %.2f mm (max %.2f mm), mean joint error: %.2f mm, lost: %.1f%%\n",
+          "mean vertex error: %.2f mm (max %.2f mm), mean joint error: %.2f mm, lost: %.1f%% "
+          "(errors over %d evaluated frames; %d failed fits count as lost)\n",
           result.mean_vertex_error_mm, result.max_vertex_error_mm, result.mean_joint_error_mm,
-          100.0 * result.lost_fraction);
+          100.0 * result.lost_fraction, result.evaluated_frames, result.failed_frames);
     }
     std::printf("results in %s\n", args->out.c_str());
   });

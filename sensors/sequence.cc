@@ -171,7 +171,13 @@ Eigen::MatrixX3d DecodeVertices(const std::string& path) {
   Eigen::MatrixX3d v(n, 3);
   const char* p = &data[kVertexHeaderBytes];
   for (size_t i = 0; i < n; ++i) {
-    for (int k = 0; k < 3; ++k, p += 4) v(i, k) = GetF32(p);
+    for (int k = 0; k < 3; ++k, p += 4) {
+      v(i, k) = GetF32(p);
+      if (!std::isfinite(v(i, k))) {
+        throw Error(path + ": vertex " + std::to_string(i) + " coordinate " + std::to_string(k) +
+                    ": expected a finite number, found " + std::to_string(v(i, k)));
+      }
+    }
   }
   return v;
 }
