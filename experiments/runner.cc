@@ -743,6 +743,21 @@ Experiment ParseExperiment(const std::string& yaml, const std::string& source_na
     }
     ex.keys.push_back(g.first);
   }
+  // Capped before expansion (overflow-safe): a million-combination grid hung --dry-run.
+  std::size_t total = list_entries.size();
+  for (const auto& g : grid) {
+    if (total > kMaxExperimentCombinations / g.second.size()) {
+      total = kMaxExperimentCombinations + 1;
+      break;
+    }
+    total *= g.second.size();
+  }
+  if (total > kMaxExperimentCombinations) {
+    std::string sizes = std::to_string(list_entries.size()) + " list entries";
+    for (const auto& g : grid) sizes += " x " + std::to_string(g.second.size()) + " " + g.first;
+    throw Error(source_name + ": expected at most " + std::to_string(kMaxExperimentCombinations) +
+                " combinations, found " + sizes + " (split the experiment)");
+  }
   std::set<std::string> ids;
   for (const auto& entry : list_entries) {
     std::vector<std::size_t> index(grid.size(), 0);

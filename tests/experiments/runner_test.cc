@@ -86,6 +86,19 @@ TEST(ExperimentParseTest, ListEntriesTimesGrid) {
   EXPECT_EQ(ex.combinations[2].overrides[1].value, "ceres_lm");
 }
 
+// Issue 20: a million combinations hung --dry-run (each was expanded and validated).
+TEST(ExperimentParseTest, GridSizeIsCappedBeforeExpansion) {
+  std::string values = "[";
+  for (int v = 0; v < 1000; ++v) values += (v ? ", " : "") + std::to_string(v);
+  values += "]";
+  const std::string msg = ErrorOf(
+      [&] { Parse("grid:\n  texture.lambda: " + values + "\n  texture.alpha: " + values + "\n"); });
+  EXPECT_NE(msg.find("exp.yaml"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("at most " + std::to_string(kMaxExperimentCombinations)), std::string::npos)
+      << msg;
+  EXPECT_NE(msg.find("1000 texture.alpha"), std::string::npos) << msg;
+}
+
 TEST(ExperimentParseTest, NoOverridesGivesTheBaseConfiguration) {
   const Experiment ex = Parse("");
   ASSERT_EQ(ex.combinations.size(), 1u);
