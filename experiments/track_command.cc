@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "experiments/atomic_output.h"
 #include "experiments/commands.h"
 #include "experiments/config.h"
 #include "experiments/pipeline.h"
@@ -117,8 +118,10 @@ void RegisterTrackCommand(CLI::App* app) {
       const std::string what = OpenFrameSource(args->sequence, options.input)->Description();
       if (!what.empty()) std::fprintf(stderr, "track: input: %s\n", what.c_str());
     }
+    // Written into a temporary sibling, published complete at the end (docs/reliability.md).
+    AtomicOutputFolder out(args->out, "track");
     const PipelineResult result = RunPipeline(
-        args->sequence, args->template_path, options, config, args->out,
+        args->sequence, args->template_path, options, config, out.path(),
         [quiet](const PipelineProgress& p) {
           if (quiet) return;
           std::fprintf(stderr, "\rtrack: frame %d/%d  %.1f frames/s  EM iterations %d", p.done,
@@ -135,6 +138,7 @@ void RegisterTrackCommand(CLI::App* app) {
           std::fflush(stderr);
         });
     if (!quiet) std::fprintf(stderr, "\n");
+    out.Commit();
     for (const auto& w : result.warnings) std::fprintf(stderr, "track: warning: %s\n", w.c_str());
     std::printf("frames: %zu: %d good, %d doubtful, %d lost (%d failed fits), %d skipped\n",
                 result.frames.size(), result.good_frames, result.doubtful_frames,
