@@ -7,7 +7,9 @@
 #include <sys/prctl.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
+#include <tbb/global_control.h>
 #include <unistd.h>
+#include <yaml-cpp/yaml.h>
 
 #include <algorithm>
 #include <chrono>
@@ -20,16 +22,13 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <random>
 #include <set>
 #include <sstream>
 #include <thread>
-
-#include <nlohmann/json.hpp>
-#include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
-#include <tbb/global_control.h>
-#include <yaml-cpp/yaml.h>
 
 #include "experiments/pipeline.h"
 #include "models/error.h"
@@ -39,6 +38,7 @@
 #include "sensors/sequence.h"
 #include "sensors/synth_conditions.h"
 #include "sensors/virtual_kinect.h"
+#include "sensors/yaml_checks.h"
 
 namespace artex {
 namespace fs = std::filesystem;
@@ -599,6 +599,7 @@ Experiment ParseExperiment(const std::string& yaml, const std::string& source_na
     throw Error(source_name + ": not valid YAML: " + e.what());
   }
   if (!root.IsMap()) throw Error(source_name + ": expected a mapping at the top level");
+  CheckYamlKeys(root, source_name);
   CheckTopKeys(root, source_name);
   Experiment ex;
   ex.file = source_name;

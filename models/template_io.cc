@@ -16,6 +16,7 @@
 #include <unordered_map>
 
 #include "models/error.h"
+#include "models/file_context.h"
 #include "models/makehuman_import.h"
 #include "models/mesh_export.h"
 #include "models/normals.h"
@@ -1255,12 +1256,14 @@ void WriteAnimatedGlb(const std::string& path, const Template& tmpl,
 
 Template ReadTemplateGlb(const std::string& path, GlbTexture* texture,
                          const GlbReadOptions& options) {
-  const std::string bytes = ReadFileBytes(path);
-  if (bytes.size() < 4 || ReadU32(bytes, 0) != kGlbMagic) {
-    Fail(path, "not a glTF binary (.glb): magic 'glTF' missing");
-  }
-  const tinygltf::Model model = LoadModel(path, bytes, options);
-  return ParseArtexTemplate(model, path, texture, options);
+  return WithFileContext(path, [&] {
+    const std::string bytes = ReadFileBytes(path);
+    if (bytes.size() < 4 || ReadU32(bytes, 0) != kGlbMagic) {
+      Fail(path, "not a glTF binary (.glb): magic 'glTF' missing");
+    }
+    const tinygltf::Model model = LoadModel(path, bytes, options);
+    return ParseArtexTemplate(model, path, texture, options);
+  });
 }
 
 Template ImportGltfSkinnedMesh(const std::string& path, const GltfImportOptions& options,

@@ -9,6 +9,8 @@
 #include <sstream>
 
 #include "models/error.h"
+#include "models/file_context.h"
+#include "sensors/yaml_checks.h"
 
 namespace artex {
 namespace {
@@ -390,9 +392,10 @@ BvhClip ParseBvh(std::istream& in, const std::string& source) {
 }
 
 BvhClip ReadBvh(const std::string& path) {
+  CheckNotAFolder(path, "a BVH file");
   std::ifstream in(path);
   if (!in) throw Error(path + ": cannot open BVH file");
-  return ParseBvh(in, path);
+  return WithFileContext(path, [&] { return ParseBvh(in, path); });
 }
 
 BvhFrame BvhRestFrame(const BvhClip& clip) {
