@@ -590,8 +590,25 @@ const MetricInfo* FindMetric(const std::string& name) {
   return nullptr;
 }
 
+namespace {
+Experiment ParseExperimentYaml(const std::string& yaml, const std::string& source_name,
+                               const std::string& base_dir);
+}  // namespace
+
 Experiment ParseExperiment(const std::string& yaml, const std::string& source_name,
                            const std::string& base_dir) {
+  try {
+    return ParseExperimentYaml(yaml, source_name, base_dir);
+  } catch (const YAML::Exception& e) {
+    // A value of the wrong shape (a list or mapping where text is expected): yaml-cpp's own
+    // message carries the line and column (found by the experiment fuzzer, issue 20).
+    throw Error(source_name + ": " + e.what() + " (expected a plain value there)");
+  }
+}
+
+namespace {
+Experiment ParseExperimentYaml(const std::string& yaml, const std::string& source_name,
+                               const std::string& base_dir) {
   YAML::Node root;
   try {
     root = YAML::Load(yaml);
@@ -790,6 +807,8 @@ Experiment ParseExperiment(const std::string& yaml, const std::string& source_na
   }
   return ex;
 }
+
+}  // namespace
 
 Experiment LoadExperiment(const std::string& path) {
   if (!fs::is_regular_file(path)) throw Error(path + ": experiment file not found");

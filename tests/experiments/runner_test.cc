@@ -99,6 +99,14 @@ TEST(ExperimentParseTest, GridSizeIsCappedBeforeExpansion) {
   EXPECT_NE(msg.find("1000 texture.alpha"), std::string::npos) << msg;
 }
 
+// Found by the experiment fuzzer: a mapping where a name is expected escaped as yaml-cpp's
+// unnamed "bad conversion" (and aborted `artex experiment`).
+TEST(ExperimentParseTest, ValuesOfTheWrongShapeNameTheFileAndLine) {
+  const std::string msg = ErrorOf([] { Parse("name: {a: 1}\n"); });
+  EXPECT_NE(msg.find("exp.yaml"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("line 4"), std::string::npos) << msg;  // after 3 lines of sequences
+}
+
 TEST(ExperimentParseTest, NoOverridesGivesTheBaseConfiguration) {
   const Experiment ex = Parse("");
   ASSERT_EQ(ex.combinations.size(), 1u);
