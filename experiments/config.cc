@@ -1,11 +1,12 @@
 #include "experiments/config.h"
 
+#include <yaml-cpp/yaml.h>
+
 #include <cmath>
 #include <sstream>
 
-#include <yaml-cpp/yaml.h>
-
 #include "models/error.h"
+#include "sensors/yaml_checks.h"
 
 namespace artex {
 
@@ -39,6 +40,7 @@ Config& Config::operator=(const Config& other) {
 }
 
 Config Config::Load(const std::string& path) {
+  CheckNotAFolder(path, "a configuration file");
   Config c;
   c.impl_->source = path;
   try {
@@ -50,6 +52,7 @@ Config Config::Load(const std::string& path) {
   }
   if (c.impl_->node.IsNull()) c.impl_->node = YAML::Node(YAML::NodeType::Map);
   if (!c.impl_->node.IsMap()) throw Error(path + ": expected a mapping at the top level");
+  CheckYamlKeys(c.impl_->node, path);
   return c;
 }
 
@@ -63,6 +66,7 @@ Config Config::FromString(const std::string& yaml, const std::string& source_nam
   }
   if (c.impl_->node.IsNull()) c.impl_->node = YAML::Node(YAML::NodeType::Map);
   if (!c.impl_->node.IsMap()) throw Error(source_name + ": expected a mapping at the top level");
+  CheckYamlKeys(c.impl_->node, source_name);
   return c;
 }
 
@@ -176,6 +180,10 @@ void Config::ThrowInvalidChoice(const std::string& key, const std::string& found
 }
 
 void Config::Set(const std::string& dotted_key, const std::string& yaml_value) {
+  if (yaml_value.find_first_not_of(" \t\r\n") == std::string::npos) {
+    // YAML reads "" as null, which every reader skips: the override would be ignored.
+    throw Error("override " + dotted_key + "=: expected a value after '=', found none");
+  }
   YAML::Node value;
   try {
     value = YAML::Load(yaml_value);

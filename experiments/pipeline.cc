@@ -149,6 +149,38 @@ FrameWorld ChooseWorldFrame(FrameSource* source, int begin, int end,
   return world;
 }
 
+// Why frame `frame`'s fit failed: what was expected and what was found.
+std::string FailedFitReason(int frame, const FitSummary& fit, int min_scan_points) {
+  std::string why = "frame " + std::to_string(frame) + ": fit failed: ";
+  if (fit.too_few_points) {
+    why +=
+        "too few scan points or correspondences (expected >= " + std::to_string(min_scan_points) +
+        " points, found " + std::to_string(fit.num_scan_points) + ")";
+  } else if (fit.non_finite) {
+    why += "non-finite scan values or pose";
+  } else {
+    why += "diverged";
+  }
+  return why;
+}
+
+// The error of a run without one usable frame: every reason, the first kListedReasons of each
+// kind listed (a long all-black recording would otherwise give one line per frame).
+std::string NoUsableFrameMessage(const std::string& sequence_dir, int frames,
+                                 const std::vector<std::string>& skipped,
+                                 const std::vector<std::string>& failed) {
+  constexpr size_t kListedReasons = 10;
+  std::string msg = sequence_dir + ": no usable frame in the sequence (" + std::to_string(frames) +
+                    " frames: " + std::to_string(skipped.size()) + " unreadable, " +
+                    std::to_string(failed.size()) + " failed fits)";
+  for (const std::vector<std::string>* list : {&skipped, &failed}) {
+    for (size_t k = 0; k < list->size() && k < kListedReasons; ++k) msg += "\n  " + (*list)[k];
+    if (list->size() > kListedReasons)
+      msg += "\n  ... and " + std::to_string(list->size() - kListedReasons) + " more";
+  }
+  return msg;
+}
+
 }  // namespace
 
 PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& template_path,
@@ -227,10 +259,11 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   const auto start = Clock::now();
   double fit_seconds = 0.0, texture_seconds = 0.0, iterations = 0.0;
   double init_seconds = 0.0, quality_seconds = 0.0;
-  int lost = 0, evaluated = 0, tracked_frames = 0;
+  int lost = 0, evaluated = 0, scored = 0, tracked_frames = 0;
   bool need_init = true;
   int doubtful_run = 0;  // consecutive doubtful frames
   double error_sum = 0.0, joint_sum = 0.0;
+  std::vector<std::string> failures;  // why each failed fit failed
   if (options.export_meshes) {
     fs::create_directories(out_dir + "/meshes", ec);
     if (ec) throw Error(out_dir + "/meshes: cannot create the folder: " + ec.message());
@@ -333,7 +366,10 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
         record.init_report = retry.init_report + " (not better than tracking: kept)";
       }
     }
-    if (!record.fit.ok()) ++result.failed_frames;
+    if (!record.fit.ok()) {
+      ++result.failed_frames;
+      failures.push_back(FailedFitReason(i, record.fit, options.fitting.min_scan_points));
+    }
     iterations += record.fit.iterations;
     const Pose frame_pose = keep_tracked ? tracked_pose : fitter.pose();
     skinning.Apply(frame_pose, &posed);
@@ -409,12 +445,17 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
       double joint = 0.0;
       for (const auto& [a, b] : joint_pairs) joint += (ours.row(a) - theirs.row(b)).norm();
       record.mean_joint_error_mm = joint_pairs.empty() ? 0.0 : 1000.0 * joint / joint_pairs.size();
-      error_sum += record.mean_vertex_error_mm;
-      joint_sum += record.mean_joint_error_mm;
-      result.max_vertex_error_mm = std::max(result.max_vertex_error_mm, record.max_vertex_error_mm);
-      // Lost: too far from the truth, or a failed fit (its kept pose is no measurement).
+      // A failed fit's kept pose is no measurement: it counts as lost and stays out of the
+      // error averages (issue 20: all-failed runs reported a small error).
+      if (record.fit.ok()) {
+        error_sum += record.mean_vertex_error_mm;
+        joint_sum += record.mean_joint_error_mm;
+        result.max_vertex_error_mm =
+            std::max(result.max_vertex_error_mm, record.max_vertex_error_mm);
+        ++evaluated;
+      }
       lost += record.mean_vertex_error_mm > options.lost_threshold_mm || !record.fit.ok();
-      ++evaluated;
+      ++scored;
       const int every = options.texture_quality_every;
       if (truth_scene && ((i - begin + 1) % every == 0 || i == end - 1)) {
         truth_scene->vertices = truth.vertices;
@@ -455,7 +496,10 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
     }
   }
   const int fitted = static_cast<int>(poses.size());
-  if (fitted == 0) throw Error(sequence_dir + ": no usable frame in the sequence");
+  if (fitted == result.failed_frames) {
+    // Nothing usable: the error keeps every frame's reason (file, expected, found).
+    throw Error(NoUsableFrameMessage(sequence_dir, end - begin, result.warnings, failures));
+  }
   result.mean_em_iterations = iterations / fitted;
   result.fit_ms_per_frame = tracked_frames ? 1000.0 * fit_seconds / tracked_frames : 0.0;
   result.init_ms_per_initialisation =
@@ -478,14 +522,16 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
             std::numeric_limits<double>::quiet_NaN();
   }
   sinks.Finish(&result);
+  result.evaluated_frames = evaluated;
   if (evaluated > 0) {
     result.mean_vertex_error_mm = error_sum / evaluated;
     result.mean_joint_error_mm = joint_sum / evaluated;
-    result.lost_fraction = static_cast<double>(lost) / evaluated;
   } else {
     result.mean_vertex_error_mm = result.max_vertex_error_mm = result.mean_joint_error_mm =
-        result.lost_fraction = std::numeric_limits<double>::quiet_NaN();
+        std::numeric_limits<double>::quiet_NaN();
   }
+  result.lost_fraction =
+      scored > 0 ? static_cast<double>(lost) / scored : std::numeric_limits<double>::quiet_NaN();
 
   WritePoseCsv(out_dir + "/poses.csv", tmpl, pose_frames, poses);
 

@@ -112,6 +112,11 @@ struct PipelineResult {
   double init_ms_per_initialisation = 0.0;
   double quality_ms_per_frame = 0.0;
   bool has_ground_truth = false;
+  // Ground-truth errors average over the evaluated frames: fitted with ground truth and not
+  // failed (a failed fit keeps the previous pose, no measurement). lost_fraction counts failed
+  // fits as lost: (evaluated frames beyond lost_threshold_mm + failed) / (evaluated + failed).
+  // NaN without ground truth (errors also when no frame was evaluated).
+  int evaluated_frames = 0;
   double mean_vertex_error_mm = 0.0;
   double max_vertex_error_mm = 0.0;
   double mean_joint_error_mm = 0.0;
@@ -142,7 +147,8 @@ struct PipelineProgress {
 // options.input) with the tracking template at template_path (.glb; "" = the default
 // generated template) and writes into out_dir (created): config.yaml
 // (resolved), poses.csv, frames.csv, summary.json, metrics.json (with ground truth),
-// texture.png, labels.png, tracked.glb, meshes/ on request. Throws artex::Error on bad input.
+// texture.png, labels.png, tracked.glb, meshes/ on request. Throws artex::Error on bad input
+// and when no frame is usable (every frame unreadable or its fit failed), listing the reasons.
 PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& template_path,
                            const PipelineOptions& options, const Config& resolved_config,
                            const std::string& out_dir,

@@ -191,6 +191,7 @@ void WriteMetricsJson(const std::string& path, const PipelineResult& result) {
                    {"failed_frames", result.failed_frames},
                    {"initialisations", result.initialisations},
                    {"has_ground_truth", result.has_ground_truth},
+                   {"evaluated_frames", result.evaluated_frames},
                    {"mean_vertex_error_mm", Number(result.mean_vertex_error_mm)},
                    {"max_vertex_error_mm", Number(result.max_vertex_error_mm)},
                    {"mean_joint_error_mm", Number(result.mean_joint_error_mm)},

@@ -8,6 +8,7 @@
 
 #include "models/error.h"
 #include "models/mesh_export.h"
+#include "sensors/yaml_checks.h"
 
 namespace artex {
 namespace {
@@ -49,6 +50,7 @@ Eigen::VectorXd ParseNumberList(const std::string& text, const std::string& what
 }
 
 std::vector<std::pair<int, Pose>> ReadPoseCsv(const std::string& path, int num_joints) {
+  CheckNotAFolder(path, "a poses.csv file");
   std::ifstream in(path);
   if (!in) throw Error(path + ": cannot open (no such file or not readable)");
   std::vector<std::pair<int, Pose>> rows;

@@ -1,18 +1,18 @@
 // artex render RUN/ -o OUT/: renders the tracked, textured model of a run (RUN/tracked.glb)
 // from novel viewpoints (an orbit) and re-animated in new poses (a built-in motion or a pose
 // file), as in the paper's Fig. 2.
+#include <CLI/CLI.hpp>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <sstream>
 #include <string>
 #include <vector>
 
-#include <CLI/CLI.hpp>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
-
+#include "experiments/atomic_output.h"
 #include "experiments/commands.h"
 #include "experiments/pose_csv.h"
 #include "models/error.h"
@@ -100,8 +100,11 @@ void RegisterRenderCommand(CLI::App* app) {
       poses.assign(args->frames, LastPose(args->run + "/poses.csv", tmpl.num_joints()));
     }
     std::error_code ec;
-    fs::create_directories(args->out, ec);
-    if (ec) throw Error(args->out + ": cannot create the output folder: " + ec.message());
+    if (fs::equivalent(args->run, args->out, ec)) {
+      throw Error(args->out + ": the output folder is the run folder it renders; choose another");
+    }
+    // Written into a temporary sibling, published complete at the end (docs/reliability.md).
+    AtomicOutputFolder out(args->out, "render");
     Eigen::MatrixX3d posed;
     for (int i = 0; i < args->frames; ++i) {
       skinning.Apply(poses[i], &posed);
@@ -114,8 +117,9 @@ void RegisterRenderCommand(CLI::App* app) {
       image.setTo(cv::Scalar(60, 60, 60), mask == 0);
       char name[64];
       std::snprintf(name, sizeof(name), "/%s_%03d.png", args->motion.empty() ? "view" : "pose", i);
-      WriteImage(args->out + name, image);
+      WriteImage(out.path() + name, image);
     }
+    out.Commit();
     std::printf("%d images in %s\n", args->frames, args->out.c_str());
   });
 }

@@ -7,7 +7,9 @@
 #include <sys/prctl.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
+#include <tbb/global_control.h>
 #include <unistd.h>
+#include <yaml-cpp/yaml.h>
 
 #include <algorithm>
 #include <chrono>
@@ -20,16 +22,13 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <random>
 #include <set>
 #include <sstream>
 #include <thread>
-
-#include <nlohmann/json.hpp>
-#include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
-#include <tbb/global_control.h>
-#include <yaml-cpp/yaml.h>
 
 #include "experiments/pipeline.h"
 #include "models/error.h"
@@ -39,6 +38,7 @@
 #include "sensors/sequence.h"
 #include "sensors/synth_conditions.h"
 #include "sensors/virtual_kinect.h"
+#include "sensors/yaml_checks.h"
 
 namespace artex {
 namespace fs = std::filesystem;
@@ -556,12 +556,13 @@ std::vector<std::string> SynthSpecKeys() {
 
 const std::vector<MetricInfo>& Metrics() {
   static const std::vector<MetricInfo> kMetrics = {
-      {"mean_vertex_error_mm", true, false, "mean over frames of the mean per-vertex distance to ground truth"},
+      {"mean_vertex_error_mm", true, false, "mean over evaluated frames (fitted, not failed) of the mean per-vertex distance to ground truth"},
       {"max_vertex_error_mm", true, false, "largest per-vertex distance to ground truth over all frames"},
-      {"mean_joint_error_mm", true, false, "mean over frames of the mean joint-centre distance to ground truth"},
-      {"final_vertex_error_mm", true, false, "mean per-vertex error of the last frame (drift)"},
-      {"lost_frames", true, false, "frames whose mean vertex error exceeds pipeline.lost_threshold_mm"},
-      {"lost_fraction", true, false, "lost_frames / fitted frames"},
+      {"mean_joint_error_mm", true, false, "mean over evaluated frames of the mean joint-centre distance to ground truth"},
+      {"final_vertex_error_mm", true, false, "mean per-vertex error of the last evaluated frame (drift)"},
+      {"lost_frames", true, false, "failed fits and frames whose mean vertex error exceeds pipeline.lost_threshold_mm"},
+      {"lost_fraction", true, false, "lost_frames / fitted frames (failed fits included)"},
+      {"evaluated_frames", false, false, "frames the ground-truth errors average over (fitted, not failed)"},
       {"failed_frames", true, false, "frames flagged too few points, non-finite or diverged"},
       {"skipped_frames", true, false, "unreadable input frames"},
       {"mean_em_iterations", true, false, "EM iterations per frame (mean)"},
@@ -598,8 +599,25 @@ const MetricInfo* FindMetric(const std::string& name) {
   return nullptr;
 }
 
+namespace {
+Experiment ParseExperimentYaml(const std::string& yaml, const std::string& source_name,
+                               const std::string& base_dir);
+}  // namespace
+
 Experiment ParseExperiment(const std::string& yaml, const std::string& source_name,
                            const std::string& base_dir) {
+  try {
+    return ParseExperimentYaml(yaml, source_name, base_dir);
+  } catch (const YAML::Exception& e) {
+    // A value of the wrong shape (a list or mapping where text is expected): yaml-cpp's own
+    // message carries the line and column (found by the experiment fuzzer, issue 20).
+    throw Error(source_name + ": " + e.what() + " (expected a plain value there)");
+  }
+}
+
+namespace {
+Experiment ParseExperimentYaml(const std::string& yaml, const std::string& source_name,
+                               const std::string& base_dir) {
   YAML::Node root;
   try {
     root = YAML::Load(yaml);
@@ -607,6 +625,7 @@ Experiment ParseExperiment(const std::string& yaml, const std::string& source_na
     throw Error(source_name + ": not valid YAML: " + e.what());
   }
   if (!root.IsMap()) throw Error(source_name + ": expected a mapping at the top level");
+  CheckYamlKeys(root, source_name);
   CheckTopKeys(root, source_name);
   Experiment ex;
   ex.file = source_name;
@@ -751,6 +770,21 @@ Experiment ParseExperiment(const std::string& yaml, const std::string& source_na
     }
     ex.keys.push_back(g.first);
   }
+  // Capped before expansion (overflow-safe): a million-combination grid hung --dry-run.
+  std::size_t total = list_entries.size();
+  for (const auto& g : grid) {
+    if (total > kMaxExperimentCombinations / g.second.size()) {
+      total = kMaxExperimentCombinations + 1;
+      break;
+    }
+    total *= g.second.size();
+  }
+  if (total > kMaxExperimentCombinations) {
+    std::string sizes = std::to_string(list_entries.size()) + " list entries";
+    for (const auto& g : grid) sizes += " x " + std::to_string(g.second.size()) + " " + g.first;
+    throw Error(source_name + ": expected at most " + std::to_string(kMaxExperimentCombinations) +
+                " combinations, found " + sizes + " (split the experiment)");
+  }
   std::set<std::string> ids;
   for (const auto& entry : list_entries) {
     std::vector<std::size_t> index(grid.size(), 0);
@@ -782,6 +816,8 @@ Experiment ParseExperiment(const std::string& yaml, const std::string& source_na
   }
   return ex;
 }
+
+}  // namespace
 
 Experiment LoadExperiment(const std::string& path) {
   if (!fs::is_regular_file(path)) throw Error(path + ": experiment file not found");
@@ -889,10 +925,11 @@ void RunSingle(const std::string& config_path, const std::string& sequence_dir,
   std::vector<double> iterations, errors, seam_before, seam_after, changed, pool, pre, estep,
       mstep, fit, tex, mrf, lev, mrf_iterations;
   const FrameRecord* last_textured = nullptr;
-  const FrameRecord* last_fitted = nullptr;
+  const FrameRecord* last_evaluated = nullptr;  // fitted, not failed
   for (const FrameRecord& r : result.frames) {
+    // A failed fit is lost whatever its kept pose shows, and no measurement for the errors.
     const bool is_lost = result.has_ground_truth && !r.skipped &&
-                         !(r.mean_vertex_error_mm <= options.lost_threshold_mm);
+                         (!r.fit.ok() || !(r.mean_vertex_error_mm <= options.lost_threshold_mm));
     trace << r.frame << "," << (r.skipped ? 1 : 0) << "," << (r.fit.ok() ? 1 : 0) << ","
           << FrameTerminationName(r.fit.termination) << "," << r.fit.iterations << ","
           << r.scan_points << "," << FormatNumber(r.mean_vertex_error_mm) << ","
@@ -918,12 +955,14 @@ void RunSingle(const std::string& config_path, const std::string& sequence_dir,
     }
     if (r.skipped) continue;
     ++fitted;
-    last_fitted = &r;
     if (is_lost) ++lost;
     if (!r.fit.ok()) ++failed;
     if (r.fit.termination == FrameTermination::kConverged) ++converged;
     iterations.push_back(r.fit.iterations);
-    if (result.has_ground_truth) errors.push_back(r.mean_vertex_error_mm);
+    if (result.has_ground_truth && r.fit.ok()) {
+      errors.push_back(r.mean_vertex_error_mm);
+      last_evaluated = &r;
+    }
     pre.push_back(1e3 * r.preprocess_seconds);
     estep.push_back(1e3 * r.fit.estep_seconds);
     mstep.push_back(1e3 * r.fit.mstep_seconds);
@@ -950,7 +989,8 @@ void RunSingle(const std::string& config_path, const std::string& sequence_dir,
     put("mean_vertex_error_mm", result.mean_vertex_error_mm);
     put("max_vertex_error_mm", result.max_vertex_error_mm);
     put("mean_joint_error_mm", result.mean_joint_error_mm);
-    put("final_vertex_error_mm", last_fitted->mean_vertex_error_mm);
+    if (last_evaluated) put("final_vertex_error_mm", last_evaluated->mean_vertex_error_mm);
+    put("evaluated_frames", result.evaluated_frames);
     put("lost_frames", lost);
     put("lost_fraction", static_cast<double>(lost) / fitted);
   }

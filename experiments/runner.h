@@ -50,6 +50,10 @@ struct Experiment {
   std::vector<ExperimentCombination> combinations;  // list entries x grid (grid varies fastest)
 };
 
+// Most combinations (list entries x grid) one experiment file may declare; more is an error
+// before anything is expanded (docs/reliability.md).
+constexpr std::size_t kMaxExperimentCombinations = 10000;
+
 // Parses and validates an experiment file: every combination's configuration (base + Config::Set
 // overrides) goes through LoadPipelineOptions and IsValid before anything runs, and every
 // synthetic spec through SynthOptionsFromSpec. Throws artex::Error naming the file, the

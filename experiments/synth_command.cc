@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 #include <string>
 
+#include "experiments/atomic_output.h"
 #include "experiments/commands.h"
 #include "models/error.h"
 #include "models/skinning.h"
@@ -264,7 +265,10 @@ void Run(const SynthCliOptions& cli, const CLI::App& app) {
     std::fprintf(stderr, "synth: wrote preview %s\n", cli.preview.c_str());
   }
   if (cli.output.empty()) return;
-  const SynthSummary summary = SynthesizeSequence(options, cli.output, [](const SynthProgress& p) {
+  // Written into a temporary sibling, published complete at the end (docs/reliability.md): an
+  // interrupted overwrite never leaves old frames or ground truth beside new ones.
+  AtomicOutputFolder out(cli.output, "synth");
+  const SynthSummary summary = SynthesizeSequence(options, out.path(), [](const SynthProgress& p) {
     switch (p.stage) {
       case SynthProgress::Stage::kSetup:
         if (p.done == 0) std::fprintf(stderr, "synth: generating subject, texture and motion...\n");
@@ -283,6 +287,7 @@ void Run(const SynthCliOptions& cli, const CLI::App& app) {
     }
     std::fflush(stderr);
   });
+  out.Commit();
   std::fprintf(
       stderr,
       "synth: wrote %d frames + %d background frames to %s in %.2f s "

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "experiments/atomic_output.h"
 #include "experiments/commands.h"
 #include "experiments/config.h"
 #include "experiments/pipeline.h"
@@ -121,8 +122,10 @@ void RegisterTrackCommand(CLI::App* app) {
       const std::string what = OpenFrameSource(args->sequence, options.input)->Description();
       if (!what.empty()) std::fprintf(stderr, "track: input: %s\n", what.c_str());
     }
+    // Written into a temporary sibling, published complete at the end (docs/reliability.md).
+    AtomicOutputFolder out(args->out, "track");
     const PipelineResult result = RunPipeline(
-        args->sequence, args->template_path, options, config, args->out,
+        args->sequence, args->template_path, options, config, out.path(),
         [quiet](const PipelineProgress& p) {
           if (quiet) return;
           std::fprintf(stderr, "\rtrack: frame %d/%d  %.1f frames/s  EM iterations %d", p.done,
@@ -139,6 +142,7 @@ void RegisterTrackCommand(CLI::App* app) {
           std::fflush(stderr);
         });
     if (!quiet) std::fprintf(stderr, "\n");
+    out.Commit();
     for (const auto& w : result.warnings) std::fprintf(stderr, "track: warning: %s\n", w.c_str());
     std::printf("frames: %zu: %d good, %d doubtful, %d lost (%d failed fits), %d skipped\n",
                 result.frames.size(), result.good_frames, result.doubtful_frames,
@@ -167,9 +171,10 @@ void RegisterTrackCommand(CLI::App* app) {
     }
     if (result.has_ground_truth) {
       std::printf(
-          "mean vertex error: %.2f mm (max %.2f mm), mean joint error: %.2f mm, lost: %.1f%%\n",
+          "mean vertex error: %.2f mm (max %.2f mm), mean joint error: %.2f mm, lost: %.1f%% "
+          "(errors over %d evaluated frames; %d failed fits count as lost)\n",
           result.mean_vertex_error_mm, result.max_vertex_error_mm, result.mean_joint_error_mm,
-          100.0 * result.lost_fraction);
+          100.0 * result.lost_fraction, result.evaluated_frames, result.failed_frames);
     }
     std::printf("results in %s\n", args->out.c_str());
   });

@@ -1,5 +1,8 @@
 #include "models/template_io.h"
 
+#include <tiny_gltf.h>
+
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -7,15 +10,14 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <map>
 #include <sstream>
 #include <unordered_map>
 
-#include <Eigen/Geometry>
-#include <tiny_gltf.h>
-
 #include "models/error.h"
 #include "models/gltf_skinning.h"
+#include "models/file_context.h"
 #include "models/makehuman_import.h"
 #include "models/mesh_export.h"
 #include "models/normals.h"
@@ -575,7 +577,37 @@ bool KeepImageEncoded(tinygltf::Image* image, const int, std::string*, std::stri
   return true;
 }
 
-tinygltf::Model LoadModel(const std::string& path, const std::string& bytes) {
+// Fails when the JSON text nests objects and arrays deeper than max_depth: tinygltf converts
+// JSON recursively and overflowed the stack on a file nesting a million levels (issue 20).
+// Linear; brackets inside strings do not count.
+void CheckJsonDepth(const char* json, size_t size, int max_depth, const std::string& path) {
+  int depth = 0;
+  bool in_string = false, escaped = false;
+  for (size_t i = 0; i < size; ++i) {
+    const char c = json[i];
+    if (in_string) {
+      if (escaped) {
+        escaped = false;
+      } else if (c == '\\') {
+        escaped = true;
+      } else if (c == '"') {
+        in_string = false;
+      }
+    } else if (c == '"') {
+      in_string = true;
+    } else if (c == '[' || c == '{') {
+      if (++depth > max_depth) {
+        Fail(path, "malformed glTF: JSON nests deeper than " + std::to_string(max_depth) +
+                       " levels (at byte " + std::to_string(i) + ")");
+      }
+    } else if (c == ']' || c == '}') {
+      --depth;
+    }
+  }
+}
+
+tinygltf::Model LoadModel(const std::string& path, const std::string& bytes,
+                          const GlbReadOptions& options) {
   tinygltf::TinyGLTF loader;
   loader.SetImageLoader(KeepImageEncoded, nullptr);
   tinygltf::Model model;
@@ -584,10 +616,12 @@ tinygltf::Model LoadModel(const std::string& path, const std::string& bytes) {
   const std::string base_dir = std::filesystem::path(path).parent_path().string();
   if (bytes.size() >= 4 && ReadU32(bytes, 0) == kGlbMagic) {
     CheckGlbContainer(bytes, path);
+    CheckJsonDepth(bytes.data() + 20, ReadU32(bytes, 12), options.max_json_depth, path);
     ok = loader.LoadBinaryFromMemory(&model, &err, &warn,
                                      reinterpret_cast<const unsigned char*>(bytes.data()),
                                      static_cast<unsigned int>(bytes.size()), base_dir);
   } else {
+    CheckJsonDepth(bytes.data(), bytes.size(), options.max_json_depth, path);
     ok = loader.LoadASCIIFromString(&model, &err, &warn, bytes.data(),
                                     static_cast<unsigned int>(bytes.size()), base_dir);
   }
@@ -623,7 +657,16 @@ AccessorValues ReadAccessor(const tinygltf::Model& model, int index, const std::
   out.count = accessor.count;
   out.components = components;
   if (accessor.bufferView < 0) {
-    if (accessor.count > (size_t{1} << 28)) Fail(path, what + ": implausible accessor count");
+    // All zeros, no data: its count is capped by the file's buffer bytes (issue 20: a 352 KB
+    // file declared 2^28 elements and allocated 6 GB).
+    size_t max_elements = 0;
+    for (const tinygltf::Buffer& b : model.buffers) max_elements += b.data.size();
+    if (accessor.count > max_elements) {
+      Fail(path, what + ": accessor " + std::to_string(index) +
+                     " without a buffer view: expected at most " + std::to_string(max_elements) +
+                     " elements (the file's buffer bytes), found " +
+                     std::to_string(accessor.count));
+    }
     out.values.assign(accessor.count * components, 0.0);
     return out;
   }
@@ -772,16 +815,56 @@ std::vector<int> NodeParents(const tinygltf::Model& model, const std::string& pa
       parent[child] = i;
     }
   }
+  // Cycle check in linear time (issue 20: the per-node walk to the root was quadratic on long
+  // chains): walk up from each unvisited node until a finished node or a root; meeting a node
+  // of the current walk is a cycle.
+  std::vector<char> state(n, 0);  // 0 unvisited, 1 on the current walk, 2 finished
+  std::vector<int> walk;
   for (int i = 0; i < n; ++i) {
-    int steps = 0;
-    for (int j = parent[i]; j >= 0; j = parent[j]) {
-      if (++steps > n) {
-        Fail(path, "joint hierarchy has a cycle through node " + std::to_string(i) + " ('" +
-                       model.nodes[i].name + "')");
-      }
+    walk.clear();
+    int j = i;
+    for (; j >= 0 && state[j] == 0; j = parent[j]) {
+      state[j] = 1;
+      walk.push_back(j);
     }
+    if (j >= 0 && state[j] == 1) {
+      Fail(path, "joint hierarchy has a cycle through node " + std::to_string(j) + " ('" +
+                     model.nodes[j].name + "')");
+    }
+    for (int k : walk) state[k] = 2;
   }
   return parent;
+}
+
+// Every node after its parent (`parent` from NodeParents: a forest), in linear time.
+std::vector<int> ParentFirstOrder(const std::vector<int>& parent) {
+  const int n = static_cast<int>(parent.size());
+  std::vector<char> placed(n, 0);
+  std::vector<int> order, walk;
+  order.reserve(n);
+  for (int i = 0; i < n; ++i) {
+    walk.clear();
+    for (int j = i; j >= 0 && !placed[j]; j = parent[j]) walk.push_back(j);
+    for (auto it = walk.rbegin(); it != walk.rend(); ++it) {
+      placed[*it] = 1;
+      order.push_back(*it);
+    }
+  }
+  return order;
+}
+
+// For every node, the nearest proper ancestor that is a skin joint (its skin index), or -1.
+// Linear time (a per-joint walk up is quadratic under long chains of plain nodes).
+std::vector<int> NearestSkinAncestor(const std::vector<int>& parent,
+                                     const std::unordered_map<int, int>& skin_index_of_node) {
+  std::vector<int> nearest(parent.size(), -1);
+  for (int i : ParentFirstOrder(parent)) {
+    const int p = parent[i];
+    if (p < 0) continue;
+    auto it = skin_index_of_node.find(p);
+    nearest[i] = it != skin_index_of_node.end() ? it->second : nearest[p];
+  }
+  return nearest;
 }
 
 Eigen::Matrix4d LocalTransform(const tinygltf::Node& node, const std::string& path, int index) {
@@ -811,18 +894,12 @@ Eigen::Matrix4d LocalTransform(const tinygltf::Node& node, const std::string& pa
 std::vector<Eigen::Matrix4d> WorldTransforms(const tinygltf::Model& model,
                                              const std::vector<int>& parent,
                                              const std::string& path) {
-  const int n = static_cast<int>(model.nodes.size());
-  std::vector<Eigen::Matrix4d> world(n);
-  std::vector<char> done(n, 0);
-  std::function<const Eigen::Matrix4d&(int)> get = [&](int i) -> const Eigen::Matrix4d& {
-    if (!done[i]) {
-      const Eigen::Matrix4d local = LocalTransform(model.nodes[i], path, i);
-      world[i] = parent[i] >= 0 ? Eigen::Matrix4d(get(parent[i]) * local) : local;
-      done[i] = 1;
-    }
-    return world[i];
-  };
-  for (int i = 0; i < n; ++i) get(i);
+  // Iterative, parents first: a recursion would overflow the stack on a long node chain.
+  std::vector<Eigen::Matrix4d> world(model.nodes.size());
+  for (int i : ParentFirstOrder(parent)) {
+    const Eigen::Matrix4d local = LocalTransform(model.nodes[i], path, i);
+    world[i] = parent[i] >= 0 ? Eigen::Matrix4d(world[parent[i]] * local) : local;
+  }
   return world;
 }
 
@@ -837,9 +914,16 @@ bool ReadVector3(const tinygltf::Value& extras, const std::string& key, Eigen::V
   return true;
 }
 
+// An integer extra; values beyond int's range saturate (a cast would be undefined).
 int ReadInt(const tinygltf::Value& extras, const std::string& key, int fallback) {
   if (!extras.IsObject() || !extras.Has(key) || !extras.Get(key).IsNumber()) return fallback;
-  return extras.Get(key).GetNumberAsInt();
+  const double d = extras.Get(key).GetNumberAsDouble();
+  if (std::isnan(d)) return fallback;
+  if (d >= static_cast<double>(std::numeric_limits<int>::max()))
+    return std::numeric_limits<int>::max();
+  if (d <= static_cast<double>(std::numeric_limits<int>::min()))
+    return std::numeric_limits<int>::min();
+  return static_cast<int>(d);
 }
 
 // The first node with a mesh and a skin.
@@ -1002,7 +1086,15 @@ Template ParseArtexTemplate(const tinygltf::Model& model, const std::string& pat
                   path);
   const std::vector<Eigen::Matrix4d> world = WorldTransforms(model, node_parent, path);
   std::unordered_map<int, int> skin_index_of_node;
-  for (int i = 0; i < num_skin_joints; ++i) skin_index_of_node[skin.joints[i]] = i;
+  for (int i = 0; i < num_skin_joints; ++i) {
+    if (!skin_index_of_node.emplace(skin.joints[i], i).second) {
+      Fail(path, "skin '" + skin.name + "': node " + std::to_string(skin.joints[i]) +
+                     " listed twice (skin joints " +
+                     std::to_string(skin_index_of_node[skin.joints[i]]) + " and " +
+                     std::to_string(i) + ")");
+    }
+  }
+  const std::vector<int> nearest_skin = NearestSkinAncestor(node_parent, skin_index_of_node);
   const int num_joints = num_skin_joints - 1;
   Template tmpl;
   tmpl.joints.resize(num_joints);
@@ -1011,14 +1103,8 @@ Template ParseArtexTemplate(const tinygltf::Model& model, const std::string& pat
     const tinygltf::Node& node = model.nodes[node_index];
     Joint& joint = tmpl.joints[j];
     joint.name = node.name;
-    joint.parent = -1;
-    for (int p = node_parent[node_index]; p >= 0; p = node_parent[p]) {
-      auto it = skin_index_of_node.find(p);
-      if (it != skin_index_of_node.end()) {
-        joint.parent = it->second - 1;  // the global node maps to -1
-        break;
-      }
-    }
+    // The nearest skin-joint ancestor; the global node (skin joint 0) maps to -1.
+    joint.parent = nearest_skin[node_index] >= 0 ? nearest_skin[node_index] - 1 : -1;
     if (!ReadVector3(node.extras, "artex_center", &joint.center)) {
       joint.center = world[node_index].block<3, 1>(0, 3);
     }
@@ -1045,10 +1131,18 @@ Template ParseArtexTemplate(const tinygltf::Model& model, const std::string& pat
 
   // Vertices: merge the UV-seam copies back.
   int num_vertices = ReadInt(mesh.extras, "artex_num_vertices", -1);
+  // Every template vertex has a glTF vertex: more than `count` cannot be (and would allocate
+  // whatever the file declares).
+  if (num_vertices > static_cast<long long>(count)) {
+    Fail(path, what + ": extras.artex_num_vertices: expected at most " + std::to_string(count) +
+                   " (the glTF vertex count), found " + std::to_string(num_vertices));
+  }
   if (num_vertices < 0) {
     num_vertices = 0;
     for (size_t i = 0; i < count; ++i) {
-      num_vertices = std::max(num_vertices, static_cast<int>(vertex_ids.values[i]) + 1);
+      const int v = ToIndex(vertex_ids.values[i], 0, static_cast<int>(count) - 1,
+                            what + " attribute " + kVertexAttribute, i, path);
+      num_vertices = std::max(num_vertices, v + 1);
     }
   }
   std::vector<int> template_vertex(count);
@@ -1110,10 +1204,16 @@ Template ParseArtexTemplate(const tinygltf::Model& model, const std::string& pat
         ReadAttribute(model, primitive, "TEXCOORD_0", 2, count, what, path);
     const AccessorValues uv_ids = ReadAttribute(model, primitive, kUvAttribute, 1, count, what, path);
     int num_uvs = ReadInt(mesh.extras, "artex_num_uvs", -1);
+    if (num_uvs > static_cast<long long>(count)) {
+      Fail(path, what + ": extras.artex_num_uvs: expected at most " + std::to_string(count) +
+                     " (the glTF vertex count), found " + std::to_string(num_uvs));
+    }
     if (num_uvs <= 0) {
       num_uvs = 0;
       for (size_t i = 0; i < count; ++i) {
-        num_uvs = std::max(num_uvs, static_cast<int>(uv_ids.values[i]) + 1);
+        const int uv = ToIndex(uv_ids.values[i], -1, static_cast<int>(count) - 1,
+                               what + " attribute " + kUvAttribute, i, path);
+        num_uvs = std::max(num_uvs, uv + 1);
       }
     }
     tmpl.uvs = Eigen::MatrixX2d::Zero(num_uvs, 2);
@@ -1146,7 +1246,10 @@ Template ParseArtexTemplate(const tinygltf::Model& model, const std::string& pat
                      " scalars, found " + std::to_string(charts.count));
     }
     tmpl.triangle_chart.resize(num_triangles);
-    for (int f = 0; f < num_triangles; ++f) tmpl.triangle_chart[f] = static_cast<int>(charts.values[f]);
+    for (int f = 0; f < num_triangles; ++f) {
+      tmpl.triangle_chart[f] = ToIndex(charts.values[f], -1, std::numeric_limits<int>::max(),
+                                       what + " triangle charts", f, path);
+    }
   }
 
   if (texture != nullptr) ReadTexture(model, primitive, texture);
@@ -1263,18 +1366,20 @@ void WriteAnimatedGlb(const std::string& path, const Template& tmpl,
 
 Template ReadTemplateGlb(const std::string& path, GlbTexture* texture,
                          const GlbReadOptions& options) {
-  const std::string bytes = ReadFileBytes(path);
-  if (bytes.size() < 4 || ReadU32(bytes, 0) != kGlbMagic) {
-    Fail(path, "not a glTF binary (.glb): magic 'glTF' missing");
-  }
-  const tinygltf::Model model = LoadModel(path, bytes);
-  return ParseArtexTemplate(model, path, texture, options);
+  return WithFileContext(path, [&] {
+    const std::string bytes = ReadFileBytes(path);
+    if (bytes.size() < 4 || ReadU32(bytes, 0) != kGlbMagic) {
+      Fail(path, "not a glTF binary (.glb): magic 'glTF' missing");
+    }
+    const tinygltf::Model model = LoadModel(path, bytes, options);
+    return ParseArtexTemplate(model, path, texture, options);
+  });
 }
 
 Template ImportGltfSkinnedMesh(const std::string& path, const GltfImportOptions& options,
                                VertexJointWeights* lbs_weights) {
   const std::string bytes = ReadFileBytes(path);
-  const tinygltf::Model model = LoadModel(path, bytes);
+  const tinygltf::Model model = LoadModel(path, bytes, options.read);
   const std::vector<int> node_parent = NodeParents(model, path);
   const int mesh_node = FindSkinnedMeshNode(model, path);
   const tinygltf::Mesh& mesh = model.meshes[model.nodes[mesh_node].mesh];
@@ -1296,14 +1401,9 @@ Template ImportGltfSkinnedMesh(const std::string& path, const GltfImportOptions&
   // Joint tree over the skin joints (nearest skin-joint ancestor), one root, pre-order.
   std::vector<int> skin_parent(num_skin_joints, -1);
   std::vector<int> roots;
+  const std::vector<int> nearest_skin = NearestSkinAncestor(node_parent, skin_index_of_node);
   for (int i = 0; i < num_skin_joints; ++i) {
-    for (int p = node_parent[skin.joints[i]]; p >= 0; p = node_parent[p]) {
-      auto it = skin_index_of_node.find(p);
-      if (it != skin_index_of_node.end()) {
-        skin_parent[i] = it->second;
-        break;
-      }
-    }
+    skin_parent[i] = nearest_skin[skin.joints[i]];
     if (skin_parent[i] < 0) roots.push_back(i);
   }
   if (roots.size() != 1) {

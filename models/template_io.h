@@ -33,6 +33,9 @@ struct GlbReadOptions {
   double weight_sum_tolerance = 1e-3;
   // Largest accepted distance of a stored weight or tau from [0, 1] (float round-off).
   double unit_interval_tolerance = 1e-6;
+  // Deepest accepted nesting of JSON objects and arrays (artex writes 5 levels); deeper files
+  // are rejected before the glTF parser sees them (it recurses per level).
+  int max_json_depth = 64;
 };
 
 // Writes `tmpl` (must pass Template::IsValid) as a skinned glTF binary, through a temporary

@@ -9,6 +9,8 @@
 #include <sstream>
 
 #include "models/error.h"
+#include "models/file_context.h"
+#include "sensors/yaml_checks.h"
 
 namespace artex {
 namespace {
@@ -227,9 +229,16 @@ class BvhParser {
         !ParseDouble(tokens[2], &frame_time) || !(frame_time > 0.0)) {
       Fail(line, "expected 'Frame Time: <seconds > 0>', found '" + lines_[line - 1] + "'");
     }
+    if (frame_time < kBvhMinFrameTime || frame_time > kBvhMaxFrameTime) {
+      std::ostringstream range;
+      range << "expected a Frame Time in [" << kBvhMinFrameTime << ", " << kBvhMaxFrameTime
+            << "] s, found " << tokens[2];
+      Fail(line, range.str());
+    }
     clip_.frame_time = frame_time;
     const size_t remaining_lines = lines_.size() - next_line_;
-    if (clip_.num_channels > 0 && static_cast<size_t>(frames) > remaining_lines) {
+    // One line per frame (blank without channels): the count is capped by the file's size.
+    if (static_cast<size_t>(frames) > remaining_lines) {
       Fail(static_cast<int>(lines_.size()), "truncated: 'Frames: " + std::to_string(frames) +
                                                 "' but only " + std::to_string(remaining_lines) +
                                                 " lines follow");
@@ -315,11 +324,45 @@ const std::vector<NameCandidates>& NameTable() {
   return kTable;
 }
 
-bool IsDescendant(const BvhClip& clip, int joint, int ancestor) {
-  for (int j = clip.joints[joint].parent; j >= 0; j = clip.joints[j].parent) {
-    if (j == ancestor) return true;
+// Pre-order entry and exit numbers of every joint: `joint` is a proper descendant of
+// `ancestor` iff enter[ancestor] < enter[joint] < exit[ancestor]. Linear time (a walk to the root
+// per query made retargeting quadratic on a 100,000-joint chain, issue 20).
+struct JointIntervals {
+  std::vector<int> enter, exit;
+  bool IsDescendant(int joint, int ancestor) const {
+    return enter[ancestor] < enter[joint] && enter[joint] < exit[ancestor];
   }
-  return false;
+};
+
+JointIntervals ComputeJointIntervals(const BvhClip& clip) {
+  const int n = static_cast<int>(clip.joints.size());
+  std::vector<std::vector<int>> children(n);
+  std::vector<int> roots;
+  for (int j = 0; j < n; ++j) {
+    const int p = clip.joints[j].parent;
+    (p >= 0 && p < n ? children[p] : roots).push_back(j);
+  }
+  JointIntervals t;
+  t.enter.assign(n, -1);
+  t.exit.assign(n, -1);
+  int clock = 0;
+  std::vector<std::pair<int, size_t>> stack;  // (joint, next child)
+  for (int r : roots) {
+    t.enter[r] = clock++;
+    stack.push_back({r, 0});
+    while (!stack.empty()) {
+      auto& [j, next] = stack.back();
+      if (next < children[j].size()) {
+        const int c = children[j][next++];
+        t.enter[c] = clock++;
+        stack.push_back({c, 0});
+      } else {
+        t.exit[j] = clock++;
+        stack.pop_back();
+      }
+    }
+  }
+  return t;
 }
 
 Eigen::Matrix3d MinimalRotation(const Eigen::Vector3d& from, const Eigen::Vector3d& to) {
@@ -349,9 +392,10 @@ BvhClip ParseBvh(std::istream& in, const std::string& source) {
 }
 
 BvhClip ReadBvh(const std::string& path) {
+  CheckNotAFolder(path, "a BVH file");
   std::ifstream in(path);
   if (!in) throw Error(path + ": cannot open BVH file");
-  return ParseBvh(in, path);
+  return WithFileContext(path, [&] { return ParseBvh(in, path); });
 }
 
 BvhFrame BvhRestFrame(const BvhClip& clip) {
@@ -415,7 +459,14 @@ BvhFrame SampleBvh(const BvhClip& clip, double time_s) {
 
 int ResampledFrameCount(const BvhClip& clip, double frame_rate, double tolerance) {
   if (clip.num_frames() == 0) return 0;
-  return static_cast<int>(std::floor(clip.duration() * frame_rate + tolerance)) + 1;
+  const double count = std::floor(clip.duration() * frame_rate + tolerance) + 1;
+  if (!(count <= kBvhMaxResampledFrames)) {
+    std::ostringstream msg;
+    msg << clip.source << ": resampling " << clip.duration() << " s at " << frame_rate
+        << " Hz: expected at most " << kBvhMaxResampledFrames << " frames, found " << count;
+    throw Error(msg.str());
+  }
+  return static_cast<int>(count);
 }
 
 int CountLeadingJumpFrames(const BvhClip& clip, double max_deg_per_s) {
@@ -494,6 +545,10 @@ std::vector<int> MapBvhJoints(const BvhClip& clip, const Template& tmpl,
   const int num_joints = tmpl.num_joints();
   std::vector<int> map(num_joints, -1);
   std::vector<bool> used(clip.joints.size(), false);
+  const JointIntervals intervals = ComputeJointIntervals(clip);
+  std::vector<std::string> normalized(clip.joints.size());
+  for (size_t j = 0; j < clip.joints.size(); ++j)
+    normalized[j] = NormalizeName(clip.joints[j].name);
   for (int k = 0; k < num_joints; ++k) {
     const std::string& name = tmpl.joints[k].name;
     int ancestor = -1;  // BVH joint of the nearest mapped template ancestor
@@ -502,7 +557,7 @@ std::vector<int> MapBvhJoints(const BvhClip& clip, const Template& tmpl,
     }
     auto admissible = [&](int j) {
       return !clip.joints[j].end_site && !used[j] &&
-             (ancestor < 0 || IsDescendant(clip, j, ancestor));
+             (ancestor < 0 || intervals.IsDescendant(j, ancestor));
     };
     const auto override_it = std::find_if(options.joint_map.begin(), options.joint_map.end(),
                                           [&](const auto& entry) { return entry.first == name; });
@@ -532,7 +587,7 @@ std::vector<int> MapBvhJoints(const BvhClip& clip, const Template& tmpl,
       }
       for (const std::string& candidate : candidates) {
         for (int j = 0; j < static_cast<int>(clip.joints.size()) && chosen < 0; ++j) {
-          if (admissible(j) && NormalizeName(clip.joints[j].name) == candidate) chosen = j;
+          if (normalized[j] == candidate && admissible(j)) chosen = j;
         }
         if (chosen >= 0) break;
       }

@@ -43,6 +43,13 @@ struct BvhClip {
   std::vector<int> Children(int joint) const;    // direct children, End Sites included
 };
 
+// Plausibility caps (docs/reliability.md): Frame Time in [kBvhMinFrameTime, kBvhMaxFrameTime]
+// seconds (100 kHz to 1 Hz); "Frames:" at most the lines that follow; a resampled clip at most
+// kBvhMaxResampledFrames frames (about 9 hours at 30 Hz).
+constexpr double kBvhMinFrameTime = 1e-5;
+constexpr double kBvhMaxFrameTime = 1.0;
+constexpr double kBvhMaxResampledFrames = 1e6;
+
 // Parses BVH text. Throws artex::Error "<source>:<line>: <problem>" on malformed input:
 // unknown keyword or channel, bad or missing number, unbalanced braces, truncated file,
 // wrong number of values in a frame line, fewer/more frame lines than "Frames:".

@@ -11,6 +11,7 @@
 
 #include "models/error.h"
 #include "sensors/sequence.h"
+#include "sensors/yaml_checks.h"
 
 namespace artex {
 namespace {
@@ -212,7 +213,47 @@ Eigen::Vector2d DistortNormalised(const Distortion& d, const Eigen::Vector2d& p)
 
 }  // namespace
 
+bool CalibrationIsPlausible(const Calibration& c, std::string* why) {
+  using L = CalibrationLimits;
+  std::ostringstream msg;
+  auto check = [&](const std::string& field, double v, double lo, double hi, const char* unit) {
+    if (!msg.str().empty() || (v >= lo && v <= hi)) return;
+    msg << "field '" << field << "': expected a value in [" << lo << ", " << hi << "] " << unit
+        << ", found " << v;
+  };
+  check("depth_scale", c.depth_scale, L::kMinDepthScale, L::kMaxDepthScale, "units per metre");
+  check("frame_rate", c.frame_rate, L::kMinFrameRate, L::kMaxFrameRate, "Hz");
+  const std::pair<const char*, const PinholeCamera*> cameras[] = {{"depth", &c.depth},
+                                                                  {"color", &c.color}};
+  const Distortion* distortions[] = {&c.depth_distortion, &c.color_distortion};
+  for (int k = 0; k < 2; ++k) {
+    const std::string p = std::string(cameras[k].first) + ".";
+    const PinholeCamera& cam = *cameras[k].second;
+    check(p + "width", cam.width, 1, L::kMaxImageSide, "pixels");
+    check(p + "height", cam.height, 1, L::kMaxImageSide, "pixels");
+    check(p + "fx", cam.fx, L::kMinFocal, L::kMaxFocal, "pixels");
+    check(p + "fy", cam.fy, L::kMinFocal, L::kMaxFocal, "pixels");
+    check(p + "cx", cam.cx, -cam.width, 2.0 * cam.width, "pixels");
+    check(p + "cy", cam.cy, -cam.height, 2.0 * cam.height, "pixels");
+    const Distortion& d = *distortions[k];
+    const std::pair<const char*, double> coefficients[] = {
+        {"k1", d.k1}, {"k2", d.k2}, {"p1", d.p1}, {"p2", d.p2}, {"k3", d.k3}};
+    for (const auto& [name, value] : coefficients) {
+      check(p + "distortion." + name, value, -L::kMaxDistortion, L::kMaxDistortion, "");
+    }
+    const Eigen::Vector3d t = cam.world_to_camera.translation();
+    for (int a = 0; a < 3; ++a) {
+      check(p + "world_to_camera.translation[" + std::to_string(a) + "]", t[a], -L::kMaxTranslation,
+            L::kMaxTranslation, "m");
+    }
+  }
+  if (msg.str().empty()) return true;
+  if (why) *why = msg.str();
+  return false;
+}
+
 Calibration ReadCalibration(const std::string& path) {
+  CheckNotAFolder(path, "a calibration file");
   YAML::Node root;
   try {
     root = YAML::LoadFile(path);
@@ -222,6 +263,7 @@ Calibration ReadCalibration(const std::string& path) {
     throw Error(path + ": not valid YAML: " + e.what());
   }
   if (!root.IsMap()) Fail(path, root, "(top level)", "a mapping", Found(root));
+  CheckYamlKeys(root, path);
   CheckKeys(path, root, "", {"version", "depth_scale", "frame_rate", "depth", "color"});
   const YAML::Node version = Require(path, root, "", "version");
   int v = 0;
@@ -238,6 +280,8 @@ Calibration ReadCalibration(const std::string& path) {
   c.frame_rate = ReadPositive(path, root, "", "frame_rate");
   ReadCamera(path, root, "depth", &c.depth, &c.depth_distortion);
   ReadCamera(path, root, "color", &c.color, &c.color_distortion);
+  std::string why;
+  if (!CalibrationIsPlausible(c, &why)) throw Error(path + ": " + why);
   return c;
 }
 

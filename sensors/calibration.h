@@ -3,9 +3,8 @@
 // and the depth scale. Stored as calibration.yaml in an artex sequence (docs/formats.md).
 #pragma once
 
-#include <string>
-
 #include <Eigen/Core>
+#include <string>
 
 #include "render/camera.h"
 
@@ -30,8 +29,26 @@ struct Calibration {
   }
 };
 
+// Plausible calibration values (docs/reliability.md); a value outside is an input error, not a
+// rig: image sizes in [1, kMaxImageSide] pixels; focal lengths in [kMinFocal, kMaxFocal] pixels;
+// the principal point within one image size of the image (cx in [-width, 2 width]);
+// |distortion coefficients| <= kMaxDistortion; depth_scale in [kMinDepthScale, kMaxDepthScale]
+// units per metre; frame_rate in [kMinFrameRate, kMaxFrameRate] Hz; |translation| <=
+// kMaxTranslation m.
+struct CalibrationLimits {
+  static constexpr int kMaxImageSide = 16384;
+  static constexpr double kMinFocal = 1.0, kMaxFocal = 1e5;
+  static constexpr double kMaxDistortion = 1e3;
+  static constexpr double kMinDepthScale = 1.0, kMaxDepthScale = 1e6;
+  static constexpr double kMinFrameRate = 0.1, kMaxFrameRate = 1000.0;
+  static constexpr double kMaxTranslation = 1e4;
+};
+// False with the field, range and value in *why when a value is outside CalibrationLimits.
+bool CalibrationIsPlausible(const Calibration& calibration, std::string* why);
+
 // Reads/writes calibration.yaml. Read throws artex::Error naming the file and field
-// (missing key, wrong type, non-positive focal length or size, non-rigid rotation...).
+// (missing key, wrong type, duplicate key, non-positive focal length or size, non-rigid
+// rotation, a value outside CalibrationLimits...).
 Calibration ReadCalibration(const std::string& path);
 void WriteCalibration(const Calibration& calibration, const std::string& path);  // atomic
 

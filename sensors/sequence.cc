@@ -12,6 +12,7 @@
 
 #include "models/error.h"
 #include "sensors/image_io.h"
+#include "sensors/yaml_checks.h"
 
 namespace artex {
 namespace fs = std::filesystem;
@@ -64,6 +65,7 @@ struct CsvLine {
 // Lines starting with '#' and blank lines are skipped.
 std::vector<CsvLine> ReadCsv(const std::string& path, const std::string& header,
                              bool header_prefix_only, std::string* header_line) {
+  CheckNotAFolder(path, "a CSV file");
   std::ifstream in(path);
   if (!in) throw Error(path + ": cannot open the file");
   std::vector<CsvLine> rows;
@@ -154,6 +156,7 @@ std::string EncodeVertices(const Eigen::MatrixX3d& vertices) {
 }
 
 Eigen::MatrixX3d DecodeVertices(const std::string& path) {
+  CheckNotAFolder(path, "a ground-truth vertex file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(path + ": missing ground-truth vertex file");
   const std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -171,7 +174,13 @@ Eigen::MatrixX3d DecodeVertices(const std::string& path) {
   Eigen::MatrixX3d v(n, 3);
   const char* p = &data[kVertexHeaderBytes];
   for (size_t i = 0; i < n; ++i) {
-    for (int k = 0; k < 3; ++k, p += 4) v(i, k) = GetF32(p);
+    for (int k = 0; k < 3; ++k, p += 4) {
+      v(i, k) = GetF32(p);
+      if (!std::isfinite(v(i, k))) {
+        throw Error(path + ": vertex " + std::to_string(i) + " coordinate " + std::to_string(k) +
+                    ": expected a finite number, found " + std::to_string(v(i, k)));
+      }
+    }
   }
   return v;
 }

@@ -12,6 +12,7 @@
 
 #include "models/error.h"
 #include "sensors/image_io.h"
+#include "sensors/yaml_checks.h"
 
 namespace artex {
 namespace fs = std::filesystem;
@@ -36,6 +37,7 @@ std::string FormatNumber(double v) {
 }
 
 std::vector<Entry> ReadList(const std::string& path) {
+  CheckNotAFolder(path, "a TUM list file");
   std::ifstream in(path);
   if (!in) throw Error(path + ": missing or unreadable TUM list file");
   std::vector<Entry> entries;
@@ -92,6 +94,7 @@ double ReadNumber(const std::string& path, const YAML::Node& root, const std::st
 }
 
 void ReadIntrinsics(const std::string& path, Calibration* c) {
+  CheckNotAFolder(path, "an intrinsics file");
   YAML::Node root;
   try {
     root = YAML::LoadFile(path);
@@ -101,6 +104,7 @@ void ReadIntrinsics(const std::string& path, Calibration* c) {
     throw Error(path + ": not valid YAML: " + e.what());
   }
   if (!root.IsMap()) throw Error(path + ": expected a mapping of intrinsics (fx, fy, cx, cy ...)");
+  CheckYamlKeys(root, path);
   const char* valid[] = {"width", "height", "fx", "fy", "cx", "cy",
                          "k1",    "k2",     "p1", "p2", "k3", "depth_scale"};
   for (const auto& kv : root) {
@@ -117,6 +121,14 @@ void ReadIntrinsics(const std::string& path, Calibration* c) {
   const double h = ReadNumber(path, root, "height", true, 0, true);
   if (w != std::floor(w) || h != std::floor(h)) {
     throw Error(path + ": fields 'width', 'height': expected integers");
+  }
+  // Checked before the conversion to int (found by the TUM fuzzer: 4.8e31 was undefined).
+  const double max_side = CalibrationLimits::kMaxImageSide;
+  if (w > max_side || h > max_side) {
+    std::ostringstream msg;
+    msg << path << ": fields 'width', 'height': expected at most " << max_side
+        << " pixels, found " << w << " x " << h;
+    throw Error(msg.str());
   }
   cam.width = static_cast<int>(w);
   cam.height = static_cast<int>(h);
@@ -135,6 +147,8 @@ void ReadIntrinsics(const std::string& path, Calibration* c) {
   c->color = cam;
   c->depth_distortion = d;
   c->color_distortion = d;
+  std::string why;
+  if (!CalibrationIsPlausible(*c, &why)) throw Error(path + ": " + why);
 }
 
 // Mean specific force of an accelerometer.txt ("timestamp ax ay az", '#' comments).

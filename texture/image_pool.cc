@@ -293,12 +293,16 @@ int ImagePool::Add(int frame_index, const cv::Mat& color_bgr, const PinholeCamer
           max_x = std::max(max_x, pixels[v].x());
           max_y = std::max(max_y, pixels[v].y());
         }
-        const int margin = options_.crop_margin;
-        const int x0 = std::clamp(static_cast<int>(std::floor(min_x)) - margin, 0, camera.width);
-        const int y0 = std::clamp(static_cast<int>(std::floor(min_y)) - margin, 0, camera.height);
-        const int x1 = std::clamp(static_cast<int>(std::ceil(max_x)) + margin + 1, 0, camera.width);
-        const int y1 =
-            std::clamp(static_cast<int>(std::ceil(max_y)) + margin + 1, 0, camera.height);
+        // Clamped as doubles first: with no vertex in view the box is infinite, and converting
+        // an infinity (or a far-off pixel) to int is undefined behaviour (issue 20, UBSan).
+        const double margin = options_.crop_margin;
+        auto to_pixel = [](double x, int size) {
+          return static_cast<int>(std::clamp(x, 0.0, static_cast<double>(size)));
+        };
+        const int x0 = to_pixel(std::floor(min_x) - margin, camera.width);
+        const int y0 = to_pixel(std::floor(min_y) - margin, camera.height);
+        const int x1 = to_pixel(std::ceil(max_x) + margin + 1, camera.width);
+        const int y1 = to_pixel(std::ceil(max_y) + margin + 1, camera.height);
         if (x1 > x0 && y1 > y0) {
           entry->image = color_bgr(cv::Rect(x0, y0, x1 - x0, y1 - y0)).clone();
           entry->offset = {x0, y0};

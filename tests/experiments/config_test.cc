@@ -99,6 +99,30 @@ TEST(ConfigTest, MissingAndMalformedFilesAreErrors) {
             std::string::npos);
 }
 
+// Issue 20: duplicate keys were dropped silently, `--set key=` was ignored, a folder given
+// as the file failed with "basic_filebuf::underflow" and no path, non-scalar keys with
+// yaml-cpp's unnamed "bad conversion".
+TEST(ConfigTest, DuplicateKeysEmptyOverridesFoldersAndOddKeysAreErrors) {
+  std::string what = ErrorOf(
+      [] { Config::FromString("texture:\n  lambda: 1\n  alpha: 2\n  lambda: 3\n", "dup.yaml"); });
+  EXPECT_NE(what.find("dup.yaml: line 4"), std::string::npos) << what;
+  EXPECT_NE(what.find("texture.lambda"), std::string::npos) << what;
+  EXPECT_NE(what.find("defined twice (first at line 2)"), std::string::npos) << what;
+  what = ErrorOf([] { Config::FromString("[a, b]: 1\n", "key.yaml"); });
+  EXPECT_NE(what.find("key.yaml"), std::string::npos) << what;
+  EXPECT_NE(what.find("plain key"), std::string::npos) << what;
+  Config c;
+  what = ErrorOf([&] { c.Set("texture.lambda", ""); });
+  EXPECT_NE(what.find("texture.lambda"), std::string::npos) << what;
+  EXPECT_NE(what.find("expected a value"), std::string::npos) << what;
+  EXPECT_NE(ErrorOf([&] { c.Set("texture.lambda", "  "); }), "");
+  EXPECT_EQ(ErrorOf([&] { c.Set("texture.lambda", "0"); }), "");
+  const std::string folder = testing::TempDir();
+  what = ErrorOf([&] { Config::Load(folder); });
+  EXPECT_NE(what.find(folder), std::string::npos) << what;
+  EXPECT_NE(what.find("found a folder"), std::string::npos) << what;
+}
+
 TEST(ConfigTest, NonFiniteNumberIsRejected) {
   Config c = Config::FromString("x: .nan\n", "n.yaml");
   double x = 0;

@@ -7,6 +7,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -151,7 +152,8 @@ TEST(PipelineTest, ResultCoversEveryFrameWithFiniteErrors) {
     EXPECT_TRUE(std::isfinite(f.mean_vertex_error_mm));
     EXPECT_GE(f.max_vertex_error_mm, f.mean_vertex_error_mm);
     EXPECT_TRUE(std::isfinite(f.mean_joint_error_mm));
-    EXPECT_GT(f.texture.pool_size, 0) << "frame " << i << ": " << f.quality.BriefReport() << ", error " << f.mean_vertex_error_mm << " mm";
+    EXPECT_GT(f.texture.pool_size, 0) << "frame " << i << ": " << f.quality.BriefReport()
+                                      << ", error " << f.mean_vertex_error_mm << " mm";
     EXPECT_NE(f.quality.label, FitQualityLabel::kLost) << f.quality.BriefReport();
   }
   // Coarse template and subject, half-size depth: tracked, not lost.
@@ -494,12 +496,57 @@ TEST(PipelineTest, NobodyInViewIsLostAndTheReturnReinitialises) {
       EXPECT_LT(f.mean_vertex_error_mm, 50.0) << "frame " << f.frame;
     }
   }
-  // Failed frames are not scored as tracked: their kept pose counts as lost.
+  // Failed frames are not scored as tracked: their kept pose counts as lost and stays out of
+  // the error averages (issue 20).
   EXPECT_NEAR(r.lost_fraction, 2.0 / kFrames, 1e-12);
+  EXPECT_EQ(r.evaluated_frames, kFrames - 2);
+  double sum = 0.0, worst = 0.0;
+  for (const FrameRecord& f : r.frames) {
+    if (f.frame == 2 || f.frame == 3) continue;
+    sum += f.mean_vertex_error_mm;
+    worst = std::max(worst, f.max_vertex_error_mm);
+  }
+  EXPECT_NEAR(r.mean_vertex_error_mm, sum / (kFrames - 2), 1e-9);
+  EXPECT_EQ(r.max_vertex_error_mm, worst);
   const nlohmann::json metrics =
       nlohmann::json::parse(ReadText(OutDir("run_empty") / "metrics.json"));
   EXPECT_EQ(metrics.at("failed_frames").get<int>(), 2);
   EXPECT_EQ(metrics.at("lost_frames").get<int>(), 2);
+  EXPECT_EQ(metrics.at("evaluated_frames").get<int>(), kFrames - 2);
+}
+
+// Every depth frame all zero: every fit fails. The run is an error that keeps each frame's
+// reason, never a small error and 0 % lost (issue 20: it reported 6 mm and exited 0).
+TEST(PipelineTest, NoUsableFrameIsAnErrorListingTheReasons) {
+  const fs::path copy = OutDir("sequence_all_zero");
+  fs::copy(PipelineTestData::Get().sequence(), copy, fs::copy_options::recursive);
+  const std::vector<std::string> rows = Lines(ReadText(copy / "frames.csv"));
+  for (int f = 0; f < kFrames; ++f) {
+    const fs::path depth = copy / Fields(rows[f + 1])[3];
+    const cv::Mat d = cv::imread(depth.string(), cv::IMREAD_UNCHANGED);
+    ASSERT_FALSE(d.empty());
+    ASSERT_TRUE(cv::imwrite(depth.string(), cv::Mat::zeros(d.size(), d.type())));
+  }
+  ASSERT_TRUE(fs::remove(copy / Fields(rows[1])[4]));  // frame 0 unreadable too
+  const std::string what = ErrorOf([&] { Track(copy.string(), OutDir("run_all_zero").string()); });
+  EXPECT_NE(what.find("no usable frame"), std::string::npos) << what;
+  EXPECT_NE(what.find(fs::path(Fields(rows[1])[4]).filename().string()), std::string::npos)
+      << what;  // the unreadable frame's file
+  for (int f = 1; f < kFrames; ++f)
+    EXPECT_NE(what.find("frame " + std::to_string(f) + ": fit failed"), std::string::npos) << what;
+  EXPECT_NE(what.find("found 0"), std::string::npos) << what;
+
+  const std::string binary = ARTEX_BINARY;
+  std::string output;
+  EXPECT_NE(RunCommand("'" + binary + "' track '" + copy.string() + "' -t '" +
+                           PipelineTestData::Get().template_path() + "' -o '" +
+                           OutDir("cli_all_zero").string() +
+                           "' -q --set texture.atlas_size=" + std::to_string(kAtlasSize),
+                       &output),
+            0)
+      << output;
+  EXPECT_NE(output.find("frame 3: fit failed"), std::string::npos) << output;
+  EXPECT_EQ(output.find("mean vertex error"), std::string::npos) << output;
 }
 
 TEST(PipelineTest, TrackCommandExitStatus) {

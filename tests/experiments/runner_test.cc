@@ -86,6 +86,27 @@ TEST(ExperimentParseTest, ListEntriesTimesGrid) {
   EXPECT_EQ(ex.combinations[2].overrides[1].value, "ceres_lm");
 }
 
+// Issue 20: a million combinations hung --dry-run (each was expanded and validated).
+TEST(ExperimentParseTest, GridSizeIsCappedBeforeExpansion) {
+  std::string values = "[";
+  for (int v = 0; v < 1000; ++v) values += (v ? ", " : "") + std::to_string(v);
+  values += "]";
+  const std::string msg = ErrorOf(
+      [&] { Parse("grid:\n  texture.lambda: " + values + "\n  texture.alpha: " + values + "\n"); });
+  EXPECT_NE(msg.find("exp.yaml"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("at most " + std::to_string(kMaxExperimentCombinations)), std::string::npos)
+      << msg;
+  EXPECT_NE(msg.find("1000 texture.alpha"), std::string::npos) << msg;
+}
+
+// Found by the experiment fuzzer: a mapping where a name is expected escaped as yaml-cpp's
+// unnamed "bad conversion" (and aborted `artex experiment`).
+TEST(ExperimentParseTest, ValuesOfTheWrongShapeNameTheFileAndLine) {
+  const std::string msg = ErrorOf([] { Parse("name: {a: 1}\n"); });
+  EXPECT_NE(msg.find("exp.yaml"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("line 4"), std::string::npos) << msg;  // after 3 lines of sequences
+}
+
 TEST(ExperimentParseTest, NoOverridesGivesTheBaseConfiguration) {
   const Experiment ex = Parse("");
   ASSERT_EQ(ex.combinations.size(), 1u);

@@ -587,6 +587,89 @@ TEST_F(TemplateIoTest, JointHierarchyCyclesAndBadIndicesAreReported) {
   ExpectReadError(index_path, "beyond");
 }
 
+// Issue 20: files that made the reader crash, allocate gigabytes or run for minutes.
+TEST_F(TemplateIoTest, DeeplyNestedJsonIsRejectedBeforeParsing) {
+  const Glb glb = ParseGlb(EncodeTemplateGlb(MakeTube(3, 4)));
+  constexpr int kDepth = 1000000;  // overflowed the stack inside tinygltf (SIGSEGV)
+  std::string text = glb.gltf.dump();
+  ASSERT_EQ(text[0], '{');
+  text =
+      "{\"extras\":" + std::string(kDepth, '[') + std::string(kDepth, ']') + "," + text.substr(1);
+  const std::string bytes = BuildGlb(glb);  // its JSON chunk replaced by `text`
+  const uint32_t old_length = U32(bytes, 12);
+  while (text.size() % 4) text.push_back(' ');
+  std::string out = bytes.substr(0, 12);
+  AppendU32(&out, static_cast<uint32_t>(text.size()));
+  AppendU32(&out, 0x4E4F534A);
+  out += text + bytes.substr(20 + old_length);
+  const uint32_t total = static_cast<uint32_t>(out.size());
+  std::memcpy(&out[8], &total, 4);
+  const std::string path = Path("deep.glb");
+  WriteBytes(path, out);
+  ExpectReadError(path, "nests deeper than 64");
+  // Brackets inside strings do not count.
+  Glb strings = glb;
+  strings.gltf["extras"] = {{"note", std::string(1000, '[')}};
+  const std::string strings_path = Path("brackets_in_strings.glb");
+  WriteBytes(strings_path, BuildGlb(strings));
+  EXPECT_NO_THROW(ReadTemplateGlb(strings_path));
+}
+
+TEST_F(TemplateIoTest, SkinListingAJointTwiceIsAnError) {
+  Glb glb = ParseGlb(EncodeTemplateGlb(MakeTube(3, 4)));
+  json& joints = glb.gltf["skins"][0]["joints"];
+  ASSERT_GE(joints.size(), 3u);
+  joints[joints.size() - 1] = joints[1];  // loaded with a joint missing before
+  const std::string path = Path("twice.glb");
+  WriteBytes(path, BuildGlb(glb));
+  ExpectReadError(path, "listed twice");
+}
+
+TEST_F(TemplateIoTest, DeclaredCountsAreCappedByTheFileSize) {
+  const Glb glb = ParseGlb(EncodeTemplateGlb(MakeTube(3, 4)));
+  // A vertex count in extras far beyond the glTF vertices (allocated before).
+  Glb vertices = glb;
+  vertices.gltf["meshes"][0]["extras"]["artex_num_vertices"] = 1000000000;
+  const std::string vertices_path = Path("many_vertices.glb");
+  WriteBytes(vertices_path, BuildGlb(vertices));
+  ExpectReadError(vertices_path, "artex_num_vertices");
+  Glb huge = glb;
+  huge.gltf["meshes"][0]["extras"]["artex_num_vertices"] = 1e300;  // no undefined cast
+  const std::string huge_path = Path("huge_count.glb");
+  WriteBytes(huge_path, BuildGlb(huge));
+  ExpectReadError(huge_path, "artex_num_vertices");
+  // An accessor without data (all zeros) declaring 2^27 elements: 3 GB of doubles before.
+  Glb zeros = glb;
+  json& position = zeros.gltf["accessors"][AttributeAccessor(glb, "POSITION")];
+  position.erase("bufferView");
+  position.erase("byteOffset");
+  position["count"] = 1 << 27;
+  const std::string zeros_path = Path("zeros.glb");
+  WriteBytes(zeros_path, BuildGlb(zeros));
+  ExpectReadError(zeros_path, "without a buffer view");
+}
+
+TEST_F(TemplateIoTest, LongNodeChainsAreCheckedInLinearTime) {
+  // 200,000 plain nodes in a chain above the global node: the cycle check walked every node to
+  // the root (quadratic, minutes) and the world transforms recursed once per level.
+  constexpr int kChain = 200000;
+  Glb glb = ParseGlb(EncodeTemplateGlb(MakeTube(3, 4)));
+  json& nodes = glb.gltf["nodes"];
+  const int first = static_cast<int>(nodes.size());
+  for (int k = 0; k < kChain; ++k) {
+    const int child = k + 1 < kChain ? first + k + 1 : 1;  // the last holds the global node
+    nodes.push_back({{"children", json::array({child})}});
+  }
+  json& scene = glb.gltf["scenes"][0]["nodes"];
+  for (auto& n : scene) {
+    if (n.get<int>() == 1) n = first;
+  }
+  const std::string path = Path("chain.glb");
+  WriteBytes(path, BuildGlb(glb));
+  const Template read = ReadTemplateGlb(path);
+  EXPECT_EQ(read.num_joints(), MakeTube(3, 4).num_joints());
+}
+
 // ---------------------------------------------------------------------------------------------
 // Generic glTF import.
 

@@ -221,6 +221,44 @@ TEST(BvhParseTest, MalformedInputNamesFileAndLine) {
   EXPECT_EQ(Parse(good + "\n\n").num_frames(), 3);
 }
 
+// Issue 20: a huge Frame Time or frame count exhausted memory when resampled.
+TEST(BvhParseTest, FrameTimeAndCountAreCapped) {
+  const std::string good = kSmallBvh;
+  ExpectParseError(ReplaceLine(good, 18, "Frame Time: 1e300"), 18, "expected a Frame Time in");
+  ExpectParseError(ReplaceLine(good, 18, "Frame Time: 1e-9"), 18, "expected a Frame Time in");
+  const char* kNoChannels = R"(HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 0 0
+}
+MOTION
+Frames: 2000000000
+Frame Time: 1
+)";
+  ExpectParseError(kNoChannels, 8, "truncated");
+  BvhClip clip = Parse(kSmallBvh);
+  clip.frame_time = 1.0;
+  EXPECT_EQ(ResampledFrameCount(clip, 30.0), 61);
+  clip.values.resize(200000, clip.num_channels);  // 200,000 s: 6 million frames at 30 Hz
+  EXPECT_THROW(ResampledFrameCount(clip, 30.0), Error);
+}
+
+// A 100,000-joint chain: retargeting walked to the root for every candidate (quadratic,
+// minutes); joint intervals make each descendant test constant time.
+TEST(BvhRetargetTest, LongJointChainsMapInLinearTime) {
+  constexpr int kChain = 100000;
+  std::string text =
+      "HIERARCHY\nROOT Hips\n{\nOFFSET 0 0 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n";
+  for (int k = 0; k < kChain; ++k) text += "JOINT j" + std::to_string(k) + "\n{\nOFFSET 0 1 0\n";
+  for (int k = 0; k < kChain; ++k) text += "}\n";
+  text += "}\nMOTION\nFrames: 1\nFrame Time: 0.0333\n0 0 0\n";
+  const BvhClip clip = Parse(text);
+  ASSERT_EQ(static_cast<int>(clip.joints.size()), kChain + 1);
+  const std::vector<int> map = MapBvhJoints(clip, Model());
+  EXPECT_EQ(map[0], 0);  // only the root maps (no other name matches)
+  for (size_t k = 1; k < map.size(); ++k) EXPECT_EQ(map[k], -1) << Model().joints[k].name;
+}
+
 TEST(BvhResampleTest, FrameCountsTimesAndSlerp) {
   std::vector<SyntheticFrame> frames(13);
   for (int f = 0; f < 13; ++f) {

@@ -167,6 +167,28 @@ TEST(CalibrationTest, MalformedFilesNameFileFieldExpectedAndFound) {
   }
 }
 
+// Issue 20: finite but absurd values, duplicate keys and a folder given as the file.
+TEST(CalibrationTest, ImplausibleValuesDuplicateKeysAndFoldersAreErrors) {
+  const std::string folder = TempFolder("plausible");
+  std::string what = ExpectError(Mutated(folder, "fx", "fx: 580.25", "fx: 1e308"));
+  EXPECT_NE(what.find("depth.fx"), std::string::npos) << what;
+  EXPECT_NE(what.find("[1, 100000]"), std::string::npos) << what;
+  EXPECT_NE(what.find("1e+308"), std::string::npos) << what;
+  what = ExpectError(Mutated(folder, "scale", "depth_scale: 1000", "depth_scale: 1e-9"));
+  EXPECT_NE(what.find("depth_scale"), std::string::npos) << what;
+  what = ExpectError(Mutated(folder, "rate", "frame_rate: 30", "frame_rate: 1e9"));
+  EXPECT_NE(what.find("frame_rate"), std::string::npos) << what;
+  what = ExpectError(Mutated(folder, "cx", "cx: 801.5", "cx: -1e7"));
+  EXPECT_NE(what.find("color.cx"), std::string::npos) << what;
+  what = ExpectError(
+      Mutated(folder, "duplicate", "depth_scale: 1000", "frame_rate: 25\ndepth_scale: 1000"));
+  EXPECT_NE(what.find("frame_rate"), std::string::npos) << what;
+  EXPECT_NE(what.find("defined twice"), std::string::npos) << what;
+  what = ExpectError(folder);
+  EXPECT_NE(what.find(folder), std::string::npos) << what;
+  EXPECT_NE(what.find("found a folder"), std::string::npos) << what;
+}
+
 TEST(CalibrationTest, DistortionMatchesRadialTangentialModel) {
   PinholeCamera cam;
   cam.fx = 500;

@@ -2,8 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <opencv2/imgcodecs.hpp>
 #include <string>
 
@@ -296,6 +298,32 @@ TEST(SequenceTest, BadFramesAreSkippedWithAWarning) {
     ADD_FAILURE() << "no error";
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("000001.bin"), std::string::npos) << e.what();
+  }
+}
+
+// The reader rejects what the writer refuses: a non-finite ground-truth vertex (issue 20: NaN
+// vertices turned the metrics into nonsense).
+TEST(SequenceTest, NonFiniteGroundTruthVerticesAreErrors) {
+  const std::string folder = TempFolder("nan_truth");
+  const Calibration c = SmallRig();
+  const Recorded r = MakeData(c, 11);
+  WriteSequence(folder, c, r);
+  const std::string file = folder + "/groundtruth/vertices/000002.bin";
+  std::string bytes = ReadText(file);
+  ASSERT_GT(bytes.size(), 8u + 12u * 3u);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  std::memcpy(&bytes[8 + 12 * 3 + 4], &nan, 4);  // vertex 3, y (little-endian hosts)
+  std::ofstream(file, std::ios::binary | std::ios::trunc) << bytes;
+  SequenceReader reader(folder);
+  EXPECT_NO_THROW(reader.ReadGroundTruth(1));
+  try {
+    reader.ReadGroundTruth(2);
+    ADD_FAILURE() << "no error for a NaN vertex";
+  } catch (const Error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("000002.bin"), std::string::npos) << what;
+    EXPECT_NE(what.find("vertex 3"), std::string::npos) << what;
+    EXPECT_NE(what.find("finite"), std::string::npos) << what;
   }
 }
 

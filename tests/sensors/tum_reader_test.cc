@@ -170,6 +170,19 @@ TEST(TumReaderTest, BadInputGivesErrorsOrWarnings) {
     }
   }
   {
+    // Found by the TUM fuzzer: a huge width was converted to int (undefined behaviour); an
+    // absurd focal length passed (issue 20).
+    const std::string folder = WriteTum("huge");
+    std::ofstream(folder + "/camera.yaml", std::ios::trunc)
+        << "width: 4.8e31\nheight: 24\nfx: 5\nfy: 5\ncx: 1\ncy: 1\n";
+    std::string msg = ErrorOf([&] { TumReader reader(folder); });
+    EXPECT_NE(msg.find("at most 16384"), std::string::npos) << msg;
+    std::ofstream(folder + "/camera.yaml", std::ios::trunc)
+        << "width: 32\nheight: 24\nfx: 1e308\nfy: 5\ncx: 1\ncy: 1\n";
+    msg = ErrorOf([&] { TumReader reader(folder); });
+    EXPECT_NE(msg.find("depth.fx"), std::string::npos) << msg;
+  }
+  {
     const std::string folder = WriteTum("frames");
     TumReader reader(folder);
     const std::string depth1 = folder + "/" + reader.depth_file(1);

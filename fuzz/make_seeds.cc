@@ -1,0 +1,147 @@
+// Writes the seed corpora of the fuzz targets with artex's own writers (nothing binary is
+// committed): make_seeds OUT [SOURCE_DIR] -> OUT/<target>/<seed files>. SOURCE_DIR (the
+// repository) supplies configs/default.yaml and configs/experiments/*.yaml.
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "experiments/pose_csv.h"
+#include "fuzz/fuzz_input.h"
+#include "models/error.h"
+#include "models/template_generator.h"
+#include "models/template_io.h"
+#include "sensors/calibration.h"
+#include "sensors/sequence.h"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string Read(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+void Put(const fs::path& out, const std::string& target, const std::string& name,
+         const std::string& bytes) {
+  fs::create_directories(out / target);
+  std::ofstream(out / target / name, std::ios::binary).write(bytes.data(), bytes.size());
+}
+
+const char* kBvh = R"(HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 90 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT LeftUpLeg
+  {
+    OFFSET 10 -5 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    JOINT LeftLeg
+    {
+      OFFSET 0 -40 0
+      CHANNELS 3 Zrotation Xrotation Yrotation
+      End Site
+      {
+        OFFSET 0 -40 0
+      }
+    }
+  }
+  JOINT Spine
+  {
+    OFFSET 0 10 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    End Site
+    {
+      OFFSET 0 50 0
+    }
+  }
+}
+MOTION
+Frames: 3
+Frame Time: 0.0333333
+0 90 0 0 0 0 10 0 0 -20 0 0 5 0 0
+1 90 0 0 5 0 12 0 0 -25 0 0 5 2 0
+2 90 0 0 10 0 14 0 0 -30 0 0 5 4 0
+)";
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2) {
+    std::fprintf(stderr, "usage: make_seeds OUT [SOURCE_DIR]\n");
+    return 2;
+  }
+  const fs::path out = argv[1];
+  const fs::path source = argc > 2 ? fs::path(argv[2]) : fs::path(".");
+  const std::string sep = artex::fuzz::kPartSeparator;
+  try {
+    artex::BodyShapeOptions shape;
+    shape.resolution = 0;
+    const artex::Template tmpl = artex::GenerateTemplate(shape);
+    const fs::path scratch = out / "scratch";
+    fs::create_directories(scratch);
+    artex::WriteTemplateGlb((scratch / "template.glb").string(), tmpl);
+    Put(out, "template_glb", "coarse.glb", Read(scratch / "template.glb"));
+
+    // A 2-frame sequence of the fuzzers' 8 x 6 rig, with ground truth.
+    artex::Calibration c;
+    c.depth.width = c.color.width = 8;
+    c.depth.height = c.color.height = 6;
+    c.depth.cx = c.color.cx = 3.5;
+    c.depth.cy = c.color.cy = 2.5;
+    artex::WriteCalibration(c, (scratch / "calibration.yaml").string());
+    Put(out, "calibration", "calibration.yaml", Read(scratch / "calibration.yaml"));
+    const fs::path seq = scratch / "sequence";
+    {
+      artex::SequenceWriter writer(seq.string(), c);
+      for (int i = 0; i < 2; ++i) {
+        artex::Frame f;
+        f.index = i;
+        f.depth_timestamp = f.color_timestamp = 1.0 + i / 30.0;
+        f.depth = cv::Mat(6, 8, CV_16UC1, cv::Scalar(1500 + 10 * i));
+        f.color = cv::Mat(6, 8, CV_8UC3, cv::Scalar(20, 40, 60 + i));
+        writer.AddFrame(f);
+        artex::GroundTruthFrame t;
+        t.pose = artex::Pose::Identity(tmpl.num_joints());
+        t.vertices = tmpl.vertices.topRows(4);
+        writer.AddGroundTruth(i, t);
+      }
+      writer.Finish();
+    }
+    Put(out, "sequence", "sequence",
+        Read(seq / "frames.csv") + sep + Read(seq / "groundtruth/poses.csv") + sep +
+            Read(seq / "groundtruth/vertices/000000.bin"));
+    for (const auto& e : fs::directory_iterator(seq / "depth")) {
+      Put(out, "image", "depth_" + e.path().filename().string(), Read(e.path()));
+    }
+    for (const auto& e : fs::directory_iterator(seq / "color")) {
+      Put(out, "image", "color_" + e.path().filename().string(), Read(e.path()));
+    }
+    Put(out, "tum", "tum",
+        "# color images\n1305031102.175304 rgb/1305031102.175304.png\n"
+        "1305031102.211214 rgb/1305031102.211214.png\n" +
+            sep +
+            "# depth maps\n1305031102.160407 depth/1305031102.160407.png\n"
+            "1305031102.226738 depth/1305031102.226738.png\n" +
+            sep +
+            "width: 640\nheight: 480\nfx: 517.3\nfy: 516.5\ncx: 318.6\ncy: 255.3\n"
+            "k1: 0.2624\nk2: -0.9531\np1: -0.0054\np2: 0.0026\nk3: 1.1633\ndepth_scale: 5000\n");
+    Put(out, "bvh", "small.bvh", kBvh);
+    std::vector<artex::Pose> poses(2, artex::Pose::Identity(tmpl.num_joints()));
+    artex::WritePoseCsv((scratch / "poses.csv").string(), tmpl, {0, 1}, poses);
+    Put(out, "poses_csv", "poses.csv", Read(scratch / "poses.csv"));
+    Put(out, "config", "default", "texture.lambda=0.5\n" + Read(source / "configs/default.yaml"));
+    for (const auto& e : fs::directory_iterator(source / "configs/experiments")) {
+      Put(out, "experiment", e.path().filename().string(), Read(e.path()));
+    }
+    fs::remove_all(scratch);
+  } catch (const artex::Error& e) {
+    std::fprintf(stderr, "make_seeds: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
