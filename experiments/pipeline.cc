@@ -372,7 +372,9 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
     }
     iterations += record.fit.iterations;
     const Pose frame_pose = keep_tracked ? tracked_pose : fitter.pose();
-    skinning.Apply(frame_pose, &posed);
+    // `posed` is the evaluated fit's (evaluate skins fitter.pose()), unless the tracked fit
+    // was kept after a re-initialisation was tried.
+    if (keep_tracked) skinning.Apply(frame_pose, &posed);
     poses.push_back(frame_pose);
     pose_frames.push_back(i);
     stream_bytes += sizeof(float) * frame_pose.num_parameters();
