@@ -156,6 +156,19 @@ void Config::Get(const std::string& key, std::vector<double>* value) const {
   *value = out;
 }
 
+void Config::Get(const std::string& key, std::vector<std::string>* value) const {
+  if (!Has(key)) return;
+  const YAML::Node n = Lookup(impl_->node, key);
+  if (!n.IsSequence()) throw Error(Path(key) + ": expected a list of names");
+  std::vector<std::string> out;
+  for (std::size_t i = 0; i < n.size(); ++i) {
+    std::ostringstream p;
+    p << Path(key) << "[" << i << "]";
+    out.push_back(Convert<std::string>(n[i], p.str(), "a name"));
+  }
+  *value = out;
+}
+
 void Config::CheckKeys(const std::vector<std::string>& valid) const {
   for (const auto& key : Keys()) {
     bool ok = false;

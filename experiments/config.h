@@ -34,6 +34,7 @@ class Config {
   void Get(const std::string& key, bool* value) const;
   void Get(const std::string& key, std::string* value) const;
   void Get(const std::string& key, std::vector<double>* value) const;
+  void Get(const std::string& key, std::vector<std::string>* value) const;
   // Reads a string and maps it through `choices`; an unknown value lists the valid ones.
   template <typename Enum>
   void GetEnum(const std::string& key, const std::map<std::string, Enum>& choices,
@@ -44,6 +45,21 @@ class Config {
     auto it = choices.find(s);
     if (it == choices.end()) ThrowChoice(key, s, choices);
     *value = it->second;
+  }
+  // A list of names, each mapped through `choices` (an unknown one lists the valid ones).
+  template <typename Enum>
+  void GetEnumList(const std::string& key, const std::map<std::string, Enum>& choices,
+                   std::vector<Enum>* value) const {
+    if (!Has(key)) return;
+    std::vector<std::string> names;
+    Get(key, &names);
+    std::vector<Enum> out;
+    for (const std::string& s : names) {
+      auto it = choices.find(s);
+      if (it == choices.end()) ThrowChoice(key, s, choices);
+      out.push_back(it->second);
+    }
+    *value = out;
   }
   // Throws when the mapping holds a key not in `valid`, listing the valid keys.
   void CheckKeys(const std::vector<std::string>& valid) const;

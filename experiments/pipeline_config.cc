@@ -134,7 +134,7 @@ void BindSegmentation(const Config& c, SubjectSegmentationOptions* o) {
 
 void BindPreprocess(const Config& c, PreprocessOptions* o) {
   c.CheckKeys({"foreground", "world_frame", "assumed_camera_height", "planes", "segmentation",
-               "background", "mesh"});
+               "background", "mesh", "silhouette"});
   c.GetEnum("foreground", ForegroundModeNames(), &o->foreground);
   c.GetEnum("world_frame", WorldFrameModeNames(), &o->world_frame);
   c.Get("assumed_camera_height", &o->assumed_camera_height);
@@ -154,6 +154,13 @@ void BindPreprocess(const Config& c, PreprocessOptions* o) {
   b.Get("opening_radius", &o->background.opening_radius);
   b.Get("closing_radius", &o->background.closing_radius);
   b.Get("keep_largest_component", &o->background.keep_largest_component);
+  const Config sil = c.Section("silhouette");
+  sil.CheckKeys({"enabled", "raster_width", "edge_margin_px", "zero_depth", "presegmented_fraction"});
+  sil.Get("enabled", &o->silhouette.enabled);
+  sil.Get("raster_width", &o->silhouette.raster_width);
+  sil.Get("edge_margin_px", &o->silhouette.edge_margin_px);
+  sil.GetEnum("zero_depth", ZeroDepthMeaningNames(), &o->silhouette.zero_depth);
+  sil.Get("presegmented_fraction", &o->silhouette.presegmented_fraction);
   const Config m = c.Section("mesh");
   m.CheckKeys({"step", "max_relative_jump", "drop_isolated_points"});
   m.Get("step", &o->mesh.step);
@@ -198,7 +205,7 @@ void BindQuality(const Config& c, FitQualityOptions* o) {
 void BindInitializer(const Config& c, InitializerOptions* o) {
   c.CheckKeys({"yaws_deg", "world_up", "arm_angles_deg", "coarse_iterations", "em_candidates",
                "em_one_per_yaw", "ranking_iterations", "refine_arms", "refine_side_angles_deg",
-               "refine_front_angles_deg", "icp"});
+               "refine_front_angles_deg", "refine_forearm_bends", "icp"});
   c.Get("yaws_deg", &o->yaws_deg);
   if (c.Has("world_up")) {
     std::vector<double> up;
@@ -218,6 +225,7 @@ void BindInitializer(const Config& c, InitializerOptions* o) {
   c.Get("refine_arms", &o->refine_arms);
   c.Get("refine_side_angles_deg", &o->refine_side_angles_deg);
   c.Get("refine_front_angles_deg", &o->refine_front_angles_deg);
+  c.GetEnumList("refine_forearm_bends", ForearmBendNames(), &o->refine_forearm_bends);
   BindIcpInit(c.Section("icp"), &o->icp);
 }
 
@@ -235,7 +243,7 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
                "candidate_margin", "normal_refresh_iterations", "tracking_tikhonov",
                "fit_vertex_selection", "scale_estimator", "scale_sample_max_distance",
                "scale_sample_min_pair_fraction", "icp_init", "init", "quality", "prediction",
-               "kalman", "particle", "temporal_prior_on_prediction"});
+               "kalman", "particle", "temporal_prior_on_prediction", "silhouette", "unobserved_joints"});
   c.GetEnum("correspondence", CorrespondenceModelNames(), &o->correspondence);
   c.GetEnum("solver", FitSolverTypeNames(), &o->solver.type);
   c.GetEnum("estep",
@@ -269,6 +277,16 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   BindWeights(c.Section("temporal"), &o->tikhonov.temporal);
   BindWeights(c.Section("smoothness"), &o->smoothness);
   c.Get("joint_limit_weight", &o->joint_limits.weight);
+  const Config sil = c.Section("silhouette");
+  sil.CheckKeys({"weight", "depth_margin", "front_weight", "max_radius"});
+  sil.Get("max_radius", &o->silhouette.max_radius);
+  sil.Get("front_weight", &o->silhouette.front_weight);
+  sil.Get("weight", &o->silhouette.weight);
+  sil.Get("depth_margin", &o->silhouette.depth_margin);
+  const Config unobserved = c.Section("unobserved_joints");
+  unobserved.CheckKeys({"weight", "min_observed_fraction"});
+  unobserved.Get("weight", &o->unobserved_joints.weight);
+  unobserved.Get("min_observed_fraction", &o->unobserved_joints.min_observed_fraction);
   c.GetEnum("scale_mode", ScaleModeNames(), &o->scale_mode);
   c.Get("scale_estimation_frames", &o->scale_estimation_frames);
   c.Get("scale_max_radius", &o->scale_max_radius);
@@ -488,6 +506,11 @@ PipelineOptions LoadPipelineOptions(const Config& config) {
   BindInput(config.Section("input"), &o.input);
   BindPreprocess(config.Section("preprocess"), &o.preprocess);
   BindFitting(config.Section("fitting"), &o.fitting);
+  // The silhouette term needs the preprocessing's free-space map; build it unless told not to.
+  if (o.fitting.silhouette.weight > 0.0 &&
+      !config.Section("preprocess").Section("silhouette").Has("enabled")) {
+    o.preprocess.silhouette.enabled = true;
+  }
   BindInitializer(config.Section("fitting").Section("init"), &o.initializer);
   BindQuality(config.Section("fitting").Section("quality"), &o.quality);
   o.initializer.quality = o.quality;  // the initialiser ranks and labels with the same options

@@ -40,6 +40,10 @@ bool PreprocessOptions::IsValid(std::string* error) const {
     if (error) *error = "segmentation." + *error;
     return false;
   }
+  if (!silhouette.IsValid(error)) {
+    if (error) *error = "silhouette." + *error;
+    return false;
+  }
   return true;
 }
 
@@ -185,6 +189,12 @@ void Preprocessor::Process(const Frame& frame, Scan* scan, PreprocessStats* stat
   const int invalid =
       SampleScanColors(calibration_.color, calibration_.color_distortion, frame.color, scan);
   const auto t3 = std::chrono::steady_clock::now();
+  scan->silhouette.reset();
+  if (options_.silhouette.enabled) {
+    scan->silhouette = BuildSilhouetteMap(frame.depth, calibration_.depth_scale, mask_,
+                                          calibration_.depth, options_.silhouette);
+  }
+  const auto t4 = std::chrono::steady_clock::now();
   if (stats) {
     stats->valid_depth_pixels = cv::countNonZero(frame.depth);
     stats->foreground_pixels = cv::countNonZero(mask_);
@@ -194,7 +204,9 @@ void Preprocessor::Process(const Frame& frame, Scan* scan, PreprocessStats* stat
     stats->background_seconds = Seconds(t0, t1);
     stats->mesh_seconds = Seconds(t1, t2);
     stats->color_seconds = Seconds(t2, t3);
-    stats->total_seconds = Seconds(t0, t3);
+    stats->silhouette_seconds = Seconds(t3, t4);
+    stats->silhouette_free_pixels = scan->silhouette ? scan->silhouette->free_pixels : 0;
+    stats->total_seconds = Seconds(t0, t4);
   }
 }
 

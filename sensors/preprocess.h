@@ -16,6 +16,7 @@
 #include "sensors/scan.h"
 #include "sensors/scene_segmentation.h"
 #include "sensors/sequence.h"
+#include "sensors/silhouette.h"
 
 namespace artex {
 
@@ -35,6 +36,8 @@ struct PreprocessOptions {
   BackgroundModelOptions background;
   SubjectSegmentationOptions segmentation;
   DepthMeshOptions mesh;
+  // The frame's free space for the fitting's silhouette term (scan.silhouette).
+  SilhouetteOptions silhouette;
   bool IsValid(std::string* error) const;
 };
 
@@ -44,7 +47,9 @@ struct PreprocessStats {
   SegmentationStats segmentation;  // kSegment only
   DepthMeshStats mesh;
   int color_invalid = 0;  // vertices projecting outside the colour image
-  double background_seconds = 0, mesh_seconds = 0, color_seconds = 0, total_seconds = 0;
+  int silhouette_free_pixels = 0;  // raster pixels of the free space (0 without a map)
+  double background_seconds = 0, mesh_seconds = 0, color_seconds = 0, silhouette_seconds = 0;
+  double total_seconds = 0;
 };
 
 // Projects scan->points (world) into the colour camera (through its world pose, i.e. the

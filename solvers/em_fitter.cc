@@ -158,6 +158,10 @@ bool EMFitterOptions::IsValid(std::string* error) const {
     msg << "smoothness." << inner;
   } else if (!icp.IsValid(&inner)) {
     msg << "icp." << inner;
+  } else if (!unobserved_joints.IsValid(&inner)) {
+    msg << "unobserved_joints." << inner;
+  } else if (!silhouette.IsValid(&inner)) {
+    msg << "silhouette." << inner;
   } else if (!prediction.IsValid(&inner)) {
     msg << "prediction." << inner;
   } else if (estep.mode == EStepMode::kRadius &&
@@ -242,6 +246,8 @@ struct EMFitter::FrameState {
   bool has_previous = false;
   std::unique_ptr<PoseSmoothnessTerm> smoothness;
   Eigen::MatrixXd information;  // data-term J^T J of the last M-step
+  std::shared_ptr<const SilhouetteMap> silhouette;  // the frame's free space (may be null)
+  SilhouetteTargets silhouette_targets;
 };
 
 EMFitter::EMFitter(const Template& tmpl, const EMFitterOptions& options) : options_(options) {
@@ -376,6 +382,7 @@ void EMFitter::BeginFrame(const Scan& scan, const Pose& initial_guess) {
   st.initial_guess = initial_guess;
   st.summary.frame = frame_;
   st.summary.num_scan_points = scan.size();
+  st.silhouette = scan.silhouette;
   pose_ = initial_guess;
   if (!initial_guess.AllFinite()) {
     st.summary.non_finite = true;
@@ -504,6 +511,34 @@ EMIterationInfo EMFitter::Iterate() {
         &st.nearest, options_.one_to_one.metric, data_weight);
   }
 
+  std::unique_ptr<SilhouetteTerm> silhouette_term;
+  st.silhouette_targets.violations = 0;
+  if (st.silhouette && options_.silhouette.weight > 0.0 && view.vertices->rows() > 0 &&
+      (st.radii.empty() || radius <= options_.silhouette.max_radius)) {
+    FindSilhouetteViolations(*st.silhouette, *view.vertices, options_.silhouette,
+                             &st.silhouette_targets);
+    if (st.silhouette_targets.violations > 0) {
+      silhouette_term = std::make_unique<SilhouetteTerm>(
+          &st.silhouette_targets,
+          options_.silhouette.weight / static_cast<double>(view.vertices->rows()));
+    }
+  }
+  info.silhouette_violations = st.silhouette_targets.violations;
+  // Joints without data hold the frame's initial guess (first frame) or the previous pose.
+  std::unique_ptr<UnobservedJointTerm> unobserved_term;
+  if (options_.unobserved_joints.weight > 0.0 &&
+      options_.correspondence == CorrespondenceModel::kOneToMany) {
+    const std::vector<int> joints = UnobservedJoints(
+        fit_skinning_->model().vertex_joint, st.targets.weight, model.num_joints(),
+        options_.unobserved_joints.min_observed_fraction);
+    info.unobserved_joints = static_cast<int>(joints.size());
+    if (!joints.empty()) {
+      unobserved_term = std::make_unique<UnobservedJointTerm>(
+          st.has_previous ? &st.previous : &st.initial_guess, joints,
+          options_.unobserved_joints.weight);
+    }
+  }
+
   // M-step problem.
   TikhonovOptions tikhonov_options = options_.tikhonov;
   if (!st.first_frame) {
@@ -524,6 +559,8 @@ EMIterationInfo EMFitter::Iterate() {
   problem.information_terms = 1;  // the data term's J^T J: the frame's information
   problem.terms.push_back(data_term.get());
   problem.terms.push_back(&tikhonov);
+  if (silhouette_term) problem.terms.push_back(silhouette_term.get());
+  if (unobserved_term) problem.terms.push_back(unobserved_term.get());
   if (options_.joint_limits.weight > 0.0) problem.terms.push_back(&joint_limits);
   if (st.smoothness) problem.terms.push_back(st.smoothness.get());
   if (prior_scale) problem.terms.push_back(&scale_prior);

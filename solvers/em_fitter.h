@@ -24,6 +24,8 @@
 #include "energies/joint_limit_term.h"
 #include "energies/one_to_many_correspondence.h"
 #include "energies/one_to_one_correspondence.h"
+#include "energies/silhouette_term.h"
+#include "energies/unobserved_joint_term.h"
 #include "energies/tikhonov_term.h"
 #include "models/pose.h"
 #include "models/skinning.h"
@@ -97,6 +99,14 @@ struct EMFitterOptions {
   // iteration and frame to frame since the cost barely changes along them.
   PoseGroupWeights tracking_update = {0.0, 0.0, 0.0, 3e-3};
   JointLimitOptions joint_limits;  // soft joint boxes (weight 0: off)
+  // Free space (energies/silhouette_term.h): fitted vertices that project where the camera saw
+  // something else behind them are pulled towards the subject's silhouette; used when the scan
+  // carries a SilhouetteMap (preprocessing builds one unless preprocess.silhouette.enabled is
+  // false). weight 0: off (the paper's energy).
+  SilhouetteTermOptions silhouette;
+  // Joints whose fitted vertices the E-step leaves unmatched are pulled towards the initial
+  // guess (first frame) or the previous pose (energies/unobserved_joint_term.h). weight 0: off.
+  UnobservedJointOptions unobserved_joints;
   PoseGroupWeights smoothness;     // constant-velocity prior (all 0: off)
 
   ScaleMode scale_mode = ScaleMode::kEstimateThenFix;
@@ -151,6 +161,8 @@ struct EMIterationInfo {
   double max_update = 0.0;
   double total_weight = 0.0;  // sum_t P_t (or matched vertices, one-to-one)
   long long num_pairs = 0;
+  int silhouette_violations = 0;  // fitted vertices outside the silhouette (before the M-step)
+  int unobserved_joints = 0;      // joints held by the unobserved-joint prior
   double scale = 1.0;
   bool stage_converged = false;
   bool converged = false;  // last stage converged: the frame is done

@@ -51,7 +51,7 @@ bool WithArms(const Template& model, const Pose& base, double elevation_deg, Pos
 // `elevation_deg` below the horizontal, sideways (frontal plane) or forwards, relative to the
 // parent's frame (the torso).
 Pose WithArmDirection(const Template& model, const Pose& base, int shoulder, int elbow,
-                      double elevation_deg, bool forwards) {
+                      int wrist, double elevation_deg, bool forwards, ForearmBend bend) {
   Pose out = base;
   const Eigen::Vector3d upper = model.joints[elbow].center - model.joints[shoulder].center;
   const double e = elevation_deg * kDegToRad;
@@ -60,14 +60,35 @@ Pose WithArmDirection(const Template& model, const Pose& base, int shoulder, int
   const Eigen::Vector3d direction = forwards
                                         ? Eigen::Vector3d(0.2 * side, -std::sin(e), std::cos(e))
                                         : Eigen::Vector3d(side * std::cos(e), -std::sin(e), 0.0);
-  out.joint_rotations[shoulder] =
+  const Eigen::Matrix3d r_shoulder =
       Eigen::Quaterniond::FromTwoVectors(upper.normalized(), direction.normalized())
           .toRotationMatrix();
+  out.joint_rotations[shoulder] = r_shoulder;
   out.joint_rotations[elbow] = Eigen::Matrix3d::Identity();
+  if (bend == ForearmBend::kStraight || wrist < 0) return out;
+  // The forearm's direction in the template frame (+Y up, +Z front); the elbow's rotation
+  // R_e with R_s R_e f_rest = f (rotations compose along the chain in the rest frame).
+  const Eigen::Vector3d forearm = model.joints[wrist].center - model.joints[elbow].center;
+  const Eigen::Vector3d f = bend == ForearmBend::kUp        ? Eigen::Vector3d(0.0, 1.0, 0.0)
+                            : bend == ForearmBend::kForward ? Eigen::Vector3d(0.0, 0.0, 1.0)
+                                                            : Eigen::Vector3d(-side, 0.0, 0.3);
+  const Eigen::Vector3d current = r_shoulder * forearm.normalized();
+  if (current.dot(f.normalized()) > 0.95) return out;  // already (nearly) that way
+  out.joint_rotations[elbow] =
+      r_shoulder.transpose() *
+      Eigen::Quaterniond::FromTwoVectors(current, f.normalized()).toRotationMatrix() * r_shoulder;
   return out;
 }
 
 }  // namespace
+
+const std::map<std::string, ForearmBend>& ForearmBendNames() {
+  static const std::map<std::string, ForearmBend> names = {{"straight", ForearmBend::kStraight},
+                                                           {"up", ForearmBend::kUp},
+                                                           {"forward", ForearmBend::kForward},
+                                                           {"across", ForearmBend::kAcross}};
+  return names;
+}
 
 bool InitializerOptions::IsValid(std::string* error) const {
   std::ostringstream msg;
@@ -273,19 +294,24 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
     Pose refined = from.pose;
     double refined_score = from.quality.score;
     bool changed = false;
-    const char* const arms[2][2] = {{"l_shoulder", "l_elbow"}, {"r_shoulder", "r_elbow"}};
+    const char* const arms[2][3] = {{"l_shoulder", "l_elbow", "l_wrist"},
+                                    {"r_shoulder", "r_elbow", "r_wrist"}};
     for (const auto& arm : arms) {
       const int shoulder = FindJoint(model, arm[0]), elbow = FindJoint(model, arm[1]);
+      const int wrist = FindJoint(model, arm[2]);
       if (shoulder < 0 || elbow < 0) continue;
       for (int forwards = 0; forwards < 2; ++forwards) {
         for (double angle :
              forwards ? options.refine_front_angles_deg : options.refine_side_angles_deg) {
-          const Pose p = WithArmDirection(model, refined, shoulder, elbow, angle, forwards);
-          const double score = evaluate(p).score;
-          if (score > refined_score) {
-            refined_score = score;
-            refined = p;
-            changed = true;
+          for (ForearmBend bend : options.refine_forearm_bends) {
+            const Pose p =
+                WithArmDirection(model, refined, shoulder, elbow, wrist, angle, forwards, bend);
+            const double score = evaluate(p).score;
+            if (score > refined_score) {
+              refined_score = score;
+              refined = p;
+              changed = true;
+            }
           }
         }
       }

@@ -9,6 +9,7 @@
 // schedule (the best of each yaw by default) and the best fit by quality score is accepted.
 #pragma once
 
+#include <map>
 #include <string>
 #include <vector>
 
@@ -20,6 +21,10 @@
 #include "solvers/icp_init.h"
 
 namespace artex {
+
+// Elbow variants of the arm refinement (InitializerOptions::refine_forearm_bends).
+enum class ForearmBend { kStraight, kUp, kForward, kAcross };
+const std::map<std::string, ForearmBend>& ForearmBendNames();  // straight, up, forward, across
 
 struct InitializerOptions {
   // Yaw hypotheses (degrees) about world +Y relative to facing the camera: 0 turns the
@@ -68,6 +73,11 @@ struct InitializerOptions {
   bool refine_arms = true;
   std::vector<double> refine_side_angles_deg = {80.0, 40.0, 0.0, -40.0, -80.0};
   std::vector<double> refine_front_angles_deg = {45.0, 0.0, -45.0};
+  // Forearm of every tried direction: straight, bent up (a raised fist), forwards, or across
+  // the body (the hand in front of the chest); a bend the forearm already has is skipped.
+  // Straight only by default: all four change one of the twelve real stills slightly for
+  // twice the initialisation time (docs/fitting.md "Unobserved joints").
+  std::vector<ForearmBend> refine_forearm_bends = {ForearmBend::kStraight};
   FitQualityOptions quality;  // ranking (score) and the reported labels
 
   bool IsValid(std::string* error) const;

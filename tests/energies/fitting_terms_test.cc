@@ -11,7 +11,10 @@
 #include "energies/one_to_many_correspondence.h"
 #include "energies/one_to_one_correspondence.h"
 #include "energies/pose_smoothness_term.h"
+#include "energies/silhouette_term.h"
+#include "energies/unobserved_joint_term.h"
 #include "energies/tikhonov_term.h"
+#include "models/error.h"
 #include "models/so3.h"
 #include "tests/solvers/fitting_test_util.h"
 
@@ -258,6 +261,143 @@ TEST_F(FittingTermsTest, PoseSmoothnessJacobianAndPrediction) {
   EXPECT_LT((prediction.rotation - expected_rotation).norm(), 1e-9);
   anchor_ = prediction;
   EXPECT_LT(Residuals(term, Eigen::VectorXd::Zero(p_)).norm(), 1e-9);
+}
+
+// Silhouette term: lateral residuals on some vertices, depth residuals on others, none on the
+// rest; the Jacobian and the normal equations against the dense path.
+TEST_F(FittingTermsTest, SilhouetteJacobianAndResiduals) {
+  Eigen::MatrixX3d posed;
+  skinning_.Apply(anchor_, &posed);
+  const int t_count = model_.num_vertices();
+  SilhouetteTargets targets;
+  targets.weight.setZero(t_count);
+  targets.depth_weight.setZero(t_count);
+  targets.target = posed;
+  const Eigen::Matrix3d r = Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized())
+                                .toRotationMatrix();  // a camera not aligned with the world
+  targets.axis_u = r.col(0).transpose().replicate(t_count, 1);
+  targets.axis_v = r.col(1).transpose().replicate(t_count, 1);
+  targets.axis_z = r.col(2).transpose().replicate(t_count, 1);
+  std::normal_distribution<double> n(0.0, 0.03);
+  for (int t = 0; t < t_count; ++t) {
+    targets.target.row(t) += Eigen::RowVector3d(n(rng_), n(rng_), n(rng_));
+    if (t % 3 == 0) {
+      targets.weight[t] = 1.0;
+      ++targets.violations;
+    } else if (t % 3 == 1 && t % 2 == 0) {
+      targets.depth_weight[t] = 0.5;
+      ++targets.violations;
+      ++targets.depth_violations;
+    }
+  }
+  SilhouetteTerm term(&targets, 0.8);
+  EXPECT_EQ(term.num_residuals(), 3 * t_count);
+  CheckJacobian(term, Eigen::VectorXd::Zero(p_));
+  CheckJacobian(term, delta_);
+  CheckNormalEquations(term, Eigen::VectorXd::Zero(p_));
+  CheckNormalEquations(term, delta_);
+  skinning_.Apply(anchor_.Retracted(delta_), &posed);
+  const Eigen::VectorXd res = Residuals(term, delta_);
+  for (int t = 0; t < t_count; ++t) {
+    const Eigen::RowVector3d d = posed.row(t) - targets.target.row(t);
+    EXPECT_NEAR(res[3 * t], std::sqrt(0.8 * targets.weight[t]) * r.col(0).dot(d.transpose()),
+                1e-12);
+    EXPECT_NEAR(res[3 * t + 2],
+                std::sqrt(0.8 * targets.depth_weight[t]) * r.col(2).dot(d.transpose()), 1e-12);
+  }
+}
+
+// A camera looking at the template: vertices beside a foreground strip are outside the
+// silhouette and get the strip's nearest pixel as target; vertices behind the observed
+// background are hidden; vertices outside the image never violate.
+TEST_F(FittingTermsTest, SilhouetteViolationsFollowTheMap) {
+  PinholeCamera camera;
+  camera.width = 64;
+  camera.height = 48;
+  camera.fx = camera.fy = 60.0;
+  camera.cx = 31.5;
+  camera.cy = 23.5;
+  cv::Mat depth(48, 64, CV_16UC1, cv::Scalar(3000));  // a wall at 3 m (1000 units/m)
+  cv::Mat mask(48, 64, CV_8UC1, cv::Scalar(0));
+  mask.colRange(28, 36).setTo(255);  // the subject: a vertical strip
+  depth.colRange(28, 36).setTo(2000);
+  SilhouetteOptions options;
+  options.raster_width = 64;
+  options.edge_margin_px = 1.0;
+  const auto map = BuildSilhouetteMap(depth, 1000.0, mask, camera, options);
+  ASSERT_EQ(map->width, 64);
+  EXPECT_FALSE(map->zero_depth_free);  // the wall has depth: a real recording
+  EXPECT_GT(map->free_pixels, 40 * 48);
+  Eigen::MatrixX3d points(5, 3);
+  points.row(0) = camera.Unproject(10.0, 20.0, 2.0).transpose();  // beside the strip, in front
+  points.row(1) = camera.Unproject(31.0, 20.0, 2.0).transpose();  // on the strip
+  points.row(2) = camera.Unproject(10.0, 20.0, 3.5).transpose();  // behind the wall: hidden
+  points.row(3) = camera.Unproject(-20.0, 20.0, 2.0).transpose(); // outside the image
+  points.row(4) = camera.Unproject(50.0, 10.0, 1.0).transpose();  // beside, other side
+  SilhouetteTermOptions term_options;
+  SilhouetteTargets targets;
+  FindSilhouetteViolations(*map, points, term_options, &targets);
+  EXPECT_EQ(targets.violations, 2);
+  EXPECT_EQ(targets.weight[0], 1.0);
+  EXPECT_EQ(targets.weight[1] + targets.weight[2] + targets.weight[3], 0.0);
+  EXPECT_EQ(targets.weight[4], 1.0);
+  double z = 0.0;
+  const Eigen::Vector2d q0 = camera.Project(targets.target.row(0).transpose(), &z);
+  EXPECT_NEAR(z, 2.0, 1e-9);  // at the vertex's depth
+  EXPECT_NEAR(q0.x(), 28.0, 1e-6);  // the strip's nearest column
+  EXPECT_NEAR(q0.y(), 20.0, 1e-6);
+  const Eigen::Vector2d q4 = camera.Project(targets.target.row(4).transpose());
+  EXPECT_NEAR(q4.x(), 35.0, 1e-6);
+  // In front of the subject: only with front_weight.
+  points.row(1) = camera.Unproject(31.0, 20.0, 1.5).transpose();
+  FindSilhouetteViolations(*map, points, term_options, &targets);
+  EXPECT_EQ(targets.depth_violations, 0);
+  term_options.front_weight = 1.0;
+  FindSilhouetteViolations(*map, points, term_options, &targets);
+  EXPECT_EQ(targets.depth_violations, 1);
+  EXPECT_NEAR((camera.world_to_camera * targets.target.row(1).transpose()).z(), 2.0, 1e-9);
+  // Zero depth around a subject that is all the valid depth: a pre-segmented recording.
+  depth.setTo(0);
+  depth.colRange(28, 36).setTo(2000);
+  const auto presegmented = BuildSilhouetteMap(depth, 1000.0, mask, camera, options);
+  EXPECT_TRUE(presegmented->zero_depth_free);
+  options.zero_depth = ZeroDepthMeaning::kUnknown;
+  const auto unknown = BuildSilhouetteMap(depth, 1000.0, mask, camera, options);
+  EXPECT_EQ(unknown->free_pixels, 0);
+  // Bad input names what is wrong.
+  try {
+    BuildSilhouetteMap(cv::Mat(10, 10, CV_8UC1), 1000.0, mask, camera, options);
+    FAIL() << "accepted a wrong depth image";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("CV_16UC1"), std::string::npos);
+  }
+}
+
+TEST_F(FittingTermsTest, UnobservedJointsArePulledTowardsTheReference) {
+  Eigen::VectorXi vertex_joint(6);
+  vertex_joint << 0, 0, 1, 1, 1, 2;
+  Eigen::VectorXd matched(6);
+  matched << 1.0, 0.0, 0.0, 0.0, 0.5, 0.0;
+  // Joint 0: 1 of 2 matched; joint 1: 1 of 3; joint 2: 0 of 1; joint 3: no vertices.
+  EXPECT_EQ(UnobservedJoints(vertex_joint, matched, 4, 0.4), (std::vector<int>{1, 2}));
+  EXPECT_EQ(UnobservedJoints(vertex_joint, matched, 4, 0.3), (std::vector<int>{2}));
+  const Pose reference = testing_util::RandomPose(model_.num_joints(), 0.3, 0.5, 0.2, &rng_, 1.0);
+  UnobservedJointTerm term(&reference, {1, 3}, 2e-3);
+  EXPECT_EQ(term.num_residuals(), p_);
+  CheckJacobian(term, delta_);
+  // Only the listed joints' rotations have residuals.
+  const Eigen::VectorXd r = Residuals(term, delta_);
+  for (int i = 0; i < p_; ++i) {
+    const bool listed = i >= JointParameterIndex(1) && i < JointParameterIndex(1) + 3;
+    const bool listed3 = i >= JointParameterIndex(3) && i < JointParameterIndex(3) + 3;
+    if (!listed && !listed3) EXPECT_EQ(r[i], 0.0) << i;
+  }
+  EXPECT_GT(r.segment<3>(JointParameterIndex(1)).norm(), 0.0);
+  UnobservedJointOptions o;
+  o.min_observed_fraction = 1.5;
+  std::string error;
+  EXPECT_FALSE(o.IsValid(&error));
+  EXPECT_NE(error.find("min_observed_fraction"), std::string::npos);
 }
 
 }  // namespace
