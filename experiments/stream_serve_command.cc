@@ -7,6 +7,7 @@
 #include <csignal>
 #include <cstdio>
 #include <fstream>
+#include <memory>
 #include <thread>
 
 #include "experiments/commands.h"
@@ -50,6 +51,7 @@ void RegisterStreamServeCommand(CLI::App* stream) {
     std::string stream;
     bool live = false;
     double wait_viewer_s = 0.0, exit_after_s = 0.0, report_wait_s = 0.0;
+    int repeat = 1;
     StreamServerOptions server;
   };
   auto a = std::make_shared<Args>();
@@ -58,6 +60,7 @@ void RegisterStreamServeCommand(CLI::App* stream) {
   cmd->add_option("stream", a->stream, "the .artx stream")->required();
   cmd->add_flag("--live", a->live,
                 "also replay the stream at its frame rate over the live WebSocket (/live)");
+  cmd->add_option("--repeat", a->repeat, "live: replay the stream this many times (>= 1)");
   cmd->add_option("--wait-viewer", a->wait_viewer_s,
                   "live: wait up to this many seconds for a viewer before replaying");
   cmd->add_option("--exit-after", a->exit_after_s,
@@ -91,11 +94,16 @@ void RegisterStreamServeCommand(CLI::App* stream) {
       in.read(reinterpret_cast<char*>(header.data()), static_cast<std::streamsize>(header.size()));
       server.OnHeader(header);
       const double period_ms = 1000.0 / reader.header().frame_rate();
+      if (a->repeat < 1) throw Error("--repeat: expected >= 1, found " + std::to_string(a->repeat));
       StreamRecord r;
       std::vector<StreamIssue> issues;
       int n = 0;
       const auto t0 = std::chrono::steady_clock::now();
-      while (!done() && reader.Next(&r, &issues)) {
+      for (int pass = 0; pass < a->repeat && !done(); ++pass) {
+       std::unique_ptr<StreamReader> again;
+       StreamReader* source = &reader;
+       if (pass > 0) source = (again = std::make_unique<StreamReader>(a->stream)).get();
+       while (!done() && source->Next(&r, &issues)) {
         const double due = n * period_ms -
                            std::chrono::duration<double, std::milli>(
                                std::chrono::steady_clock::now() - t0)
@@ -103,6 +111,7 @@ void RegisterStreamServeCommand(CLI::App* stream) {
         if (due > 0) SleepMs(due);
         server.OnRecord(EncodeStreamRecord(r), r.keyframe, WallClockMs());
         ++n;
+       }
       }
       for (const StreamIssue& i : issues)
         std::fprintf(stderr, "serve: byte %zu, frame %d: %s\n", i.offset, i.frame, i.what.c_str());

@@ -8,7 +8,9 @@
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket.hpp>
+#include <algorithm>
 #include <chrono>
+#include <cstdlib>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -36,9 +38,11 @@ namespace {
 using Message = std::shared_ptr<std::vector<uint8_t>>;
 
 Message Stamped(const std::vector<uint8_t>& bytes, double stamp_ms) {
-  auto m = std::make_shared<std::vector<uint8_t>>(8 + bytes.size());
+  const double published_ms = WallClockMs();
+  auto m = std::make_shared<std::vector<uint8_t>>(16 + bytes.size());
   std::memcpy(m->data(), &stamp_ms, 8);  // little-endian hosts
-  std::memcpy(m->data() + 8, bytes.data(), bytes.size());
+  std::memcpy(m->data() + 8, &published_ms, 8);
+  std::memcpy(m->data() + 16, bytes.data(), bytes.size());
   return m;
 }
 
@@ -82,6 +86,8 @@ bool StreamServerOptions::IsValid(std::string* error) const {
     msg << "serve max_queued_records: expected >= 1, found " << max_queued_records;
   else if (max_join_records < 0)
     msg << "serve max_join_records: expected >= 0, found " << max_join_records;
+  else if (max_in_flight < 1)
+    msg << "serve max_in_flight: expected >= 1, found " << max_in_flight;
   else if (send_timeout_ms < 1)
     msg << "serve send_timeout_ms: expected >= 1, found " << send_timeout_ms;
   if (msg.str().empty()) return true;
@@ -257,6 +263,7 @@ void StreamServer::AcceptLoop() {
     }
     if (ec) continue;
     SetTimeouts(*socket, options_.send_timeout_ms, 10000);
+    socket->set_option(tcp::no_delay(true), ec);  // no Nagle delay on the live records
     {
       std::lock_guard<std::mutex> lock(impl_->sockets_mutex);
       impl_->sockets.push_back(socket);
@@ -351,6 +358,10 @@ void StreamServer::ServeLive(std::shared_ptr<void> opaque, void* request) {
   ws.accept(req, ec);
   if (ec) return;
   ws.binary(true);
+  // A small kernel send buffer keeps the backlog of a slow viewer in its (bounded) queue
+  // here, where it is dropped to the next keyframe, rather than in the socket.
+  const int sndbuf = 64 * 1024;
+  setsockopt(socket->native_handle(), SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof(sndbuf));
   auto viewer = std::make_shared<Viewer>();
   {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -359,8 +370,24 @@ void StreamServer::ServeLive(std::shared_ptr<void> opaque, void* request) {
     ++stats_.viewers_total;
     changed_.notify_all();
   }
+  // Flow control: the page acknowledges every record it has shown (a text message with the
+  // count it has handled); at most max_in_flight records are sent and not yet acknowledged, so
+  // a slow browser's backlog stays in the bounded queue above instead of the browser's buffers.
+  long acked = 0;
+  beast::flat_buffer incoming;
+  const auto read_ack = [&]() -> bool {
+    incoming.clear();
+    ws.read(incoming, ec);
+    if (ec) return false;
+    const std::string text = beast::buffers_to_string(incoming.data());
+    acked = std::max(acked, std::atol(text.c_str()));
+    return true;
+  };
   bool header_sent = false;
   for (;;) {
+    while (!ec && socket->available(ec) > 0) read_ack();
+    if (ec) break;
+    if (header_sent && viewer->sent - acked >= options_.max_in_flight && !read_ack()) break;
     Message m;
     {
       std::unique_lock<std::mutex> lock(mutex_);

@@ -4,10 +4,14 @@
 //   GET /info.json       {"file": bool, "live": bool, "fps": ...}: what the page should play
 //   GET /stream.artx     the stream file (ServeFile)
 //   GET /live            WebSocket: the live stream, one binary message per header / record,
-//                        each prefixed by the float64 (little-endian) wall-clock time in ms
-//                        since the epoch when the sender finished the frame (latency stamp)
+//                        each prefixed by two float64 (little-endian) wall-clock times in ms
+//                        since the epoch: when the pipeline handed the frame to the sender
+//                        (its processing time, the latency stamp) and when the encoded
+//                        record was published to the viewers
 //   POST /report         the page's measurements (JSON), kept as the last report
-// Bounded buffering: each live viewer has a queue of at most max_queued_records records;
+// Bounded buffering: the page acknowledges each record it has shown (a text message with the
+// number of records it has handled) and at most max_in_flight records are unacknowledged;
+// behind them each live viewer has a queue of at most max_queued_records records;
 // when it is full (the browser is slower than the sender) the queue is dropped and that viewer
 // resumes at the next keyframe (a decodable point). A viewer joining mid-stream receives the
 // header and the records since the last keyframe (when there are at most max_join_records).
@@ -36,6 +40,7 @@ struct StreamServerOptions {
   std::string viewer_dir;              // the page's folder; "": the source tree's viewer/
   int max_queued_records = 15;         // per live viewer (0.5 s at 30 Hz); >= 1
   int max_join_records = 120;          // records since the last keyframe kept for joining
+  int max_in_flight = 3;               // records sent to a viewer and not yet acknowledged
   int send_timeout_ms = 5000;          // a viewer that takes longer to accept bytes is dropped
 
   bool IsValid(std::string* error) const;

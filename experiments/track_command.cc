@@ -195,7 +195,8 @@ void RegisterTrackCommand(CLI::App* app) {
       std::printf(
           "stream: %s: pose %.2f kbit/s, texture %.1f kbit/s, total %.1f kbit/s, %d "
           "keyframes, hand error <= %.3f mm, encoding %.1f ms/frame\n",
-          args->stream.c_str(), s.pose_kbps, s.texture_kbps, s.total_kbps, s.keyframes,
+          args->stream.empty() ? (args->out + "/stream.artx").c_str() : args->stream.c_str(),
+          s.pose_kbps, s.texture_kbps, s.total_kbps, s.keyframes,
           s.max_hand_error_mm, s.mean_encode_ms);
     }
     if (result.has_ground_truth && result.novel_view_psnr_db == result.novel_view_psnr_db) {

@@ -18,8 +18,8 @@ const params = new URLSearchParams(location.search);
 const $ = (id) => document.getElementById(id);
 const state = {
   ready: false, error: null, mode: null, frame: -1, frames: 0, playing: params.get('autoplay') !== '0',
-  shown: 0, decoded: 0, dropped: 0, bytes: 0, textured: 0, numTriangles: 0,
-  decodeMs: [], poseMs: [], latencyMs: [], renderMs: [], fps: 0, benchFps: null, liveDone: false,
+  shown: 0, skipped: 0, decoded: 0, dropped: 0, bytes: 0, textured: 0, numTriangles: 0,
+  decodeMs: [], poseMs: [], latencyMs: [], receiveMs: [], decodedMs: [], encodeMs: [], pageMs: [], renderMs: [], fps: 0, benchFps: null, liveDone: false,
   codec: null,
 };
 window.artex = state;
@@ -133,7 +133,7 @@ function newVideoDecoder(firstKeyVideo) {
       texture.setFrame(frame);
       mesh.material.color.setRGB(1, 1, 1);
       textureFrame = f;
-      if (p && p.onShown) p.onShown();
+      if (p && p.onShown) p.onShown(p.pose);
       dirty = true;
     },
     error: fail,
@@ -170,28 +170,28 @@ function decodeRecord(r, onShown) {
     applyCoverage(r.mask, r.keyframe, coverageBits).then((n) => { state.textured = n; }).catch(fail);
   }
   if (header.codec !== 0 && r.video.length && videoDecoder && videoDecoder.state === 'configured') {
-    pendingFrames.set(r.frame, { t: performance.now(), onShown });
+    pendingFrames.set(r.frame, { t: performance.now(), onShown, pose: latestPose });
     videoDecoder.decode(new EncodedVideoChunk({
       type: r.keyframe ? 'key' : 'delta', timestamp: r.frame, data: r.video,
     }));
   } else if (onShown) {
-    onShown();
+    onShown(latestPose);
   }
   dirty = true;
   return true;
 }
 
-function showPose() {
-  if (!latestPose) return;
+function showPose(pose = latestPose, frame = latestPoseFrame) {
+  if (!pose) return;
   const t = performance.now();
-  skinning.apply(latestPose, posed);
+  skinning.apply(pose, posed);
   geometry.attributes.position.needsUpdate = true;
   state.poseMs.push(performance.now() - t);
-  state.frame = latestPoseFrame;
+  state.frame = frame;
 }
 
 // ---- File playback ----
-let records = [], next = 0, lastTick = 0;
+let records = [], next = 0, lastTick = 0, seeking = false;
 
 async function seek(frame) {
   // Decode from the last keyframe at or before `frame` up to it.
@@ -200,9 +200,14 @@ async function seek(frame) {
   let key = k;
   while (key > 0 && !records[key].keyframe) --key;
   state.needVideoReset = true;
+  seeking = true;  // no playback ticks until the pictures are decoded
   for (let i = key; i <= k; ++i) decodeRecord(records[i]);
-  if (videoDecoder && videoDecoder.state === 'configured') await videoDecoder.flush();
   next = k + 1;
+  try {
+    if (videoDecoder && videoDecoder.state === 'configured') await videoDecoder.flush();
+  } finally {
+    seeking = false;
+  }
   showPose();
   $('seek').value = String(k);
   dirty = true;
@@ -228,35 +233,51 @@ async function playFile(url) {
 }
 
 function tickFile(now) {
-  if (!state.playing || !records.length) return;
+  if (!state.playing || !records.length || seeking) return;
   if (now - lastTick < 1000 / header.frameRate) return;
   lastTick = now;
   if (next >= records.length) { state.playing = false; $('play').textContent = 'Play'; return; }
   const r = records[next++];
-  if (r.keyframe) state.needVideoReset = state.needVideoReset || false;
   decodeRecord(r);
   showPose();
   $('seek').value = String(next - 1);
 }
 
 // ---- Live ----
+let pendingShow = null, presenting = null;
+const slowMs = +(params.get('slow') || 0);  // tests: a browser slower than the sender
 function playLive() {
   const ws = new WebSocket(`ws://${location.host}/live`);
   ws.binaryType = 'arraybuffer';
-  let placed = false;
+  let placed = false, handled = 0;
+  // Flow control: the number of records handled so far (the server sends a few ahead only).
+  const ack = () => { if (ws.readyState === WebSocket.OPEN) ws.send(String(++handled)); };
   ws.onmessage = (event) => {
     const all = new Uint8Array(event.data);
     const stamp = new DataView(event.data).getFloat64(0, true);
-    const bytes = all.subarray(8);
+    const published = new DataView(event.data).getFloat64(8, true);
+    const bytes = all.subarray(16);
+    if (slowMs > 0) { const until = performance.now() + slowMs; while (performance.now() < until); }
     if (!header) {
       try { start(parseHeader(bytes)); } catch (e) { fail(e); ws.close(); }
       return;
     }
     const r = recordAt(bytes, 0);
-    if (r.error) { ++state.dropped; console.warn(`live record: ${r.error}`); return; }
+    if (r.error) { ++state.dropped; console.warn(`live record: ${r.error}`); ack(); return; }
     ++state.frames;
-    const ok = decodeRecord(r, () => { pendingShow = { stamp, frame: r.frame }; });
-    if (!ok) return;
+    const received = Date.now();
+    state.receiveMs.push(received - stamp);
+    state.encodeMs.push(published - stamp);
+    // Drawn at the next animation frame once its picture is decoded (a newer picture replaces
+    // it: skipped); timed at the animation frame after the one that drew it, when the browser
+    // has composited it. Drawing only in animation frames keeps a software GPU from queueing.
+    const ok = decodeRecord(r, (pose) => {
+      ack();
+      state.decodedMs.push(Date.now() - stamp);
+      if (pendingShow) ++state.skipped;
+      pendingShow = { pose, frame: r.frame, stamp, received };
+    });
+    if (!ok) { ack(); return; }
     if (!placed && r.keyframe) {
       showPose();
       placeCamera(+(params.get('yaw') || 0), +(params.get('height') || 0));
@@ -267,17 +288,17 @@ function playLive() {
   ws.onclose = () => { state.liveDone = true; report(true); };
   ws.onerror = () => fail('live: the WebSocket to the server failed');
 }
-let pendingShow = null;
 
 // ---- Reporting (POST /report: printed by the server) ----
 function summary() {
   const lat = state.latencyMs;
   return {
     mode: state.mode, codec: state.codec, frames_received: state.frames, frames_decoded: state.decoded,
-    frames_shown: state.shown, dropped: state.dropped, textured_triangles: state.textured,
+    frames_shown: state.shown, frames_skipped: state.skipped, dropped: state.dropped, textured_triangles: state.textured,
     decode_ms_median: median(state.decodeMs), pose_and_skinning_ms_median: median(state.poseMs),
     render_ms_median: median(state.renderMs), fps: state.fps, bench_fps: state.benchFps,
-    latency_ms_median: median(lat), latency_ms_max: lat.length ? Math.max(...lat) : NaN,
+    sender_ms_median: median(state.encodeMs), receive_ms_median: median(state.receiveMs),
+    page_ms_median: median(state.pageMs), decoded_ms_median: median(state.decodedMs), latency_ms_median: median(lat), latency_ms_max: lat.length ? Math.max(...lat) : NaN,
     within_100ms: lat.length ? lat.filter((x) => x <= 100).length / lat.length : NaN,
   };
 }
@@ -301,22 +322,25 @@ function loop(now) {
   requestAnimationFrame(loop);
   if (!header) return;
   if (state.mode === 'file') tickFile(now);
-  if (state.mode === 'live' && pendingShow) {
-    showPose();
+  if (state.mode === 'live' && latestPoseFrame !== state.frame && header.codec === 0) dirty = true;
+  if (presenting) {
+    const now = Date.now();
+    state.latencyMs.push(now - presenting.stamp);
+    state.pageMs.push(now - presenting.received);
+    ++state.shown;
+    presenting = null;
+  }
+  if (pendingShow) {
+    showPose(pendingShow.pose, pendingShow.frame);
+    presenting = pendingShow;
+    pendingShow = null;
     dirty = true;
   }
-  if (dirty || state.playing) {
+  if (dirty || (state.playing && state.mode === 'file')) {
     render();
     dirty = false;
-    if (pendingShow) {
-      state.latencyMs.push(Date.now() - pendingShow.stamp);
-      ++state.shown;
-      pendingShow = null;
-    } else if (state.mode === 'file' && state.playing) {
-      ++state.shown;
-    }
+    if (state.mode === 'file' && state.playing) ++state.shown;
   }
-  if (lastVideoFrame && textureFrame >= 0) { /* the texture holds it until the next picture */ }
   if (now - fpsSince >= 1000) {
     state.fps = (1000 * fpsCount) / (now - fpsSince);
     kbps = (8 * (state.bytes - bitsSince)) / (now - fpsSince);
@@ -329,6 +353,7 @@ function loop(now) {
 }
 
 function updatePanel() {
+  if (!header) return;
   const lat = state.latencyMs;
   const rows = [
     ['mode', `${state.mode} (${header.codecName} ${header.atlasWidth}², ${fmt(header.frameRate, 0)} Hz)`],
