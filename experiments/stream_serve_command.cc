@@ -109,7 +109,8 @@ void RegisterStreamServeCommand(CLI::App* stream) {
                                std::chrono::steady_clock::now() - t0)
                                .count();
         if (due > 0) SleepMs(due);
-        server.OnRecord(EncodeStreamRecord(r), r.keyframe, WallClockMs());
+        const double now = WallClockMs();
+        server.OnRecord(EncodeStreamRecord(r), r.keyframe, now, now);
         ++n;
        }
       }

@@ -37,12 +37,11 @@ namespace {
 
 using Message = std::shared_ptr<std::vector<uint8_t>>;
 
-Message Stamped(const std::vector<uint8_t>& bytes, double stamp_ms) {
-  const double published_ms = WallClockMs();
-  auto m = std::make_shared<std::vector<uint8_t>>(16 + bytes.size());
-  std::memcpy(m->data(), &stamp_ms, 8);  // little-endian hosts
-  std::memcpy(m->data() + 8, &published_ms, 8);
-  std::memcpy(m->data() + 16, bytes.data(), bytes.size());
+Message Stamped(const std::vector<uint8_t>& bytes, double stamp_ms, double atlas_ms) {
+  const double stamps[3] = {stamp_ms, atlas_ms, WallClockMs()};
+  auto m = std::make_shared<std::vector<uint8_t>>(sizeof(stamps) + bytes.size());
+  std::memcpy(m->data(), stamps, sizeof(stamps));  // little-endian hosts
+  std::memcpy(m->data() + sizeof(stamps), bytes.data(), bytes.size());
   return m;
 }
 
@@ -149,14 +148,16 @@ void StreamServer::ServeFile(const std::string& stream_path) {
 void StreamServer::OnHeader(const std::vector<uint8_t>& header) {
   std::lock_guard<std::mutex> lock(mutex_);
   live_ = true;
-  header_message_ = *Stamped(header, WallClockMs());
+  const double now = WallClockMs();
+  header_message_ = *Stamped(header, now, now);
   gop_.clear();
   gop_complete_ = false;
   changed_.notify_all();
 }
 
-void StreamServer::OnRecord(const std::vector<uint8_t>& record, bool keyframe, double stamp_ms) {
-  const Message m = Stamped(record, stamp_ms);
+void StreamServer::OnRecord(const std::vector<uint8_t>& record, bool keyframe, double stamp_ms,
+                            double atlas_ms) {
+  const Message m = Stamped(record, stamp_ms, atlas_ms);
   std::lock_guard<std::mutex> lock(mutex_);
   ++stats_.records_published;
   if (keyframe) {

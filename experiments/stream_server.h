@@ -4,10 +4,10 @@
 //   GET /info.json       {"file": bool, "live": bool, "fps": ...}: what the page should play
 //   GET /stream.artx     the stream file (ServeFile)
 //   GET /live            WebSocket: the live stream, one binary message per header / record,
-//                        each prefixed by two float64 (little-endian) wall-clock times in ms
-//                        since the epoch: when the pipeline handed the frame to the sender
-//                        (its processing time, the latency stamp) and when the encoded
-//                        record was published to the viewers
+//                        each prefixed by three float64 (little-endian) wall-clock times in
+//                        ms since the epoch: when the pipeline handed the frame to the sender
+//                        (its processing time, the latency stamp), when its atlas picture was
+//                        composed, and when the encoded record was published to the viewers
 //   POST /report         the page's measurements (JSON), kept as the last report
 // Bounded buffering: the page acknowledges each record it has shown (a text message with the
 // number of records it has handled) and at most max_in_flight records are unacknowledged;
@@ -67,7 +67,8 @@ class StreamServer : public StreamTap {
   void ServeFile(const std::string& stream_path);
   // Live stream (StreamTap): the header first, then one record per frame.
   void OnHeader(const std::vector<uint8_t>& header) override;
-  void OnRecord(const std::vector<uint8_t>& record, bool keyframe, double stamp_ms) override;
+  void OnRecord(const std::vector<uint8_t>& record, bool keyframe, double stamp_ms,
+                double atlas_ms) override;
   // Closes the live viewers' connections after their queues are sent (end of the stream).
   void EndLive();
   // Waits until a live viewer is connected; false after timeout_s seconds without one.

@@ -52,11 +52,15 @@ FrameSinks::~FrameSinks() = default;
 
 void FrameSinks::AddFrame(int frame, const Pose& pose) {
   if (atlas_dir_.empty() && !sender_) return;
-  const double stamp_ms = std::chrono::duration<double, std::milli>(
-                              std::chrono::system_clock::now().time_since_epoch())
-                              .count();
+  const auto wall_ms = [] {
+    return std::chrono::duration<double, std::milli>(
+               std::chrono::system_clock::now().time_since_epoch())
+        .count();
+  };
+  const double stamp_ms = wall_ms();
   cv::Mat atlas;
   if (texturer_) atlas = texturer_->Atlas();
+  const double atlas_ms = wall_ms();  // the atlas picture composed
   if (!atlas_dir_.empty()) {
     WritePngFile(AtlasName(atlas_dir_, frame, ""), atlas);
     const std::vector<int>& frames = texturer_->triangle_frames();
@@ -68,7 +72,7 @@ void FrameSinks::AddFrame(int frame, const Pose& pose) {
   if (sender_) {
     const StreamFrameStats s =
         sender_->AddFrame(frame, pose, atlas, texturer_ ? &texturer_->triangle_frames() : nullptr);
-    if (tap_) tap_->OnRecord(sender_->last_record(), s.keyframe, stamp_ms);
+    if (tap_) tap_->OnRecord(sender_->last_record(), s.keyframe, stamp_ms, atlas_ms);
   }
 }
 

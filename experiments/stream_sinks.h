@@ -14,13 +14,15 @@
 namespace artex {
 
 // A live consumer of the stream's bytes (the viewer's server, experiments/stream_server.h):
-// the header once, then every record as it is encoded, with the wall-clock time (ms since the
-// epoch) at which the pipeline handed the frame to the sinks (its processing time).
+// the header once, then every record as it is encoded, with the wall-clock times (ms since the
+// epoch) at which the pipeline handed the frame to the sinks (its processing time) and at
+// which the sink had composed its atlas picture (before encoding).
 class StreamTap {
  public:
   virtual ~StreamTap() = default;
   virtual void OnHeader(const std::vector<uint8_t>& header) = 0;
-  virtual void OnRecord(const std::vector<uint8_t>& record, bool keyframe, double stamp_ms) = 0;
+  virtual void OnRecord(const std::vector<uint8_t>& record, bool keyframe, double stamp_ms,
+                        double atlas_ms) = 0;
 };
 
 // The tap that FrameSinks created from now on feed when they write a stream (nullptr: none);

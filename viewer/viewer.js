@@ -19,7 +19,7 @@ const $ = (id) => document.getElementById(id);
 const state = {
   ready: false, error: null, mode: null, frame: -1, frames: 0, playing: params.get('autoplay') !== '0',
   shown: 0, skipped: 0, decoded: 0, dropped: 0, bytes: 0, textured: 0, numTriangles: 0,
-  decodeMs: [], poseMs: [], latencyMs: [], receiveMs: [], decodedMs: [], encodeMs: [], pageMs: [], renderMs: [], fps: 0, benchFps: null, liveDone: false,
+  decodeMs: [], poseMs: [], latencyMs: [], receiveMs: [], decodedMs: [], encodeMs: [], pageMs: [], composeMs: [], fromAtlasMs: [], renderMs: [], fps: 0, benchFps: null, liveDone: false,
   codec: null,
 };
 window.artex = state;
@@ -254,9 +254,11 @@ function playLive() {
   const ack = () => { if (ws.readyState === WebSocket.OPEN) ws.send(String(++handled)); };
   ws.onmessage = (event) => {
     const all = new Uint8Array(event.data);
-    const stamp = new DataView(event.data).getFloat64(0, true);
-    const published = new DataView(event.data).getFloat64(8, true);
-    const bytes = all.subarray(16);
+    const dv = new DataView(event.data);
+    // Wall-clock stamps (ms): frame handed to the sender, its atlas composed, record published.
+    const stamp = dv.getFloat64(0, true), atlasReady = dv.getFloat64(8, true);
+    const published = dv.getFloat64(16, true);
+    const bytes = all.subarray(24);
     if (slowMs > 0) { const until = performance.now() + slowMs; while (performance.now() < until); }
     if (!header) {
       try { start(parseHeader(bytes)); } catch (e) { fail(e); ws.close(); }
@@ -268,6 +270,7 @@ function playLive() {
     const received = Date.now();
     state.receiveMs.push(received - stamp);
     state.encodeMs.push(published - stamp);
+    state.composeMs.push(atlasReady - stamp);
     // Drawn at the next animation frame once its picture is decoded (a newer picture replaces
     // it: skipped); timed at the animation frame after the one that drew it, when the browser
     // has composited it. Drawing only in animation frames keeps a software GPU from queueing.
@@ -275,7 +278,7 @@ function playLive() {
       ack();
       state.decodedMs.push(Date.now() - stamp);
       if (pendingShow) ++state.skipped;
-      pendingShow = { pose, frame: r.frame, stamp, received };
+      pendingShow = { pose, frame: r.frame, stamp, atlasReady, received };
     });
     if (!ok) { ack(); return; }
     if (!placed && r.keyframe) {
@@ -297,9 +300,12 @@ function summary() {
     frames_shown: state.shown, frames_skipped: state.skipped, dropped: state.dropped, textured_triangles: state.textured,
     decode_ms_median: median(state.decodeMs), pose_and_skinning_ms_median: median(state.poseMs),
     render_ms_median: median(state.renderMs), fps: state.fps, bench_fps: state.benchFps,
-    sender_ms_median: median(state.encodeMs), receive_ms_median: median(state.receiveMs),
+    sender_ms_median: median(state.encodeMs), atlas_compose_ms_median: median(state.composeMs), receive_ms_median: median(state.receiveMs),
     page_ms_median: median(state.pageMs), decoded_ms_median: median(state.decodedMs), latency_ms_median: median(lat), latency_ms_max: lat.length ? Math.max(...lat) : NaN,
     within_100ms: lat.length ? lat.filter((x) => x <= 100).length / lat.length : NaN,
+    // The same from the composed atlas picture (the sender's atlas composition excluded).
+    from_atlas_ms_median: median(state.fromAtlasMs),
+    from_atlas_within_100ms: state.fromAtlasMs.length ? state.fromAtlasMs.filter((x) => x <= 100).length / state.fromAtlasMs.length : NaN,
   };
 }
 state.summary = summary;
@@ -326,6 +332,7 @@ function loop(now) {
   if (presenting) {
     const now = Date.now();
     state.latencyMs.push(now - presenting.stamp);
+    state.fromAtlasMs.push(now - presenting.atlasReady);
     state.pageMs.push(now - presenting.received);
     ++state.shown;
     presenting = null;
