@@ -18,7 +18,7 @@ const params = new URLSearchParams(location.search);
 const $ = (id) => document.getElementById(id);
 const state = {
   ready: false, error: null, mode: null, frame: -1, frames: 0, playing: params.get('autoplay') !== '0',
-  shown: 0, skipped: 0, decoded: 0, dropped: 0, bytes: 0, textured: 0, numTriangles: 0,
+  shown: 0, skipped: 0, decoded: 0, playFrames: 0, playSeconds: 0, dropped: 0, bytes: 0, textured: 0, numTriangles: 0,
   decodeMs: [], poseMs: [], latencyMs: [], receiveMs: [], decodedMs: [], encodeMs: [], pageMs: [], composeMs: [], fromAtlasMs: [], renderMs: [], fps: 0, benchFps: null, liveDone: false,
   codec: null,
 };
@@ -191,7 +191,7 @@ function showPose(pose = latestPose, frame = latestPoseFrame) {
 }
 
 // ---- File playback ----
-let records = [], next = 0, lastTick = 0, seeking = false;
+let fileKbps = 0, records = [], next = 0, lastTick = 0, seeking = false;
 
 async function seek(frame) {
   // Decode from the last keyframe at or before `frame` up to it.
@@ -200,11 +200,14 @@ async function seek(frame) {
   let key = k;
   while (key > 0 && !records[key].keyframe) --key;
   state.needVideoReset = true;
-  seeking = true;  // no playback ticks until the pictures are decoded
-  for (let i = key; i <= k; ++i) decodeRecord(records[i]);
+  seeking = true;  // no playback ticks until the picture of `frame` is decoded
+  // (not VideoDecoder.flush(): after a flush the decoder wants a keyframe again)
+  let shown;
+  const picture = new Promise((resolve) => { shown = resolve; });
+  for (let i = key; i <= k; ++i) decodeRecord(records[i], i === k ? shown : undefined);
   next = k + 1;
   try {
-    if (videoDecoder && videoDecoder.state === 'configured') await videoDecoder.flush();
+    await Promise.race([picture, new Promise((resolve) => setTimeout(resolve, 10000))]);
   } finally {
     seeking = false;
   }
@@ -221,12 +224,14 @@ async function playFile(url) {
   const index = indexRecords(bytes, header);
   for (const i of index.issues) console.warn(`byte ${i.offset}, frame ${i.frame}: ${i.what}`);
   records = index.records;
+  fileKbps = records.length ? (8 * header.frameRate * records.reduce((a, r) => a + r.size, 0)) / records.length / 1000 : 0;
   state.frames = records.length;
   state.issues = index.issues;
   $('seek').max = String(Math.max(0, records.length - 1));
   $('seek').oninput = () => { state.playing = false; $('play').textContent = 'Play'; seek(records[+$('seek').value].frame); };
   const target = params.has('frame') ? +params.get('frame') : records.length ? records[0].frame : 0;
   if (params.has('frame')) state.playing = false;
+  $('play').textContent = state.playing ? 'Pause' : 'Play';
   if (records.length) await seek(target);
   placeCamera(+(params.get('yaw') || 0), +(params.get('height') || 0));
   state.ready = true;
@@ -299,7 +304,8 @@ function summary() {
     mode: state.mode, codec: state.codec, frames_received: state.frames, frames_decoded: state.decoded,
     frames_shown: state.shown, frames_skipped: state.skipped, dropped: state.dropped, textured_triangles: state.textured,
     decode_ms_median: median(state.decodeMs), pose_and_skinning_ms_median: median(state.poseMs),
-    render_ms_median: median(state.renderMs), fps: state.fps, bench_fps: state.benchFps,
+    render_ms_median: median(state.renderMs), fps: state.fps,
+    playback_fps: state.playFrames / Math.max(1e-9, state.playSeconds), bench_fps: state.benchFps,
     sender_ms_median: median(state.encodeMs), atlas_compose_ms_median: median(state.composeMs), receive_ms_median: median(state.receiveMs),
     page_ms_median: median(state.pageMs), decoded_ms_median: median(state.decodedMs), latency_ms_median: median(lat), latency_ms_max: lat.length ? Math.max(...lat) : NaN,
     within_100ms: lat.length ? lat.filter((x) => x <= 100).length / lat.length : NaN,
@@ -324,8 +330,11 @@ function render() {
   ++fpsCount;
 }
 
+let lastLoop = 0;
 function loop(now) {
   requestAnimationFrame(loop);
+  const previousLoop = lastLoop;
+  lastLoop = now;
   if (!header) return;
   if (state.mode === 'file') tickFile(now);
   if (state.mode === 'live' && latestPoseFrame !== state.frame && header.codec === 0) dirty = true;
@@ -344,6 +353,10 @@ function loop(now) {
     dirty = true;
   }
   if (dirty || (state.playing && state.mode === 'file')) {
+    if (state.playing && state.mode === 'file' && previousLoop) {
+      ++state.playFrames;
+      state.playSeconds += (now - previousLoop) / 1000;
+    }
     render();
     dirty = false;
     if (state.mode === 'file' && state.playing) ++state.shown;
@@ -365,8 +378,10 @@ function updatePanel() {
   const rows = [
     ['mode', `${state.mode} (${header.codecName} ${header.atlasWidth}², ${fmt(header.frameRate, 0)} Hz)`],
     ['frame', `${state.frame}${state.mode === 'file' ? ` / ${records.length ? records[records.length - 1].frame : 0}` : ''}`],
-    ['received / shown', `${state.frames} / ${state.shown}${state.dropped ? `, ${state.dropped} dropped` : ''}`],
-    ['bitrate', `${fmt(kbps, 0)} kbit/s (${fmt(state.bytes / 1024, 0)} KiB in all)`],
+    [state.mode === 'file' ? 'frames / drawn' : 'received / shown', `${state.frames} / ${state.shown}${state.dropped ? `, ${state.dropped} dropped` : ''}`],
+    state.mode === 'file'
+      ? ['bitrate', `${fmt(fileKbps, 0)} kbit/s (the stream's mean; header ${fmt(header.headerSize / 1024, 0)} KiB)`]
+      : ['bitrate', `${fmt(kbps, 0)} kbit/s (last second; ${fmt(state.bytes / 1024, 0)} KiB in all)`],
     ['page', `${fmt(state.fps, 0)} frames/s, render ${fmt(median(state.renderMs), 1)} ms`],
     ['decode', `picture ${fmt(median(state.decodeMs), 1)} ms, pose+skin ${fmt(median(state.poseMs), 2)} ms`],
     ['textured', `${state.textured} / ${state.numTriangles} triangles`],

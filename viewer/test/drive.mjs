@@ -6,6 +6,8 @@
 //   bench URL N                         the page's frame rate over N back-to-back renders
 //   live  URL SECONDS                   watch the live stream until it ends (or SECONDS) and
 //                                       print the page's measurements (latency, frames shown)
+//   play  URL                           play the file at its frame rate to the end and print the
+//                                       page's measurements (frame rate, decode times)
 //   shot  URL OUT.png                   a screenshot of the whole page (docs/images/)
 // Prints one JSON line. Exit 77 when no browser can start (the caller skips), 1 on failure.
 import fs from 'node:fs';
@@ -18,7 +20,7 @@ try {
   browser = await puppeteer.launch({
     executablePath, headless: true,
     args: ['--no-sandbox', '--use-angle=swiftshader', '--enable-unsafe-swiftshader',
-      '--ignore-gpu-blocklist', '--disable-gpu-vsync', '--window-size=920,520'],
+      '--ignore-gpu-blocklist', '--window-size=1000,760'],
   });
 } catch (e) {
   console.log(JSON.stringify({ skipped: `no browser could start (${executablePath}): ${e.message.split('\n')[0]}` }));
@@ -27,7 +29,7 @@ try {
 const out = {};
 try {
   const page = await browser.newPage();
-  await page.setViewport({ width: 920, height: 500, deviceScaleFactor: 1 });
+  await page.setViewport({ width: 1000, height: 760, deviceScaleFactor: 1 });
   const logs = [];
   page.on('console', (m) => logs.push(`${m.type()}: ${m.text()}`));
   page.on('pageerror', (e) => logs.push(`pageerror: ${e.message}`));
@@ -85,6 +87,10 @@ try {
     if (error) throw new Error(`page: ${error}`);
     Object.assign(out, await page.evaluate(() => window.artex.summary()));
     out.ended = await page.evaluate(() => window.artex.liveDone);
+  } else if (mode === 'play') {
+    await waitReady(60000);
+    await page.waitForFunction(() => !window.artex.playing, { timeout: 120000, polling: 100 });
+    Object.assign(out, await page.evaluate(() => window.artex.summary()));
   } else if (mode === 'shot') {
     await waitReady(60000);
     await page.evaluate(() => { window.artex.render(); });
