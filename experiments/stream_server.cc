@@ -366,6 +366,12 @@ void StreamServer::ServeLive(std::shared_ptr<void> opaque, void* request) {
   auto viewer = std::make_shared<Viewer>();
   {
     std::lock_guard<std::mutex> lock(mutex_);
+    // A viewer joining a running stream starts at the last keyframe (the records since it),
+    // or waits for the next one; before the header it receives every record from the first.
+    if (!header_message_.empty()) {
+      viewer->queue.assign(gop_.begin(), gop_.end());
+      viewer->waiting_for_keyframe = gop_.empty();
+    }
     viewers_.push_back(viewer);
     ++stats_.viewers;
     ++stats_.viewers_total;
@@ -400,9 +406,6 @@ void StreamServer::ServeLive(std::shared_ptr<void> opaque, void* request) {
       if (!header_sent && !header_message_.empty()) {
         m = std::make_shared<std::vector<uint8_t>>(header_message_);
         header_sent = true;
-        // Join at the last keyframe (the records since it), or wait for the next one.
-        viewer->queue.assign(gop_.begin(), gop_.end());
-        viewer->waiting_for_keyframe = gop_.empty();
       } else if (!viewer->queue.empty()) {
         m = viewer->queue.front();
         viewer->queue.pop_front();
