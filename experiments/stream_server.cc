@@ -98,7 +98,7 @@ struct StreamServer::Viewer {
   std::deque<Message> queue;
   bool waiting_for_keyframe = false;
   bool closed = false;
-  long sent = 0, dropped = 0;
+  long offered = 0, sent = 0;  // dropped: offered - sent - queued
 };
 
 struct StreamServer::Impl {
@@ -173,19 +173,20 @@ void StreamServer::OnRecord(const std::vector<uint8_t>& record, bool keyframe, d
   }
   for (const auto& v : viewers_) {
     if (v->closed) continue;
-    if (v->waiting_for_keyframe && !keyframe) {
-      ++v->dropped;
-      continue;
-    }
+    ++v->offered;
+    if (v->waiting_for_keyframe && !keyframe) continue;
     v->waiting_for_keyframe = false;
     if (static_cast<int>(v->queue.size()) >= options_.max_queued_records) {
-      // The browser is slower than the sender: drop what it has not taken and resume at the
-      // next decodable point (this record when it is a keyframe).
-      v->dropped += static_cast<long>(v->queue.size());
+      // The browser is slower than the sender: drop what it has not taken and restart at the
+      // latest keyframe (the records since it, this one included, when they fit the queue),
+      // else at the next keyframe.
       v->queue.clear();
+      if (gop_complete_ && static_cast<int>(gop_.size()) <= options_.max_queued_records) {
+        v->queue.assign(gop_.begin(), gop_.end());
+        continue;
+      }
       if (!keyframe) {
         v->waiting_for_keyframe = true;
-        ++v->dropped;
         continue;
       }
     }
@@ -219,7 +220,7 @@ StreamServerStats StreamServer::Stats() const {
   StreamServerStats s = stats_;
   for (const auto& v : viewers_) {
     s.records_sent += v->sent;
-    s.records_dropped += v->dropped;
+    s.records_dropped += v->offered - v->sent - static_cast<long>(v->queue.size());
   }
   return s;
 }
@@ -370,6 +371,7 @@ void StreamServer::ServeLive(std::shared_ptr<void> opaque, void* request) {
     // or waits for the next one; before the header it receives every record from the first.
     if (!header_message_.empty()) {
       viewer->queue.assign(gop_.begin(), gop_.end());
+      viewer->offered = static_cast<long>(gop_.size());
       viewer->waiting_for_keyframe = gop_.empty();
     }
     viewers_.push_back(viewer);

@@ -13,7 +13,8 @@
 // number of records it has handled) and at most max_in_flight records are unacknowledged;
 // behind them each live viewer has a queue of at most max_queued_records records;
 // when it is full (the browser is slower than the sender) the queue is dropped and that viewer
-// resumes at the next keyframe (a decodable point). A viewer joining mid-stream receives the
+// restarts at the latest keyframe (the records since it, when they fit the queue) or else at
+// the next keyframe: always a decodable point, never an unbounded backlog. A viewer joining mid-stream receives the
 // header and the records since the last keyframe (when there are at most max_join_records).
 #pragma once
 
@@ -51,7 +52,7 @@ struct StreamServerStats {
   int viewers_total = 0;    // live viewers ever connected
   long records_published = 0;
   long records_sent = 0;     // summed over viewers
-  long records_dropped = 0;  // summed over viewers (queue overflow and waiting for a keyframe)
+  long records_dropped = 0;  // summed over viewers (offered, neither sent nor queued)
   std::string last_report;   // the page's last POST /report body ("" when none)
 };
 

@@ -166,9 +166,10 @@ TEST_F(StreamServerTest, SlowViewerIsBoundedAndResumesAtAKeyframe) {
   ws.handshake("127.0.0.1", "/live");
   ws.text(true);
   ASSERT_TRUE(server.WaitForViewer(10.0));
-  // 100 records (keyframes every 10) while the viewer acknowledges nothing.
-  const int kRecords = 100;
-  for (int f = 0; f < kRecords; ++f) server.OnRecord(Record(f, f % 10 == 0), f % 10 == 0, f, f);
+  // 100 records (keyframes every 4) while the viewer acknowledges nothing.
+  const int kRecords = 100, kInterval = 4;
+  for (int f = 0; f < kRecords; ++f)
+    server.OnRecord(Record(f, f % kInterval == 0), f % kInterval == 0, f, f);
   server.EndLive();
   ReadMessage(ws);  // header
   std::vector<uint32_t> frames;
@@ -191,11 +192,14 @@ TEST_F(StreamServerTest, SlowViewerIsBoundedAndResumesAtAKeyframe) {
   EXPECT_EQ(s.records_sent, static_cast<long>(frames.size()));
   EXPECT_EQ(s.records_sent + s.records_dropped, kRecords);
   // Every gap in the frames received is followed by a keyframe (decodable).
-  EXPECT_EQ(frames[0] % 10, 0u);
+  EXPECT_EQ(frames[0] % kInterval, 0u);
   for (std::size_t i = 1; i < frames.size(); ++i) {
     EXPECT_GT(frames[i], frames[i - 1]);
-    if (frames[i] != frames[i - 1] + 1) EXPECT_EQ(frames[i] % 10, 0u) << "after " << frames[i - 1];
+    if (frames[i] != frames[i - 1] + 1)
+      EXPECT_EQ(frames[i] % kInterval, 0u) << "after " << frames[i - 1];
   }
+  // It ends with the latest record: the backlog was dropped, not the present.
+  EXPECT_EQ(frames.back(), static_cast<uint32_t>(kRecords - 1));
 }
 
 }  // namespace
