@@ -40,7 +40,10 @@ renderer.setPixelRatio(1);
 renderer.setClearColor(0x000000, 1);
 const scene = new THREE.Scene();
 const camera = new THREE.PerspectiveCamera();
-let controls, mesh, geometry, skinning, tmpl, header, texture, posed;
+let controls, mesh, geometry, skinning, tmpl, header, texture, posed, yuv;
+// ?upload=frame: the VideoFrame itself as the texture (the browser converts it to RGB);
+// default: its I420 planes, converted in the shader (the same matrix as artex's decoder).
+const uploadYuv = params.get('upload') !== 'frame';
 let homeEye, homeTarget;
 
 // Projection of artex's pinhole camera (pixel centres at integers, OpenCV frame) in GL clip
@@ -68,8 +71,35 @@ function setupScene() {
   geometry.setAttribute('position', new THREE.BufferAttribute(posed, 3).setUsage(THREE.DynamicDrawUsage));
   geometry.setAttribute('uv', new THREE.BufferAttribute(tmpl.uvs, 2));
   geometry.setIndex(new THREE.BufferAttribute(tmpl.indices, 1));
-  const material = new THREE.MeshBasicMaterial({ color: 0xffffff, side: THREE.DoubleSide });
-  if (header.codec !== 0) {
+  let material = new THREE.MeshBasicMaterial({ color: 0x404040, side: THREE.DoubleSide });
+  if (header.codec !== 0 && uploadYuv) {
+    // The decoded I420 planes as three one-channel textures, converted to RGB in the fragment
+    // shader with the BT.601 studio-range matrix that artex's decoder (OpenCV) uses.
+    const W = header.atlasWidth, H = header.atlasHeight;
+    const plane = (w, h) => {
+      const t = new THREE.DataTexture(new Uint8Array(w * h), w, h, THREE.RedFormat, THREE.UnsignedByteType);
+      t.flipY = false;  // artex's UV v runs downwards: image row = v * height
+      t.colorSpace = THREE.NoColorSpace;
+      t.generateMipmaps = false;
+      t.minFilter = t.magFilter = THREE.LinearFilter;
+      t.unpackAlignment = 1;
+      return t;
+    };
+    yuv = { y: plane(W, H), u: plane(W / 2, H / 2), v: plane(W / 2, H / 2), W, H };
+    material = new THREE.ShaderMaterial({
+      side: THREE.DoubleSide,
+      uniforms: { yTex: { value: yuv.y }, uTex: { value: yuv.u }, vTex: { value: yuv.v }, lit: { value: 0 } },
+      vertexShader: 'varying vec2 vUv; void main() { vUv = uv; gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0); }',
+      fragmentShader: `precision highp float;
+        uniform sampler2D yTex, uTex, vTex; uniform float lit; varying vec2 vUv;
+        void main() {
+          float y = 1.164 * (255.0 * texture2D(yTex, vUv).r - 16.0);
+          float u = 255.0 * texture2D(uTex, vUv).r - 128.0, v = 255.0 * texture2D(vTex, vUv).r - 128.0;
+          vec3 rgb = vec3(y + 1.596 * v, y - 0.813 * v - 0.391 * u, y + 2.018 * u) / 255.0;
+          gl_FragColor = vec4(lit > 0.5 ? clamp(rgb, 0.0, 1.0) : vec3(0.25), 1.0);
+        }`,
+    });
+  } else if (header.codec !== 0) {
     texture = new THREE.VideoFrameTexture();
     texture.flipY = false;  // artex's UV v runs downwards: image row = v * height
     texture.colorSpace = THREE.NoColorSpace;
@@ -77,7 +107,6 @@ function setupScene() {
     texture.minFilter = THREE.LinearFilter;
     texture.magFilter = THREE.LinearFilter;
     material.map = texture;
-    material.color.setRGB(0.25, 0.25, 0.25);  // until the first picture
   }
   mesh = new THREE.Mesh(geometry, material);
   mesh.frustumCulled = false;
@@ -128,13 +157,31 @@ function newVideoDecoder(firstKeyVideo) {
       const p = pendingFrames.get(f);
       pendingFrames.delete(f);
       if (p) state.decodeMs.push(performance.now() - p.t);
+      const show = () => {
+        textureFrame = f;
+        if (p && p.onShown) p.onShown(p.pose);
+        dirty = true;
+      };
+      if (yuv) {
+        if (frame.format !== 'I420') { fail(`atlas video: expected I420 pictures, found ${frame.format}`); frame.close(); return; }
+        const { W, H } = yuv, buffer = new Uint8Array((W * H * 3) / 2);
+        frame.copyTo(buffer, { layout: [{ offset: 0, stride: W }, { offset: W * H, stride: W / 2 },
+          { offset: (W * H * 5) / 4, stride: W / 2 }] }).then(() => {
+          frame.close();
+          yuv.y.image.data.set(buffer.subarray(0, W * H));
+          yuv.u.image.data.set(buffer.subarray(W * H, (W * H * 5) / 4));
+          yuv.v.image.data.set(buffer.subarray((W * H * 5) / 4));
+          yuv.y.needsUpdate = yuv.u.needsUpdate = yuv.v.needsUpdate = true;
+          mesh.material.uniforms.lit.value = 1;
+          show();
+        }).catch(fail);
+        return;
+      }
       if (lastVideoFrame) lastVideoFrame.close();
       lastVideoFrame = frame;
       texture.setFrame(frame);
       mesh.material.color.setRGB(1, 1, 1);
-      textureFrame = f;
-      if (p && p.onShown) p.onShown(p.pose);
-      dirty = true;
+      show();
     },
     error: fail,
   });
