@@ -100,19 +100,18 @@ void RegisterStreamServeCommand(CLI::App* stream) {
       int n = 0;
       const auto t0 = std::chrono::steady_clock::now();
       for (int pass = 0; pass < a->repeat && !done(); ++pass) {
-       std::unique_ptr<StreamReader> again;
-       StreamReader* source = &reader;
-       if (pass > 0) source = (again = std::make_unique<StreamReader>(a->stream)).get();
-       while (!done() && source->Next(&r, &issues)) {
-        const double due = n * period_ms -
-                           std::chrono::duration<double, std::milli>(
-                               std::chrono::steady_clock::now() - t0)
-                               .count();
-        if (due > 0) SleepMs(due);
-        const double now = WallClockMs();
-        server.OnRecord(EncodeStreamRecord(r), r.keyframe, now, now);
-        ++n;
-       }
+        std::unique_ptr<StreamReader> again;
+        StreamReader* source = &reader;
+        if (pass > 0) source = (again = std::make_unique<StreamReader>(a->stream)).get();
+        while (!done() && source->Next(&r, &issues)) {
+          const double due = n * period_ms - std::chrono::duration<double, std::milli>(
+                                                 std::chrono::steady_clock::now() - t0)
+                                                 .count();
+          if (due > 0) SleepMs(due);
+          const double now = WallClockMs();
+          server.OnRecord(EncodeStreamRecord(r), r.keyframe, now, now);
+          ++n;
+        }
       }
       for (const StreamIssue& i : issues)
         std::fprintf(stderr, "serve: byte %zu, frame %d: %s\n", i.offset, i.frame, i.what.c_str());

@@ -3,15 +3,15 @@
 #include <sys/socket.h>
 #include <sys/time.h>
 
+#include <algorithm>
 #include <boost/asio/connect.hpp>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket.hpp>
-#include <algorithm>
 #include <chrono>
-#include <cstdlib>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -64,7 +64,8 @@ bool ReadWholeFile(const std::string& path, std::string* out) {
 }
 
 void SetTimeouts(tcp::socket& socket, int send_ms, int receive_ms) {
-  timeval s{send_ms / 1000, (send_ms % 1000) * 1000}, r{receive_ms / 1000, (receive_ms % 1000) * 1000};
+  timeval s{send_ms / 1000, (send_ms % 1000) * 1000},
+      r{receive_ms / 1000, (receive_ms % 1000) * 1000};
   setsockopt(socket.native_handle(), SOL_SOCKET, SO_SNDTIMEO, &s, sizeof(s));
   setsockopt(socket.native_handle(), SOL_SOCKET, SO_RCVTIMEO, &r, sizeof(r));
 }
@@ -203,16 +204,16 @@ void StreamServer::EndLive() {
 
 bool StreamServer::WaitForViewer(double timeout_s) {
   std::unique_lock<std::mutex> lock(mutex_);
-  return changed_.wait_for(lock, std::chrono::duration<double>(timeout_s),
-                           [&] { return stats_.viewers > 0 || stopping_; }) &&
-         stats_.viewers > 0;
+  return changed_.wait_for(lock, std::chrono::duration<double>(timeout_s), [&] {
+    return stats_.viewers > 0 || stopping_;
+  }) && stats_.viewers > 0;
 }
 
 bool StreamServer::WaitForFinalReport(double timeout_s) {
   std::unique_lock<std::mutex> lock(mutex_);
-  return changed_.wait_for(lock, std::chrono::duration<double>(timeout_s),
-                           [&] { return final_report_ || stopping_; }) &&
-         final_report_;
+  return changed_.wait_for(lock, std::chrono::duration<double>(timeout_s), [&] {
+    return final_report_ || stopping_;
+  }) && final_report_;
 }
 
 StreamServerStats StreamServer::Stats() const {
@@ -250,8 +251,8 @@ void StreamServer::Stop() {
       }
     }
   }
-  for (std::thread& t : threads_)
-    if (t.joinable()) t.join();
+  for (Connection& c : threads_)
+    if (c.thread.joinable()) c.thread.join();
 }
 
 void StreamServer::AcceptLoop() {
@@ -270,7 +271,26 @@ void StreamServer::AcceptLoop() {
       std::lock_guard<std::mutex> lock(impl_->sockets_mutex);
       impl_->sockets.push_back(socket);
     }
-    threads_.emplace_back([this, socket] { Serve(socket); });
+    for (auto it = threads_.begin(); it != threads_.end();) {
+      if (*it->done) {
+        it->thread.join();
+        it = threads_.erase(it);
+      } else {
+        ++it;
+      }
+    }
+    {
+      std::lock_guard<std::mutex> lock(impl_->sockets_mutex);
+      auto& v = impl_->sockets;
+      v.erase(std::remove_if(v.begin(), v.end(), [](const auto& w) { return w.expired(); }),
+              v.end());
+    }
+    auto done = std::make_shared<std::atomic<bool>>(false);
+    threads_.push_back({std::thread([this, socket, done] {
+                          Serve(socket);
+                          *done = true;
+                        }),
+                        done});
   }
 }
 
@@ -401,8 +421,8 @@ void StreamServer::ServeLive(std::shared_ptr<void> opaque, void* request) {
     {
       std::unique_lock<std::mutex> lock(mutex_);
       changed_.wait(lock, [&] {
-        return stopping_ || (!header_sent && !header_message_.empty()) ||
-               !viewer->queue.empty() || live_ended_;
+        return stopping_ || (!header_sent && !header_message_.empty()) || !viewer->queue.empty() ||
+               live_ended_;
       });
       if (stopping_) break;
       if (!header_sent && !header_message_.empty()) {
@@ -423,6 +443,11 @@ void StreamServer::ServeLive(std::shared_ptr<void> opaque, void* request) {
   std::lock_guard<std::mutex> lock(mutex_);
   viewer->closed = true;
   --stats_.viewers;
+  // Its counts move into the totals; the viewer is forgotten.
+  stats_.records_sent += viewer->sent;
+  stats_.records_dropped +=
+      viewer->offered - viewer->sent - static_cast<long>(viewer->queue.size());
+  viewers_.erase(std::remove(viewers_.begin(), viewers_.end(), viewer), viewers_.end());
   changed_.notify_all();
 }
 

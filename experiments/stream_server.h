@@ -14,13 +14,16 @@
 // behind them each live viewer has a queue of at most max_queued_records records;
 // when it is full (the browser is slower than the sender) the queue is dropped and that viewer
 // restarts at the latest keyframe (the records since it, when they fit the queue) or else at
-// the next keyframe: always a decodable point, never an unbounded backlog. A viewer joining mid-stream receives the
-// header and the records since the last keyframe (when there are at most max_join_records).
+// the next keyframe: always a decodable point, never an unbounded backlog. A viewer joining
+// mid-stream receives the header and the records since the last keyframe (when there are at most
+// max_join_records).
 #pragma once
 
+#include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
+#include <list>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -37,19 +40,19 @@ namespace artex {
 
 struct StreamServerOptions {
   std::string address = "127.0.0.1";  // listen address (loopback: this machine only)
-  int port = 8090;                     // TCP port; 0: any free port (see StreamServer::port)
-  std::string viewer_dir;              // the page's folder; "": the source tree's viewer/
-  int max_queued_records = 15;         // per live viewer (0.5 s at 30 Hz); >= 1
-  int max_join_records = 120;          // records since the last keyframe kept for joining
-  int max_in_flight = 3;               // records sent to a viewer and not yet acknowledged
-  int send_timeout_ms = 5000;          // a viewer that takes longer to accept bytes is dropped
+  int port = 8090;                    // TCP port; 0: any free port (see StreamServer::port)
+  std::string viewer_dir;             // the page's folder; "": the source tree's viewer/
+  int max_queued_records = 15;        // per live viewer (0.5 s at 30 Hz); >= 1
+  int max_join_records = 120;         // records since the last keyframe kept for joining
+  int max_in_flight = 3;              // records sent to a viewer and not yet acknowledged
+  int send_timeout_ms = 5000;         // a viewer that takes longer to accept bytes is dropped
 
   bool IsValid(std::string* error) const;
 };
 
 struct StreamServerStats {
-  int viewers = 0;          // live viewers connected now
-  int viewers_total = 0;    // live viewers ever connected
+  int viewers = 0;        // live viewers connected now
+  int viewers_total = 0;  // live viewers ever connected
   long records_published = 0;
   long records_sent = 0;     // summed over viewers
   long records_dropped = 0;  // summed over viewers (offered, neither sent nor queued)
@@ -102,7 +105,11 @@ class StreamServer : public StreamTap {
   StreamServerStats stats_;
   bool final_report_ = false;
   std::thread acceptor_thread_;
-  std::vector<std::thread> threads_;
+  struct Connection {
+    std::thread thread;
+    std::shared_ptr<std::atomic<bool>> done;
+  };
+  std::list<Connection> threads_;  // finished ones are joined as new connections arrive
 };
 
 // The --port, --viewer-dir and --max-queue options of the serving commands, and their closing

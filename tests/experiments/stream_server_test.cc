@@ -39,7 +39,9 @@ class StreamServerTest : public ::testing::Test {
     options_.max_in_flight = 3;
   }
   void TearDown() override { fs::remove_all(dir_); }
-  static void Write(const fs::path& p, const std::string& s) { std::ofstream(p, std::ios::binary) << s; }
+  static void Write(const fs::path& p, const std::string& s) {
+    std::ofstream(p, std::ios::binary) << s;
+  }
 
   http::response<http::string_body> Request(int port, http::verb verb, const std::string& target,
                                             const std::string& body = "") {
@@ -96,14 +98,16 @@ TEST_F(StreamServerTest, ServesThePageTheStreamFileAndKeepsTheReport) {
   ASSERT_GT(server.port(), 0);
   EXPECT_EQ(Request(server.port(), http::verb::get, "/").body(), "<html>viewer</html>");
   EXPECT_EQ(Request(server.port(), http::verb::get, "/index.html?x=1").result(), http::status::ok);
-  EXPECT_EQ(Request(server.port(), http::verb::get, "/../secret").result(), http::status::not_found);
+  EXPECT_EQ(Request(server.port(), http::verb::get, "/../secret").result(),
+            http::status::not_found);
   EXPECT_EQ(Request(server.port(), http::verb::get, "/stream.artx").result(),
             http::status::not_found);
   EXPECT_NE(Request(server.port(), http::verb::get, "/info.json").body().find("\"file\":false"),
             std::string::npos);
   Write(dir_ / "s.artx", std::string("ARTX\0\1", 6));
   server.ServeFile((dir_ / "s.artx").string());
-  EXPECT_EQ(Request(server.port(), http::verb::get, "/stream.artx").body(), std::string("ARTX\0\1", 6));
+  EXPECT_EQ(Request(server.port(), http::verb::get, "/stream.artx").body(),
+            std::string("ARTX\0\1", 6));
   EXPECT_FALSE(server.WaitForFinalReport(0.01));
   Request(server.port(), http::verb::post, "/report", "{\"fps\":3,\"done\":true}");
   EXPECT_TRUE(server.WaitForFinalReport(5.0));
@@ -127,7 +131,8 @@ TEST_F(StreamServerTest, RejectsBadOptionsAndAMissingPage) {
 TEST_F(StreamServerTest, LiveViewerJoinsAtTheLastKeyframeWithStamps) {
   StreamServer server(options_);
   server.OnHeader({'A', 'R', 'T', 'X'});
-  for (uint32_t f = 0; f < 7; ++f) server.OnRecord(Record(f, f % 5 == 0), f % 5 == 0, 1000.0 + f, 2000.0 + f);
+  for (uint32_t f = 0; f < 7; ++f)
+    server.OnRecord(Record(f, f % 5 == 0), f % 5 == 0, 1000.0 + f, 2000.0 + f);
   asio::io_context io;
   websocket::stream<tcp::socket> ws(io);
   ws.next_layer().connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), server.port()));
@@ -187,8 +192,7 @@ TEST_F(StreamServerTest, SlowViewerIsBoundedAndResumesAtAKeyframe) {
   const StreamServerStats s = server.Stats();
   // Sent: the records in flight and the bounded queue; the rest dropped.
   ASSERT_FALSE(frames.empty());
-  EXPECT_LE(static_cast<int>(frames.size()),
-            options_.max_in_flight + options_.max_queued_records);
+  EXPECT_LE(static_cast<int>(frames.size()), options_.max_in_flight + options_.max_queued_records);
   EXPECT_EQ(s.records_sent, static_cast<long>(frames.size()));
   EXPECT_EQ(s.records_sent + s.records_dropped, kRecords);
   // Every gap in the frames received is followed by a keyframe (decodable).
