@@ -24,5 +24,6 @@ void RegisterSlurmSubcommands(CLI::App* app, CLI::App* experiment);
 // with matplotlib is missing).
 void MakeExperimentPlots(const std::string& out);
 void RegisterStreamCommands(CLI::App* app);    // artex stream encode|play
+void RegisterStreamServeCommand(CLI::App* stream);  // artex stream serve (the browser viewer)
 
 }  // namespace artex

@@ -35,6 +35,7 @@ void RegisterStreamCommands(CLI::App* app) {
   CLI::App* stream =
       app->add_subcommand("stream", "Tele-presence stream: encode a run, play a stream");
   stream->require_subcommand(1);
+  RegisterStreamServeCommand(stream);
 
   struct EncodeArgs {
     std::string run, out, config, template_path;

@@ -1,5 +1,6 @@
 #include "experiments/stream_sinks.h"
 
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <opencv2/imgcodecs.hpp>
@@ -22,7 +23,11 @@ void WritePngFile(const std::string& path, const cv::Mat& image) {
   WriteFileAtomically(path, std::string(bytes.begin(), bytes.end()));
 }
 
+StreamTap* g_stream_tap = nullptr;
+
 }  // namespace
+
+void SetStreamTap(StreamTap* tap) { g_stream_tap = tap; }
 
 FrameSinks::FrameSinks(const PipelineOptions& options, const Template& tmpl,
                        const Calibration& calibration, const Texturer* texturer,
@@ -38,6 +43,8 @@ FrameSinks::FrameSinks(const PipelineOptions& options, const Template& tmpl,
     sender_ = std::make_unique<StreamSender>(options.stream_path, tmpl, calibration.color,
                                              calibration.frame_rate, options.texturing.atlas_size,
                                              texturer != nullptr, options.stream);
+    tap_ = g_stream_tap;
+    if (tap_) tap_->OnHeader(sender_->header_bytes());
   }
 }
 
@@ -45,8 +52,15 @@ FrameSinks::~FrameSinks() = default;
 
 void FrameSinks::AddFrame(int frame, const Pose& pose) {
   if (atlas_dir_.empty() && !sender_) return;
+  const auto wall_ms = [] {
+    return std::chrono::duration<double, std::milli>(
+               std::chrono::system_clock::now().time_since_epoch())
+        .count();
+  };
+  const double stamp_ms = wall_ms();
   cv::Mat atlas;
   if (texturer_) atlas = texturer_->Atlas();
+  const double atlas_ms = wall_ms();  // the atlas picture composed
   if (!atlas_dir_.empty()) {
     WritePngFile(AtlasName(atlas_dir_, frame, ""), atlas);
     const std::vector<int>& frames = texturer_->triangle_frames();
@@ -55,8 +69,11 @@ void FrameSinks::AddFrame(int frame, const Pose& pose) {
       row.at<uint8_t>(0, static_cast<int>(f)) = frames[f] >= 0 ? 255 : 0;
     WritePngFile(AtlasName(atlas_dir_, frame, "_textured"), row);
   }
-  if (sender_)
-    sender_->AddFrame(frame, pose, atlas, texturer_ ? &texturer_->triangle_frames() : nullptr);
+  if (sender_) {
+    const StreamFrameStats s =
+        sender_->AddFrame(frame, pose, atlas, texturer_ ? &texturer_->triangle_frames() : nullptr);
+    if (tap_) tap_->OnRecord(sender_->last_record(), s.keyframe, stamp_ms, atlas_ms);
+  }
 }
 
 void FrameSinks::Finish(PipelineResult* result) {

@@ -5,11 +5,13 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "experiments/atomic_output.h"
 #include "experiments/commands.h"
+#include "experiments/stream_server.h"
 #include "experiments/config.h"
 #include "experiments/pipeline.h"
 #include "models/error.h"
@@ -52,6 +54,9 @@ void RegisterTrackCommand(CLI::App* app) {
     bool no_texture = false;
     int max_frames = 0;
     bool quiet = false;
+    bool serve = false;  // --serve: the live stream to the browser viewer (docs/viewer.md)
+    double serve_wait_s = 0.0, serve_report_s = 0.0;
+    StreamServerOptions server;
   };
   auto args = std::make_shared<Args>();
   CLI::App* cmd = app->add_subcommand(
@@ -83,6 +88,15 @@ void RegisterTrackCommand(CLI::App* app) {
                   "who to track without background frames: central (default), nearest, largest, "
                   "or the person at pixel X,Y (config keys preprocess.segmentation.subject, "
                   ".pixel)");
+  cmd->add_flag("--serve", args->serve,
+                "serve the browser viewer and stream live while tracking (docs/viewer.md; the "
+                "stream goes to --stream or OUT/stream.artx)");
+  cmd->add_option("--serve-wait", args->serve_wait_s,
+                  "with --serve: wait up to this many seconds for a viewer before tracking");
+  cmd->add_option("--serve-report-wait", args->serve_report_s,
+                  "with --serve: after tracking, wait up to this many seconds for the page's "
+                  "final report and print it");
+  AddServeOptions(cmd, &args->server);
   cmd->callback([args] {
     Config config = args->config.empty() ? Config() : Config::Load(args->config);
     for (const auto& o : args->overrides) {
@@ -124,8 +138,21 @@ void RegisterTrackCommand(CLI::App* app) {
     }
     // Written into a temporary sibling, published complete at the end (docs/reliability.md).
     AtomicOutputFolder out(args->out, "track");
+    PipelineOptions run_options = options;
+    std::unique_ptr<StreamServer> server;
+    struct TapGuard {
+      ~TapGuard() { SetStreamTap(nullptr); }
+    } tap_guard;
+    if (args->serve) {
+      if (run_options.stream_path.empty()) run_options.stream_path = out.path() + "/stream.artx";
+      server = std::make_unique<StreamServer>(args->server);
+      SetStreamTap(server.get());
+      std::fprintf(stderr, "track: viewer at %s?live=1\n", server->Url().c_str());
+      if (args->serve_wait_s > 0 && !server->WaitForViewer(args->serve_wait_s))
+        std::fprintf(stderr, "track: no viewer after %.0f s; tracking anyway\n", args->serve_wait_s);
+    }
     const PipelineResult result = RunPipeline(
-        args->sequence, args->template_path, options, config, out.path(),
+        args->sequence, args->template_path, run_options, config, out.path(),
         [quiet](const PipelineProgress& p) {
           if (quiet) return;
           std::fprintf(stderr, "\rtrack: frame %d/%d  %.1f frames/s  EM iterations %d", p.done,
@@ -142,6 +169,15 @@ void RegisterTrackCommand(CLI::App* app) {
           std::fflush(stderr);
         });
     if (!quiet) std::fprintf(stderr, "\n");
+    if (server) {
+      SetStreamTap(nullptr);
+      server->EndLive();
+      if (args->serve_report_s > 0 && !server->WaitForFinalReport(args->serve_report_s))
+        std::fprintf(stderr, "track: no final report from a viewer after %.0f s\n",
+                     args->serve_report_s);
+      PrintServeReport(*server, "track: serve");
+      server->Stop();
+    }
     out.Commit();
     for (const auto& w : result.warnings) std::fprintf(stderr, "track: warning: %s\n", w.c_str());
     std::printf("frames: %zu: %d good, %d doubtful, %d lost (%d failed fits), %d skipped\n",
@@ -159,7 +195,8 @@ void RegisterTrackCommand(CLI::App* app) {
       std::printf(
           "stream: %s: pose %.2f kbit/s, texture %.1f kbit/s, total %.1f kbit/s, %d "
           "keyframes, hand error <= %.3f mm, encoding %.1f ms/frame\n",
-          args->stream.c_str(), s.pose_kbps, s.texture_kbps, s.total_kbps, s.keyframes,
+          args->stream.empty() ? (args->out + "/stream.artx").c_str() : args->stream.c_str(),
+          s.pose_kbps, s.texture_kbps, s.total_kbps, s.keyframes,
           s.max_hand_error_mm, s.mean_encode_ms);
     }
     if (result.has_ground_truth && result.novel_view_psnr_db == result.novel_view_psnr_db) {

@@ -134,6 +134,7 @@ StreamSender::StreamSender(const std::string& path, const Template& tmpl,
   out_.write(reinterpret_cast<const char*>(bytes.data()),
              static_cast<std::streamsize>(bytes.size()));
   summary_.header_bytes = bytes.size();
+  header_bytes_ = bytes;
   summary_.glb_bytes = h.glb.size();
   summary_.frame_rate = frame_rate;
 }
@@ -190,6 +191,8 @@ StreamFrameStats StreamSender::AddFrame(int frame, const Pose& pose, const cv::M
   out_.write(reinterpret_cast<const char*>(bytes.data()),
              static_cast<std::streamsize>(bytes.size()));
   if (!out_) throw Error(path_ + ": writing the stream failed");
+  out_.flush();  // readers of the growing file (the viewer's server) see whole records
+  last_record_ = bytes;
   s.keyframe = keyframe;
   s.pose_bytes = record.pose.size();
   s.mask_bytes = record.mask.size();

@@ -67,6 +67,9 @@ class StreamSender {
                             const std::vector<int>* triangle_frames);
   // Closes the stream (renames it into place) and returns the totals.
   StreamSummary Finish();
+  // The bytes written so far: the header, and the record of the last AddFrame (live taps).
+  const std::vector<uint8_t>& header_bytes() const { return header_bytes_; }
+  const std::vector<uint8_t>& last_record() const { return last_record_; }
 
  private:
   std::string path_, temp_path_;
@@ -79,6 +82,7 @@ class StreamSender {
   PoseEncoder pose_encoder_;
   std::unique_ptr<AtlasVideoEncoder> video_;
   std::vector<uint8_t> last_bits_;
+  std::vector<uint8_t> header_bytes_, last_record_;
   StreamSummary summary_;
   bool finished_ = false;
 };
