@@ -1,6 +1,6 @@
 // A first-in first-out queue of at most `capacity` items between two pipeline stages
 // (experiments/pipeline_stages.h): Push blocks while full, TryPush refuses, Pop blocks while
-// empty. Close() wakes every waiter: Push/TryPush then refuse and Pop drains what is left
+// empty (PushDroppingOldest makes room instead). Close() wakes every waiter: Push/TryPush then refuse and Pop drains what is left
 // before it returns false. Thread-safe for any number of producers and consumers.
 #pragma once
 
@@ -33,6 +33,21 @@ class BoundedQueue {
     items_.push_back(std::move(item));
     not_empty_.notify_one();
     return true;
+  }
+  // Never waits: when full, the oldest item is dropped to make room (a live source keeps
+  // the newest frames). Returns the number of items dropped (0 or 1); closed: drops `item`
+  // itself and returns 1.
+  int PushDroppingOldest(T&& item) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (closed_) return 1;
+    int dropped = 0;
+    if (items_.size() >= capacity_) {
+      items_.pop_front();
+      dropped = 1;
+    }
+    items_.push_back(std::move(item));
+    not_empty_.notify_one();
+    return dropped;
   }
   // Waits for an item; false when the queue is closed and empty.
   bool Pop(T* item) {

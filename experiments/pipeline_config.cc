@@ -380,7 +380,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
                "texture_doubtful_frames", "reinitialise_on", "reinitialise_after_doubtful",
                "texture_quality_every", "texture_quality_yaws_deg", "texture_quality_height",
                "export_atlases", "stream", "concurrency", "queue_depth", "live",
-               "live_rate_hz", "colour_delay_frames"});
+               "live_queue_depth", "live_rate_hz", "colour_delay_frames"});
   c.Get("texture", &o->texture);
   c.Get("colour_term", &o->colour_term);
   c.Get("first_frame", &o->first_frame);
@@ -405,6 +405,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.GetEnum("concurrency", PipelineConcurrencyNames(), &o->realtime.concurrency);
   c.Get("queue_depth", &o->realtime.queue_depth);
   c.Get("live", &o->realtime.live);
+  c.Get("live_queue_depth", &o->realtime.live_queue_depth);
   c.Get("live_rate_hz", &o->realtime.live_rate_hz);
   c.Get("colour_delay_frames", &o->realtime.colour_delay_frames);
 }

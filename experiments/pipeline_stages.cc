@@ -129,6 +129,8 @@ bool RealtimeOptions::IsValid(std::string* error) const {
   } else if (!(live_rate_hz >= 0.0) || live_rate_hz > 1000.0) {
     msg = "pipeline.live_rate_hz: expected 0 (the recording's rate) or a rate in (0, 1000] Hz, "
           "found " + std::to_string(live_rate_hz);
+  } else if (live_queue_depth < 1) {
+    msg = "pipeline.live_queue_depth: expected >= 1, found " + std::to_string(live_queue_depth);
   } else if (colour_delay_frames < 0) {
     msg = "pipeline.colour_delay_frames: expected >= 0, found " +
           std::to_string(colour_delay_frames);
@@ -604,7 +606,9 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
     stats.frames_dropped = missed;
   } else {
     const std::size_t depth = static_cast<std::size_t>(options.queue_depth);
-    BoundedQueue<FrameWork> to_track(depth), to_texture(depth), to_output(depth);
+    BoundedQueue<FrameWork> to_track(
+        options.live ? static_cast<std::size_t>(options.live_queue_depth) : depth);
+    BoundedQueue<FrameWork> to_texture(depth), to_output(depth);
     std::mutex error_mutex;
     std::exception_ptr error;
     const auto abort = [&](std::exception_ptr e) {
@@ -620,24 +624,22 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
     std::atomic<int> dropped{0};
     std::thread reader([&] {
       try {
-        int frame = 0, sequence = 0, missed = 0;
+        int frame = 0, missed = 0;
         PipelineClock::time_point at;
         while (true) {
           const int missed_before = missed;
           if (!clock.Next(&frame, &at, &missed)) break;
           if (first_textured) dropped_after_first += missed - missed_before;
-          FrameWork work = read_clock.Time([&] { return ReadWork(source, frame, sequence, at); });
+          FrameWork work = read_clock.Time([&] { return ReadWork(source, frame, 0, at); });
           if (options.live) {
-            // A sensor does not wait: a frame the tracker has no room for is dropped.
-            if (!to_track.TryPush(std::move(work))) {
-              ++missed;
-              if (first_textured) ++dropped_after_first;
-              continue;
-            }
+            // A sensor does not wait: when the tracker has no room, the oldest waiting frame
+            // is dropped (the newest is the one worth tracking).
+            const int lost = to_track.PushDroppingOldest(std::move(work));
+            missed += lost;
+            if (first_textured) dropped_after_first += lost;
           } else if (!to_track.Push(std::move(work))) {
             break;
           }
-          ++sequence;
         }
         dropped = missed;
       } catch (...) {
@@ -648,7 +650,10 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
     std::thread tracker([&] {
       try {
         FrameWork work;
+        int sequence = 0;
         while (to_track.Pop(&work)) {
+          // Numbered as the track stage takes them (live frames dropped before are not).
+          work.sequence = sequence++;
           take_colours(work.sequence);
           track_clock.Time([&] { track->Process(&work); });
           if (!to_texture.Push(std::move(work))) break;

@@ -23,10 +23,15 @@ struct RealtimeOptions {
   // Frames waiting between two stages (pipeline.queue_depth, >= 1): bounds the memory (one
   // frame ~1.2 MB of images at 640x480) and the added latency.
   int queue_depth = 2;
-  // pipeline.live: frames arrive on a clock at live_rate_hz as from a sensor; a frame that
-  // arrives while the first stage's queue is full is dropped (counted), never queued.
+  // pipeline.live: frames arrive on a clock at live_rate_hz as from a sensor; when a frame
+  // arrives while the track stage's queue is full, the oldest waiting frame is dropped
+  // (counted): nothing queues without bound and the newest frame is tracked next. Sequential:
+  // the frames that arrive while a frame is processed are dropped but the newest.
   bool live = false;
   double live_rate_hz = 0.0;  // pipeline.live_rate_hz; 0: the recording's frame rate
+  // pipeline.live_queue_depth (>= 1): live, the frames waiting for the track stage (each adds
+  // up to a frame period of latency when tracking is the slowest stage).
+  int live_queue_depth = 1;
   // pipeline.colour_delay_frames: the E-step's colour term of frame t uses the texture as it
   // was after frame t - 1 - this (0: after frame t-1, which makes fitting wait for texturing;
   // 1: fitting of t overlaps texturing of t-1). The same in both concurrency modes.
