@@ -65,6 +65,10 @@ class BoundedQueue {
     not_full_.notify_all();
     not_empty_.notify_all();
   }
+  bool closed() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return closed_;
+  }
   std::size_t capacity() const { return capacity_; }
 
  private:

@@ -634,6 +634,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
           if (options.live) {
             // A sensor does not wait: when the tracker has no room, the oldest waiting frame
             // is dropped (the newest is the one worth tracking).
+            if (to_track.closed()) break;  // a stage failed
             const int lost = to_track.PushDroppingOldest(std::move(work));
             missed += lost;
             if (first_textured) dropped_after_first += lost;
