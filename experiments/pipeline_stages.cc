@@ -578,9 +578,13 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
     if (!work->record.skipped) first_textured = true;
     mailbox.Post(work->sequence, std::move(colours), changed);
   };
+  int skipped = 0;  // unreadable frames (they pass the stages as records)
   const auto finish = [&](FrameWork* work) {
     output_clock.Time([&] { output->Process(work); });
-    if (work->record.skipped) return;
+    if (work->record.skipped) {
+      ++skipped;
+      return;
+    }
     ++stats.frames_processed;
     latencies.push_back(
         1000.0 * std::chrono::duration<double>(work->textured - work->captured).count());
@@ -691,7 +695,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
   stats.wall_seconds = Since(start);
   const double cpu = CpuSeconds() - cpu_start;
   stats.frames_dropped_after_first = dropped_after_first;
-  stats.frames_offered = stats.frames_processed + stats.frames_dropped;
+  stats.frames_offered = stats.frames_processed + stats.frames_dropped + skipped;
   stats.frames_per_second = stats.frames_processed / std::max(1e-9, stats.wall_seconds);
   stats.steady_frames_per_second =
       stats.frames_processed > 1 && first_done >= 0

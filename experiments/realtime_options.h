@@ -51,8 +51,8 @@ struct RealtimeStats {
   PipelineConcurrency concurrency = PipelineConcurrency::kSequential;
   bool live = false;
   double rate_hz = 0.0;          // live: the replay clock
-  int frames_offered = 0;        // frames of the range (live: that arrived on the clock)
-  int frames_processed = 0;      // went through every stage
+  int frames_offered = 0;        // frames of the range: processed + dropped + unreadable
+  int frames_processed = 0;      // readable frames that went through every stage
   int frames_dropped = 0;        // live only
   int frames_dropped_after_first = 0;  // live: dropped after the first frame was textured
   double wall_seconds = 0.0;     // first read to last output
