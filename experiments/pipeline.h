@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "experiments/config.h"
+#include "experiments/realtime_options.h"
 #include "models/template_io.h"
 #include "models/textured_mesh_export.h"
 #include "sensors/frame_source.h"
@@ -74,6 +75,9 @@ struct PipelineOptions {
   bool export_atlases = false;
   std::string stream_path;  // also write the tele-presence stream here (.artx; "" none)
   StreamOptions stream;     // section stream
+  // Sequential or pipelined stages, live replay (pipeline.concurrency, .queue_depth, .live,
+  // .live_rate_hz, .colour_delay_frames; experiments/realtime_options.h).
+  RealtimeOptions realtime;
 
   bool IsValid(std::string* error) const;
 };
@@ -134,6 +138,7 @@ struct PipelineResult {
   std::vector<std::string> warnings;
   bool glb_written = false;
   AnimatedGlbSummary glb;  // tracked.glb against artex's skinning (residuals in mm)
+  RealtimeStats realtime;  // throughput, latency, drops, stage timings (realtime.json)
 };
 
 struct PipelineProgress {
@@ -147,8 +152,9 @@ struct PipelineProgress {
 // options.input) with the tracking template at template_path (.glb; "" = the default
 // generated template) and writes into out_dir (created): config.yaml
 // (resolved), poses.csv, frames.csv, summary.json, metrics.json (with ground truth),
-// texture.png, labels.png, tracked.glb, meshes/ on request. Throws artex::Error on bad input
-// and when no frame is usable (every frame unreadable or its fit failed), listing the reasons.
+// texture.png, labels.png, tracked.glb, realtime.json (throughput, latency, live drops),
+// meshes/ on request. The stages run per options.realtime (experiments/pipeline_stages.h).
+// Throws artex::Error on bad input and when no frame is usable (every frame unreadable or its fit failed), listing the reasons.
 PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& template_path,
                            const PipelineOptions& options, const Config& resolved_config,
                            const std::string& out_dir,

@@ -397,7 +397,8 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
                "export_textured_mesh", "mesh_up_axis", "lost_threshold_mm",
                "texture_doubtful_frames", "reinitialise_on", "reinitialise_after_doubtful",
                "texture_quality_every", "texture_quality_yaws_deg", "texture_quality_height",
-               "export_atlases", "stream"});
+               "export_atlases", "stream", "concurrency", "queue_depth", "live",
+               "live_queue_depth", "live_rate_hz", "colour_delay_frames"});
   c.Get("texture", &o->texture);
   c.Get("colour_term", &o->colour_term);
   c.Get("first_frame", &o->first_frame);
@@ -419,6 +420,12 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("texture_quality_height", &o->held_out.height);
   c.Get("export_atlases", &o->export_atlases);
   c.Get("stream", &o->stream_path);
+  c.GetEnum("concurrency", PipelineConcurrencyNames(), &o->realtime.concurrency);
+  c.Get("queue_depth", &o->realtime.queue_depth);
+  c.Get("live", &o->realtime.live);
+  c.Get("live_queue_depth", &o->realtime.live_queue_depth);
+  c.Get("live_rate_hz", &o->realtime.live_rate_hz);
+  c.Get("colour_delay_frames", &o->realtime.colour_delay_frames);
 }
 
 void BindStream(const Config& c, StreamOptions* o) {
@@ -481,6 +488,7 @@ bool PipelineOptions::IsValid(std::string* error) const {
     return false;
   }
   if (!stream.IsValid(error)) return false;
+  if (!realtime.IsValid(error)) return false;
   std::ostringstream msg;
   if (first_frame < 0)
     msg << "pipeline.first_frame: expected >= 0, found " << first_frame;

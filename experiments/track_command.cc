@@ -57,6 +57,7 @@ void RegisterTrackCommand(CLI::App* app) {
     bool serve = false;  // --serve: the live stream to the browser viewer (docs/viewer.md)
     double serve_wait_s = 0.0, serve_report_s = 0.0;
     StreamServerOptions server;
+    bool live = false, sequential = false;
   };
   auto args = std::make_shared<Args>();
   CLI::App* cmd = app->add_subcommand(
@@ -81,6 +82,12 @@ void RegisterTrackCommand(CLI::App* app) {
                   "TUM RGB-D intrinsics: a YAML file or a preset fr1|fr2|fr3|kinect (default: "
                   "<folder>/camera.yaml; config key input.intrinsics)");
   cmd->add_flag("-q,--quiet", args->quiet, "no progress line");
+  cmd->add_flag("--live", args->live,
+                "replay the recording at its frame rate as a sensor would, dropping the frames "
+                "the pipeline has no room for (config keys pipeline.live, .live_rate_hz)");
+  cmd->add_flag("--sequential", args->sequential,
+                "run the stages one after another on one thread (config key "
+                "pipeline.concurrency: sequential; default pipelined)");
   cmd->add_option("--stream", args->stream,
                   "also write the tele-presence stream (.artx, docs/streaming.md; config key "
                   "pipeline.stream, options in the stream section)");
@@ -125,6 +132,8 @@ void RegisterTrackCommand(CLI::App* app) {
       }
     }
     if (args->export_meshes) config.Set("pipeline.export_meshes", "true");
+    if (args->live) config.Set("pipeline.live", "true");
+    if (args->sequential) config.Set("pipeline.concurrency", "sequential");
     if (args->no_texture) config.Set("pipeline.texture", "false");
     if (!args->stream.empty()) config.Set("pipeline.stream", YamlQuoted(args->stream));
     if (args->max_frames > 0) config.Set("pipeline.max_frames", std::to_string(args->max_frames));
@@ -213,6 +222,14 @@ void RegisterTrackCommand(CLI::App* app) {
           result.mean_vertex_error_mm, result.max_vertex_error_mm, result.mean_joint_error_mm,
           100.0 * result.lost_fraction, result.evaluated_frames, result.failed_frames);
     }
+    const RealtimeStats& rt = result.realtime;
+    std::printf(
+        "%s%s: %d frames processed, %d dropped; %.1f frames/s (%.1f after the first frame), "
+        "latency median %.0f ms, p95 %.0f ms, CPU %.0f%%\n",
+        rt.concurrency == PipelineConcurrency::kPipelined ? "pipelined" : "sequential",
+        rt.live ? " live" : "", rt.frames_processed, rt.frames_dropped, rt.frames_per_second,
+        rt.steady_frames_per_second, rt.latency_median_ms, rt.latency_p95_ms,
+        100.0 * rt.cpu_utilisation);
     std::printf("results in %s\n", args->out.c_str());
   });
 }

@@ -1,0 +1,109 @@
+#!/usr/bin/python3
+"""Whole `artex track` on a virtual-Kinect walk, side by side in one run (docs/realtime.md):
+sequential vs pipelined (frames/s, latency median/p95, CPU utilisation, peak RSS, accuracy),
+live replay at the recording's 30 Hz (frames dropped), and peak RSS against sequence length.
+
+  bench/track_realtime.py [--artex build/experiments/artex] [--frames 60] [--long 300]
+                          [--work /tmp/artex-rt-bench] [--repeat 1] [--set key=value ...]
+
+Sequences are synthesised once into --work (artex synth --motion walk --seed 1, 640x480).
+Prints one table and writes WORK/results.json. The machine is shared: `uptime` is printed
+before and after, and every figure of one table comes from the same invocation.
+"""
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+
+
+def sh(cmd):
+    return subprocess.run(cmd, check=True, capture_output=True, text=True)
+
+
+def synth(artex, frames, out):
+    if not os.path.exists(os.path.join(out, "calibration.yaml")):
+        sh([artex, "synth", "--motion", "walk", "--frames", str(frames), "--seed", "1", "-o", out])
+    return out
+
+
+def track(artex, seq, out, config, sets):
+    cmd = ["/usr/bin/time", "-v", artex, "track", seq, "-c", config, "-o", out, "-q"]
+    for s in sets:
+        cmd += ["--set", s]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    if r.returncode != 0:
+        sys.exit("artex track failed: " + " ".join(cmd) + "\n" + r.stderr[-2000:])
+    rss = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", r.stderr).group(1))
+    cpu = re.search(r"Percent of CPU this job got: (\d+)%", r.stderr).group(1)
+    wall = re.search(r"Elapsed \(wall clock\) time \(h:mm:ss or m:ss\): ([\d:.]+)", r.stderr).group(1)
+    parts = [float(p) for p in wall.split(":")]
+    wall_s = sum(p * 60 ** (len(parts) - 1 - i) for i, p in enumerate(parts))
+    with open(os.path.join(out, "realtime.json")) as f:
+        rt = json.load(f)
+    with open(os.path.join(out, "metrics.json")) as f:
+        metrics = json.load(f)
+    return {"rss_mb": rss / 1024.0, "process_cpu_percent": int(cpu), "process_wall_s": wall_s,
+            "realtime": rt, "metrics": metrics}
+
+
+def uptime():
+    return sh(["uptime"]).stdout.strip()
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--artex", default="build/experiments/artex")
+    ap.add_argument("--config", default="configs/default.yaml")
+    ap.add_argument("--frames", type=int, default=60)
+    ap.add_argument("--long", type=int, default=300, help="frames of the RSS comparison (0: skip)")
+    ap.add_argument("--work", default="/tmp/artex-rt-bench")
+    ap.add_argument("--set", action="append", default=[], help="extra --set for every run")
+    ap.add_argument("--no-live", action="store_true")
+    args = ap.parse_args()
+    os.makedirs(args.work, exist_ok=True)
+    seq = synth(args.artex, args.frames, os.path.join(args.work, "walk%d" % args.frames))
+    runs = [
+        ("sequential", seq, ["pipeline.concurrency=sequential"]),
+        ("pipelined", seq, ["pipeline.concurrency=pipelined"]),
+    ]
+    if not args.no_live:
+        runs.append(("pipelined live 30 Hz", seq, ["pipeline.live=true"]))
+    if args.long > 0:
+        long_seq = synth(args.artex, args.long, os.path.join(args.work, "walk%d" % args.long))
+        runs.append(("pipelined %d frames" % args.long, long_seq, ["pipeline.concurrency=pipelined"]))
+        if not args.no_live:
+            runs.append(("pipelined live 30 Hz, %d frames" % args.long, long_seq,
+                         ["pipeline.live=true"]))
+    before = uptime()
+    results = {}
+    for name, s, sets in runs:
+        out = os.path.join(args.work, "run_" + re.sub(r"[^a-z0-9]+", "_", name))
+        results[name] = track(args.artex, s, out, args.config, sets + args.set)
+    after = uptime()
+    print("load before: " + before)
+    print("load after:  " + after)
+    head = ("%-34s %7s %7s %8s %8s %6s %5s %8s %8s %7s %7s"
+            % ("run", "fps", "fps>1", "lat med", "lat p95", "CPU", "drop", "drop>1", "RSS MB",
+               "err mm", "PSNR"))
+    print(head)
+    for name, r in results.items():
+        rt, m = r["realtime"], r["metrics"]
+        print("%-34s %7.1f %7.1f %8.0f %8.0f %5.0f%% %5d %8d %8.0f %7.3f %7.3f"
+              % (name, rt["frames_per_second"], rt["steady_frames_per_second"],
+                 rt["latency_median_ms"] or 0, rt["latency_p95_ms"] or 0,
+                 100 * rt["cpu_utilisation"], rt["frames_dropped"],
+                 rt["frames_dropped_after_first"], r["rss_mb"],
+                 m["mean_vertex_error_mm"] or float("nan"),
+                 m["mean_novel_view_psnr_db"] or float("nan")))
+    print("stage busy ms/frame (read, track, texture, output):")
+    for name, r in results.items():
+        print("  %-32s %s" % (name, ", ".join("%.1f" % s["ms_per_frame"]
+                                              for s in r["realtime"]["stages"])))
+    with open(os.path.join(args.work, "results.json"), "w") as f:
+        json.dump({"uptime_before": before, "uptime_after": after, "runs": results}, f, indent=2)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,82 @@
+// A first-in first-out queue of at most `capacity` items between two pipeline stages
+// (experiments/pipeline_stages.h): Push blocks while full, TryPush refuses, Pop blocks while
+// empty (PushDroppingOldest makes room instead). Close() wakes every waiter: Push/TryPush then refuse and Pop drains what is left
+// before it returns false. Thread-safe for any number of producers and consumers.
+#pragma once
+
+#include <condition_variable>
+#include <cstddef>
+#include <deque>
+#include <mutex>
+#include <utility>
+
+namespace artex {
+
+template <class T>
+class BoundedQueue {
+ public:
+  explicit BoundedQueue(std::size_t capacity) : capacity_(capacity < 1 ? 1 : capacity) {}
+
+  // Waits for room; false (item untouched) when the queue is closed.
+  bool Push(T&& item) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    not_full_.wait(lock, [&] { return closed_ || items_.size() < capacity_; });
+    if (closed_) return false;
+    items_.push_back(std::move(item));
+    not_empty_.notify_one();
+    return true;
+  }
+  // Never waits; false (item untouched) when full or closed.
+  bool TryPush(T&& item) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (closed_ || items_.size() >= capacity_) return false;
+    items_.push_back(std::move(item));
+    not_empty_.notify_one();
+    return true;
+  }
+  // Never waits: when full, the oldest item is dropped to make room (a live source keeps
+  // the newest frames). Returns the number of items dropped (0 or 1); closed: drops `item`
+  // itself and returns 1.
+  int PushDroppingOldest(T&& item) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (closed_) return 1;
+    int dropped = 0;
+    if (items_.size() >= capacity_) {
+      items_.pop_front();
+      dropped = 1;
+    }
+    items_.push_back(std::move(item));
+    not_empty_.notify_one();
+    return dropped;
+  }
+  // Waits for an item; false when the queue is closed and empty.
+  bool Pop(T* item) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    not_empty_.wait(lock, [&] { return closed_ || !items_.empty(); });
+    if (items_.empty()) return false;
+    *item = std::move(items_.front());
+    items_.pop_front();
+    not_full_.notify_one();
+    return true;
+  }
+  void Close() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    closed_ = true;
+    not_full_.notify_all();
+    not_empty_.notify_all();
+  }
+  bool closed() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return closed_;
+  }
+  std::size_t capacity() const { return capacity_; }
+
+ private:
+  const std::size_t capacity_;
+  std::mutex mutex_;
+  std::condition_variable not_full_, not_empty_;
+  std::deque<T> items_;
+  bool closed_ = false;
+};
+
+}  // namespace artex

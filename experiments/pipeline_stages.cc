@@ -1,0 +1,751 @@
+#include "experiments/pipeline_stages.h"
+
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <exception>
+#include <limits>
+#include <nanoflann.hpp>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <thread>
+
+#include "experiments/atomic_output.h"
+#include "experiments/bounded_queue.h"
+#include "models/error.h"
+#include "models/mesh_export.h"
+#include "models/normals.h"
+#include "solvers/particle_predictor.h"
+
+namespace artex {
+namespace {
+
+double Since(PipelineClock::time_point t) {
+  return std::chrono::duration<double>(PipelineClock::now() - t).count();
+}
+
+// nanoflann adaptor over an N x 3 matrix.
+struct PointCloud {
+  const Eigen::MatrixX3d* points;
+  size_t kdtree_get_point_count() const { return static_cast<size_t>(points->rows()); }
+  double kdtree_get_pt(size_t i, size_t d) const {
+    return (*points)(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(d));
+  }
+  template <class Box>
+  bool kdtree_get_bbox(Box&) const {
+    return false;
+  }
+};
+using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointCloud>,
+                                                   PointCloud, 3>;
+
+// Distance of every tracked vertex to the ground-truth surface: to the nearest subject vertex,
+// refined to the distance to that vertex's tangent plane (never more than the vertex distance).
+void SurfaceErrors(const Eigen::MatrixX3d& tracked, const Eigen::MatrixX3d& truth,
+                   const Eigen::MatrixX3d& truth_normals, double* mean, double* max) {
+  PointCloud cloud{&truth};
+  KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  tree.buildIndex();
+  double sum = 0.0, worst = 0.0;
+  for (Eigen::Index t = 0; t < tracked.rows(); ++t) {
+    const Eigen::Vector3d p = tracked.row(t);
+    unsigned int index = 0;
+    double d2 = 0.0;
+    tree.knnSearch(p.data(), 1, &index, &d2);
+    const Eigen::Vector3d q = truth.row(static_cast<Eigen::Index>(index));
+    const Eigen::Vector3d n = truth_normals.row(static_cast<Eigen::Index>(index));
+    const double plane = n.squaredNorm() > 0.5 ? std::abs(n.dot(p - q)) : std::sqrt(d2);
+    const double d = std::min(std::sqrt(d2), plane);
+    sum += d;
+    worst = std::max(worst, d);
+  }
+  *mean = tracked.rows() ? sum / tracked.rows() : 0.0;
+  *max = worst;
+}
+
+// Bytes to send the texels that changed in the last frame: their bounding box of the atlas
+// as a JPEG (quality 90); 0 when nothing changed.
+std::size_t TextureUpdateBytes(const Texturer& texturer) {
+  const cv::Mat patch = texturer.ChangedPatch();
+  if (patch.empty()) return 0;
+  std::vector<unsigned char> bytes;
+  cv::imencode(".jpg", patch, bytes, {cv::IMWRITE_JPEG_QUALITY, 90});
+  return bytes.size();
+}
+
+// Rows of `points` mapped by `t`.
+Eigen::MatrixX3d TransformRows(const Eigen::Isometry3d& t, const Eigen::MatrixX3d& points) {
+  Eigen::MatrixX3d out = (points * t.linear().transpose()).rowwise() + t.translation().transpose();
+  return out;
+}
+
+// Why frame `frame`'s fit failed: what was expected and what was found.
+std::string FailedFitReason(int frame, const FitSummary& fit, int min_scan_points) {
+  std::string why = "frame " + std::to_string(frame) + ": fit failed: ";
+  if (fit.too_few_points) {
+    why +=
+        "too few scan points or correspondences (expected >= " + std::to_string(min_scan_points) +
+        " points, found " + std::to_string(fit.num_scan_points) + ")";
+  } else if (fit.non_finite) {
+    why += "non-finite scan values or pose";
+  } else {
+    why += "diverged";
+  }
+  return why;
+}
+
+double CpuSeconds() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_utime.tv_sec + 1e-6 * usage.ru_utime.tv_usec + usage.ru_stime.tv_sec +
+         1e-6 * usage.ru_stime.tv_usec;
+}
+
+double Percentile(std::vector<double> values, double q) {
+  if (values.empty()) return std::numeric_limits<double>::quiet_NaN();
+  std::sort(values.begin(), values.end());
+  const double at = q * (values.size() - 1);
+  const size_t lo = static_cast<size_t>(std::floor(at));
+  const size_t hi = std::min(values.size() - 1, lo + 1);
+  return values[lo] + (at - lo) * (values[hi] - values[lo]);
+}
+
+}  // namespace
+
+const std::map<std::string, PipelineConcurrency>& PipelineConcurrencyNames() {
+  static const std::map<std::string, PipelineConcurrency> names = {
+      {"sequential", PipelineConcurrency::kSequential},
+      {"pipelined", PipelineConcurrency::kPipelined}};
+  return names;
+}
+
+bool RealtimeOptions::IsValid(std::string* error) const {
+  std::string msg;
+  if (queue_depth < 1) {
+    msg = "pipeline.queue_depth: expected >= 1, found " + std::to_string(queue_depth);
+  } else if (!(live_rate_hz >= 0.0) || live_rate_hz > 1000.0) {
+    msg = "pipeline.live_rate_hz: expected 0 (the recording's rate) or a rate in (0, 1000] Hz, "
+          "found " + std::to_string(live_rate_hz);
+  } else if (live_queue_depth < 1) {
+    msg = "pipeline.live_queue_depth: expected >= 1, found " + std::to_string(live_queue_depth);
+  } else if (colour_delay_frames < 0) {
+    msg = "pipeline.colour_delay_frames: expected >= 0, found " +
+          std::to_string(colour_delay_frames);
+  }
+  if (msg.empty()) return true;
+  if (error) *error = msg;
+  return false;
+}
+
+std::vector<unsigned char> WritePngFile(const std::string& path, const cv::Mat& image) {
+  std::vector<unsigned char> bytes;
+  if (!cv::imencode(".png", image, bytes)) throw Error(path + ": PNG encoding failed");
+  WriteFileAtomically(path, std::string(bytes.begin(), bytes.end()));
+  return bytes;
+}
+
+// ---------------------------------------------------------------------------------------------
+// ColourMailbox
+
+void ColourMailbox::Post(int sequence, Eigen::MatrixX3d colours, bool changed) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (changed) pending_.emplace_back(sequence, std::move(colours));
+  done_ = std::max(done_, sequence);
+  posted_.notify_all();
+}
+
+bool ColourMailbox::WaitAndTake(int sequence, Eigen::MatrixX3d* colours) {
+  std::unique_lock<std::mutex> lock(mutex_);
+  posted_.wait(lock, [&] { return aborted_ || done_ >= sequence; });
+  if (aborted_) return false;
+  auto newest = pending_.end();
+  for (auto it = pending_.begin(); it != pending_.end(); ++it)
+    if (it->first <= sequence) newest = it;
+  if (newest == pending_.end()) return false;
+  *colours = std::move(newest->second);
+  pending_.erase(pending_.begin(), newest + 1);
+  return true;
+}
+
+void ColourMailbox::Abort() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  aborted_ = true;
+  posted_.notify_all();
+}
+
+// ---------------------------------------------------------------------------------------------
+// TrackStage
+
+TrackStage::TrackStage(const PipelineOptions& options, const Calibration& calibration,
+                       Preprocessor* preprocessor, EMFitter* fitter)
+    : options_(options), calibration_(calibration), preprocessor_(preprocessor), fitter_(fitter) {}
+
+void TrackStage::SetTemplateColors(const Eigen::MatrixX3d& colours) {
+  fitter_->SetTemplateColors(colours);
+}
+
+void TrackStage::Initialise(FrameRecord* r) {
+  const InitResult init = InitializeFit(fitter_, scan_, calibration_.depth, options_.initializer);
+  r->fit = init.fit;
+  r->reinitialised = true;
+  r->init_seconds = init.total_seconds;
+  r->init_report = init.BriefReport();
+  ++initialisations;
+  init_seconds += init.total_seconds;
+}
+
+void TrackStage::Evaluate(FrameRecord* r, Eigen::MatrixX3d* posed) {
+  fitter_->skinning().Apply(fitter_->pose(), posed);
+  if (r->fit.ok()) {
+    r->quality = EvaluateFitQuality(*posed, fitter_->skinning().model().triangles, scan_,
+                                    calibration_.depth, options_.quality);
+  } else {
+    r->quality = FitQuality();  // a failed fit is lost, whatever its kept pose shows
+    r->quality.label = FitQualityLabel::kLost;
+  }
+  quality_seconds += r->quality.seconds;
+}
+
+void TrackStage::Process(FrameWork* work) {
+  FrameRecord& record = work->record;
+  if (record.skipped) return;
+  const Frame& frame = work->frame;
+  const auto t_pre = PipelineClock::now();
+  PreprocessStats stats;
+  preprocessor_->Process(frame, &scan_, &stats);
+  record.preprocess_seconds = Since(t_pre);
+  record.scan_points = scan_.size();
+  record.segmentation = stats.segmentation;
+  if (options_.export_foreground) work->foreground = preprocessor_->foreground_mask().clone();
+
+  // Fit: the multi-hypothesis initialisation on the first frame and after a lost one.
+  const bool enough_points = scan_.size() >= options_.fitting.min_scan_points;
+  if (need_init_ && enough_points) {
+    Initialise(&record);
+  } else {
+    record.fit = TrackFrame(fitter_, scan_, calibration_.depth, options_.quality);
+    fit_seconds += record.fit.total_seconds;
+    ++tracked_frames;
+  }
+  Eigen::MatrixX3d& posed = work->posed;
+  Evaluate(&record, &posed);
+  Pose tracked_pose;
+  bool keep_tracked = false;
+  // Tracking that loses the frame (or doubts it, by option) is followed by a
+  // re-initialisation in the same frame; the better of the two by quality score is kept.
+  const FitQualityLabel label = record.quality.label;
+  doubtful_run_ = label == FitQualityLabel::kDoubtful ? doubtful_run_ + 1 : 0;
+  const bool doubted_long = options_.reinitialise_after_doubtful > 0 &&
+                            doubtful_run_ >= options_.reinitialise_after_doubtful;
+  if (!record.reinitialised && record.fit.ok() && enough_points &&
+      (label == FitQualityLabel::kLost ||
+       (label == FitQualityLabel::kDoubtful &&
+        (doubted_long || options_.reinitialise_on == ReinitialiseOn::kDoubtful)))) {
+    doubtful_run_ = 0;
+    tracked_pose = fitter_->pose();
+    const Scan tracked_scan = scan_;
+    FrameRecord retry = record;
+    fitter_->Reset(/*keep_scale=*/true);
+    if (label == FitQualityLabel::kLost) {
+      // The tracked component may be the wrong one: choose the subject again.
+      preprocessor_->ResetSubject();
+      preprocessor_->Process(frame, &scan_, &stats);
+      retry.scan_points = scan_.size();
+      retry.segmentation = stats.segmentation;
+    }
+    if (scan_.size() >= options_.fitting.min_scan_points) {
+      Initialise(&retry);
+      Evaluate(&retry, &posed);
+    }
+    if (retry.reinitialised && retry.fit.ok() && retry.quality.score > record.quality.score) {
+      record = retry;
+    } else {
+      // The tracked fit stays (its scan too); a lost one is re-initialised next frame.
+      scan_ = tracked_scan;
+      fitter_->Reset(/*keep_scale=*/true);
+      if (label != FitQualityLabel::kLost) fitter_->AcceptPose(scan_, tracked_pose);
+      keep_tracked = true;
+      record.init_seconds = retry.init_seconds;
+      record.init_report = retry.init_report + " (not better than tracking: kept)";
+    }
+  }
+  work->pose = keep_tracked ? tracked_pose : fitter_->pose();
+  // `posed` is the evaluated fit's (Evaluate skins fitter.pose()), unless the tracked fit
+  // was kept after a re-initialisation was tried.
+  if (keep_tracked) fitter_->skinning().Apply(work->pose, &posed);
+  const bool lost_frame = record.quality.label == FitQualityLabel::kLost;
+  // A lost frame's pose is not texture: it would paint the room onto the body.
+  work->texture_frame = !lost_frame && (options_.texture_doubtful_frames ||
+                                        record.quality.label == FitQualityLabel::kGood);
+  if (lost_frame) {
+    // Re-initialise on the next frame with enough points; the scale estimate and the
+    // texture survive (the same person), the tracked subject component does not.
+    need_init_ = true;
+    fitter_->Reset(/*keep_scale=*/true);
+    preprocessor_->ResetSubject();
+  } else {
+    need_init_ = false;
+  }
+  work->frame.depth.release();
+}
+
+// ---------------------------------------------------------------------------------------------
+// TextureStage
+
+TextureStage::TextureStage(const PipelineOptions& options, const Calibration& calibration,
+                           Texturer* texturer, FrameSinks* sinks, bool evaluate_texture, int begin,
+                           int end)
+    : options_(options),
+      calibration_(calibration),
+      texturer_(texturer),
+      sinks_(sinks),
+      evaluate_texture_(evaluate_texture && texturer != nullptr),
+      begin_(begin),
+      end_(end) {}
+
+bool TextureStage::Process(FrameWork* work, Eigen::MatrixX3d* colours) {
+  const FrameRecord& done = work->record;
+  if (done.skipped) return false;
+  const int i = done.frame;
+  FrameRecord& record = work->record;
+  bool changed = false;
+  stream_bytes += sizeof(float) * work->pose.num_parameters();
+  if (texturer_ && work->texture_frame) {
+    record.texture = texturer_->AddFrame(i, work->frame.color, calibration_.color, work->posed);
+    texture_seconds += record.texture.seconds_total;
+    stream_bytes += TextureUpdateBytes(*texturer_);
+    if (options_.colour_term) {
+      std::vector<uint8_t> valid;
+      Eigen::MatrixX3d& c = *colours;
+      texturer_->VertexColors(&c, &valid);
+      int count = 0;
+      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+      for (int v = 0; v < c.rows(); ++v) {
+        if (!valid[v]) continue;
+        mean += c.row(v).transpose();
+        ++count;
+      }
+      // The colour term starts once the texture covers most of the body; vertices without
+      // texture take the mean colour (neutral for the colour distance on average).
+      if (count > 0.9 * c.rows()) {
+        mean /= count;
+        for (int v = 0; v < c.rows(); ++v)
+          if (!valid[v]) c.row(v) = mean.transpose();
+        changed = true;
+      }
+    }
+    for (int f : options_.atlas_frames) work->write_atlas = work->write_atlas || f == i;
+  }
+  if (sinks_) sinks_->AddFrame(i, work->pose);
+  const int every = options_.texture_quality_every;
+  work->evaluate_texture =
+      evaluate_texture_ && every > 0 && ((i - begin_ + 1) % every == 0 || i == end_ - 1);
+  if (work->evaluate_texture || work->write_atlas) {
+    work->atlas = texturer_->Atlas().clone();
+    if (work->evaluate_texture) work->triangle_frames = texturer_->triangle_frames();
+  }
+  work->frame.color.release();
+  return changed;
+}
+
+// ---------------------------------------------------------------------------------------------
+// OutputStage
+
+OutputStage::OutputStage(const PipelineOptions& options, const Template& tmpl,
+                         const GroundTruthContext& truth, const std::string& out_dir, int begin,
+                         int end, PipelineResult* result,
+                         const std::function<void(const PipelineProgress&)>& progress)
+    : options_(options),
+      tmpl_(tmpl),
+      skinning_(tmpl),
+      truth_(truth),
+      out_dir_(out_dir),
+      begin_(begin),
+      end_(end),
+      result_(result),
+      progress_(progress),
+      start_(PipelineClock::now()) {}
+
+void OutputStage::Process(FrameWork* work) {
+  PipelineResult& result = *result_;
+  FrameRecord& record = work->record;
+  const int i = record.frame;
+  if (record.skipped) {
+    ++result.skipped_frames;
+    result.warnings.push_back(work->warning);
+    result.frames.push_back(record);
+    return;
+  }
+  if (options_.export_foreground) {
+    char name[64];
+    std::snprintf(name, sizeof(name), "/foreground/%06d.png", i);
+    WritePngFile(out_dir_ + name, work->foreground);
+  }
+  if (!record.fit.ok()) {
+    ++result.failed_frames;
+    failures.push_back(FailedFitReason(i, record.fit, options_.fitting.min_scan_points));
+  }
+  iterations += record.fit.iterations;
+  const Pose& frame_pose = work->pose;
+  const Eigen::MatrixX3d& posed = work->posed;
+  poses.push_back(frame_pose);
+  pose_frames.push_back(i);
+  switch (record.quality.label) {
+    case FitQualityLabel::kGood:
+      ++result.good_frames;
+      break;
+    case FitQualityLabel::kDoubtful:
+      ++result.doubtful_frames;
+      break;
+    case FitQualityLabel::kLost:
+      ++result.lost_frames;
+      break;
+  }
+  if (work->write_atlas) {
+    char name[64];
+    std::snprintf(name, sizeof(name), "/texture_%06d.png", i);
+    WritePngFile(out_dir_ + name, work->atlas);
+  }
+  if (options_.export_meshes) {
+    char name[64];
+    std::snprintf(name, sizeof(name), "/meshes/%06d.ply", i);
+    WritePosedMesh(out_dir_ + name, ToUpAxis(posed, options_.mesh_up_axis), tmpl_.triangles);
+  }
+  if (truth_.subject) {
+    const GroundTruthFrame truth = truth_.sequence->ReadGroundTruth(i);
+    Eigen::MatrixX3d truth_normals;
+    ComputeVertexNormals(truth.vertices, truth_.subject->triangles, &truth_normals);
+    double mean = 0.0, max = 0.0;
+    const Eigen::MatrixX3d tracked_in_truth = TransformRows(truth_.to_truth_world, posed);
+    SurfaceErrors(tracked_in_truth, truth.vertices, truth_normals, &mean, &max);
+    record.mean_vertex_error_mm = 1000.0 * mean;
+    record.max_vertex_error_mm = 1000.0 * max;
+    Eigen::MatrixX3d ours, theirs;
+    skinning_.PosedJointCenters(frame_pose, &ours);
+    ours = TransformRows(truth_.to_truth_world, ours);
+    truth_.subject_skinning->PosedJointCenters(truth.pose, &theirs);
+    double joint = 0.0;
+    for (const auto& [a, b] : truth_.joint_pairs) joint += (ours.row(a) - theirs.row(b)).norm();
+    record.mean_joint_error_mm =
+        truth_.joint_pairs.empty() ? 0.0 : 1000.0 * joint / truth_.joint_pairs.size();
+    // A failed fit's kept pose is no measurement: it counts as lost and stays out of the
+    // error averages (issue 20: all-failed runs reported a small error).
+    if (record.fit.ok()) {
+      error_sum += record.mean_vertex_error_mm;
+      joint_sum += record.mean_joint_error_mm;
+      result.max_vertex_error_mm = std::max(result.max_vertex_error_mm, record.max_vertex_error_mm);
+      ++evaluated;
+    }
+    lost += record.mean_vertex_error_mm > options_.lost_threshold_mm || !record.fit.ok();
+    ++scored;
+    if (truth_.truth_scene && work->evaluate_texture) {
+      truth_.truth_scene->vertices = truth.vertices;
+      record.texture_quality = EvaluateNovelViews(tmpl_, tracked_in_truth, work->atlas,
+                                                  work->triangle_frames, *truth_.truth_scene,
+                                                  options_.held_out);
+      const NovelViewQuality& q = record.texture_quality;
+      if (std::isfinite(q.psnr_db) && std::isfinite(q.ssim)) {
+        result.novel_view_psnr_db = q.psnr_db;
+        result.novel_view_ssim = q.ssim;
+        result.texture_coverage = q.coverage;
+        psnr_sum += q.psnr_db;
+        ssim_sum += q.ssim;
+        ++quality_evaluations;
+      }
+    }
+  } else {
+    record.mean_vertex_error_mm = record.max_vertex_error_mm = record.mean_joint_error_mm =
+        std::numeric_limits<double>::quiet_NaN();
+  }
+  result.frames.push_back(record);
+  if (progress_) {
+    PipelineProgress p;
+    p.done = i - begin_ + 1;
+    p.total = end_ - begin_;
+    p.frames_per_second = static_cast<double>(result.frames.size()) / std::max(1e-9, Since(start_));
+    p.last = &result.frames.back();
+    progress_(p);
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Scheduling
+
+namespace {
+
+// The frames arriving at the stages: all of [begin, end) as fast as the stages take them, or
+// live on a clock, skipping the frames whose time passed while the source was busy.
+class FrameClock {
+ public:
+  FrameClock(bool live, double rate_hz, int begin, int end)
+      : live_(live), period_(live ? 1.0 / rate_hz : 0.0), begin_(begin), end_(end), next_(begin) {}
+  // The next frame to read (false: none left); live: waits for its arrival, adds the frames
+  // that arrived meanwhile to *missed, and sets *arrival to its arrival time.
+  bool Next(int* frame, PipelineClock::time_point* arrival, int* missed) {
+    if (!started_) {
+      start_ = PipelineClock::now();
+      started_ = true;
+    }
+    if (next_ >= end_) return false;
+    if (live_) {
+      const double now = Since(start_);
+      const int due = begin_ + static_cast<int>(std::floor(now / period_));
+      if (due > next_) {  // late: only the newest frame that has arrived is read
+        const int to = std::min(due, end_);
+        *missed += to - next_;
+        next_ = to;
+        if (next_ >= end_) return false;
+      }
+      const auto at = start_ + std::chrono::duration_cast<PipelineClock::duration>(
+                                   std::chrono::duration<double>((next_ - begin_) * period_));
+      std::this_thread::sleep_until(at);
+      *arrival = at;
+    } else {
+      *arrival = PipelineClock::now();
+    }
+    *frame = next_++;
+    return true;
+  }
+
+ private:
+  bool live_;
+  double period_;
+  int begin_, end_, next_;
+  bool started_ = false;
+  PipelineClock::time_point start_;
+};
+
+struct StageClock {
+  double busy = 0.0;
+  int frames = 0;
+  template <class F>
+  auto Time(F&& f) {
+    const auto t = PipelineClock::now();
+    struct Done {
+      StageClock* c;
+      PipelineClock::time_point t;
+      ~Done() {
+        c->busy += Since(t);
+        ++c->frames;
+      }
+    } done{this, t};
+    return f();
+  }
+};
+
+FrameWork ReadWork(FrameSource* source, int frame, int sequence, PipelineClock::time_point at) {
+  FrameWork work;
+  work.sequence = sequence;
+  work.record.frame = frame;
+  work.captured = at;
+  if (!source->ReadFrame(frame, &work.frame, &work.warning)) work.record.skipped = true;
+  return work;
+}
+
+}  // namespace
+
+RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int begin, int end,
+                        double rate_hz, TrackStage* track, TextureStage* texture,
+                        OutputStage* output) {
+  RealtimeStats stats;
+  stats.concurrency = options.concurrency;
+  stats.live = options.live;
+  stats.rate_hz = options.live ? rate_hz : 0.0;
+  FrameClock clock(options.live, rate_hz, begin, end);
+  StageClock read_clock, track_clock, texture_clock, output_clock;
+  std::vector<double> latencies;  // ms, processed frames
+  double first_done = -1.0;       // s since start: the first frame textured
+  std::atomic<bool> first_textured{false};
+  ColourMailbox mailbox;
+  const int delay = options.colour_delay_frames;
+  const auto start = PipelineClock::now();
+  const double cpu_start = CpuSeconds();
+
+  // The colours for item n: texture's state after item n - 1 - delay.
+  const auto take_colours = [&](int n) {
+    const int from = n - 1 - delay;
+    if (from < 0) return;
+    Eigen::MatrixX3d colours;
+    if (mailbox.WaitAndTake(from, &colours)) track->SetTemplateColors(colours);
+  };
+  const auto run_texture = [&](FrameWork* work) {
+    Eigen::MatrixX3d colours;
+    const bool changed = texture_clock.Time([&] { return texture->Process(work, &colours); });
+    work->textured = PipelineClock::now();
+    if (!work->record.skipped) first_textured = true;
+    mailbox.Post(work->sequence, std::move(colours), changed);
+  };
+  int skipped = 0;  // unreadable frames (they pass the stages as records)
+  const auto finish = [&](FrameWork* work) {
+    output_clock.Time([&] { output->Process(work); });
+    if (work->record.skipped) {
+      ++skipped;
+      return;
+    }
+    ++stats.frames_processed;
+    latencies.push_back(
+        1000.0 * std::chrono::duration<double>(work->textured - work->captured).count());
+    if (first_done < 0) first_done = Since(start);
+  };
+  int dropped_after_first = 0;
+
+  if (options.concurrency == PipelineConcurrency::kSequential) {
+    int frame = 0, sequence = 0;
+    PipelineClock::time_point at;
+    int missed = 0;
+    while (true) {
+      const int missed_before = missed;
+      if (!clock.Next(&frame, &at, &missed)) break;
+      if (first_textured) dropped_after_first += missed - missed_before;
+      FrameWork work = read_clock.Time([&] { return ReadWork(source, frame, sequence, at); });
+      take_colours(sequence);
+      track_clock.Time([&] { track->Process(&work); });
+      run_texture(&work);
+      finish(&work);
+      ++sequence;
+    }
+    stats.frames_dropped = missed;
+  } else {
+    const std::size_t depth = static_cast<std::size_t>(options.queue_depth);
+    BoundedQueue<FrameWork> to_track(
+        options.live ? static_cast<std::size_t>(options.live_queue_depth) : depth);
+    BoundedQueue<FrameWork> to_texture(depth), to_output(depth);
+    std::mutex error_mutex;
+    std::exception_ptr error;
+    const auto abort = [&](std::exception_ptr e) {
+      {
+        std::lock_guard<std::mutex> lock(error_mutex);
+        if (!error) error = e;
+      }
+      to_track.Close();
+      to_texture.Close();
+      to_output.Close();
+      mailbox.Abort();
+    };
+    std::atomic<int> dropped{0};
+    std::thread reader([&] {
+      try {
+        int frame = 0, missed = 0;
+        PipelineClock::time_point at;
+        while (true) {
+          const int missed_before = missed;
+          if (!clock.Next(&frame, &at, &missed)) break;
+          if (first_textured) dropped_after_first += missed - missed_before;
+          FrameWork work = read_clock.Time([&] { return ReadWork(source, frame, 0, at); });
+          if (options.live) {
+            // A sensor does not wait: when the tracker has no room, the oldest waiting frame
+            // is dropped (the newest is the one worth tracking).
+            if (to_track.closed()) break;  // a stage failed
+            const int lost = to_track.PushDroppingOldest(std::move(work));
+            missed += lost;
+            if (first_textured) dropped_after_first += lost;
+          } else if (!to_track.Push(std::move(work))) {
+            break;
+          }
+        }
+        dropped = missed;
+      } catch (...) {
+        abort(std::current_exception());
+      }
+      to_track.Close();
+    });
+    std::thread tracker([&] {
+      try {
+        FrameWork work;
+        int sequence = 0;
+        while (to_track.Pop(&work)) {
+          // Numbered as the track stage takes them (live frames dropped before are not).
+          work.sequence = sequence++;
+          take_colours(work.sequence);
+          track_clock.Time([&] { track->Process(&work); });
+          if (!to_texture.Push(std::move(work))) break;
+        }
+      } catch (...) {
+        abort(std::current_exception());
+      }
+      to_texture.Close();
+    });
+    std::thread texturer([&] {
+      try {
+        FrameWork work;
+        while (to_texture.Pop(&work)) {
+          run_texture(&work);
+          if (!to_output.Push(std::move(work))) break;
+        }
+      } catch (...) {
+        abort(std::current_exception());
+      }
+      to_output.Close();
+    });
+    try {
+      FrameWork work;
+      while (to_output.Pop(&work)) finish(&work);
+    } catch (...) {
+      abort(std::current_exception());
+    }
+    reader.join();
+    tracker.join();
+    texturer.join();
+    if (error) std::rethrow_exception(error);
+    stats.frames_dropped = dropped;
+  }
+  stats.wall_seconds = Since(start);
+  const double cpu = CpuSeconds() - cpu_start;
+  stats.frames_dropped_after_first = dropped_after_first;
+  stats.frames_offered = stats.frames_processed + stats.frames_dropped + skipped;
+  stats.frames_per_second = stats.frames_processed / std::max(1e-9, stats.wall_seconds);
+  stats.steady_frames_per_second =
+      stats.frames_processed > 1 && first_done >= 0
+          ? (stats.frames_processed - 1) / std::max(1e-9, stats.wall_seconds - first_done)
+          : stats.frames_per_second;
+  stats.latency_median_ms = Percentile(latencies, 0.5);
+  stats.latency_p95_ms = Percentile(latencies, 0.95);
+  stats.latency_max_ms = latencies.empty() ? std::numeric_limits<double>::quiet_NaN()
+                                           : *std::max_element(latencies.begin(), latencies.end());
+  stats.cpu_utilisation = cpu / std::max(1e-9, stats.wall_seconds);
+  const auto stage = [](const char* name, const StageClock& c) {
+    StageTiming t;
+    t.name = name;
+    t.frames = c.frames;
+    t.busy_seconds = c.busy;
+    return t;
+  };
+  stats.stages = {stage("read", read_clock), stage("track", track_clock),
+                  stage("texture", texture_clock), stage("output", output_clock)};
+  return stats;
+}
+
+void WriteRealtimeJson(const std::string& path, const RealtimeStats& s) {
+  nlohmann::json j;
+  const auto finite = [](double v) -> nlohmann::json {
+    return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
+  };
+  j["concurrency"] = s.concurrency == PipelineConcurrency::kPipelined ? "pipelined" : "sequential";
+  j["live"] = s.live;
+  j["rate_hz"] = s.rate_hz;
+  j["frames_offered"] = s.frames_offered;
+  j["frames_processed"] = s.frames_processed;
+  j["frames_dropped"] = s.frames_dropped;
+  j["frames_dropped_after_first"] = s.frames_dropped_after_first;
+  j["wall_seconds"] = s.wall_seconds;
+  j["frames_per_second"] = s.frames_per_second;
+  j["steady_frames_per_second"] = s.steady_frames_per_second;
+  j["latency_median_ms"] = finite(s.latency_median_ms);
+  j["latency_p95_ms"] = finite(s.latency_p95_ms);
+  j["latency_max_ms"] = finite(s.latency_max_ms);
+  j["cpu_utilisation"] = s.cpu_utilisation;
+  nlohmann::json stages = nlohmann::json::array();
+  for (const StageTiming& t : s.stages) {
+    stages.push_back({{"name", t.name},
+                      {"frames", t.frames},
+                      {"busy_seconds", t.busy_seconds},
+                      {"ms_per_frame", t.frames ? 1000.0 * t.busy_seconds / t.frames : 0.0}});
+  }
+  j["stages"] = stages;
+  WriteFileAtomically(path, j.dump(2) + "\n");
+}
+
+}  // namespace artex

@@ -1,0 +1,174 @@
+// The stages of the per-sequence pipeline (experiments/pipeline.h, docs/realtime.md) and the
+// scheduler that runs them one after another or concurrently (realtime_options.h).
+//
+// read -> track (preprocess + fit + fit quality + re-initialisation) -> texture (atlas, stream
+// sinks, colour feedback) -> output (ground-truth metrics, per-frame files, the run's record).
+// Each stage is a serial unit owning its state: frames pass through every stage in order, so
+// the pipelined schedule computes exactly what the sequential one does. Dependences between
+// frames stay inside a stage (the fitter's pose history and predictor, the segmenter's tracked
+// subject in track; the texturer's pool and labelling in texture), except the colour term:
+// track of frame t waits until texture has finished frame t - 1 - colour_delay_frames and
+// uses the colours of that state (ColourMailbox).
+#pragma once
+
+#include <chrono>
+#include <condition_variable>
+#include <cstddef>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "experiments/pipeline.h"
+#include "experiments/realtime_options.h"
+#include "experiments/stream_sinks.h"
+#include "experiments/texture_evaluation.h"
+#include "models/skinning.h"
+#include "sensors/calibration.h"
+#include "sensors/preprocess.h"
+#include "sensors/sequence.h"
+
+namespace artex {
+
+using PipelineClock = std::chrono::steady_clock;
+
+// One frame travelling through the stages.
+struct FrameWork {
+  int sequence = 0;  // position among the frames that entered the stages (0, 1, ...)
+  FrameRecord record;
+  std::string warning;  // why the frame is unreadable (record.skipped)
+  Frame frame;          // depth is released after tracking, colour after texturing
+  PipelineClock::time_point captured, textured;
+  Pose pose;                // the frame's pose (fitted frames)
+  Eigen::MatrixX3d posed;   // its skinned template (world, m)
+  bool texture_frame = false;
+  cv::Mat foreground;       // pipeline.export_foreground
+  // The texture after this frame, for the output stage (novel-view quality, atlas_frames).
+  cv::Mat atlas;
+  std::vector<int> triangle_frames;
+  bool evaluate_texture = false;
+  bool write_atlas = false;
+};
+
+// Colours from the texture stage to the track stage: Post after texturing item n (or with
+// colours empty, none changed); WaitAndTake(m) blocks until item m is posted and returns the
+// newest colours posted for an item <= m (false: none new). Abort wakes every waiter.
+class ColourMailbox {
+ public:
+  void Post(int sequence, Eigen::MatrixX3d colours, bool changed);
+  bool WaitAndTake(int sequence, Eigen::MatrixX3d* colours);
+  void Abort();
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable posted_;
+  int done_ = -1;  // items 0..done_ posted
+  std::vector<std::pair<int, Eigen::MatrixX3d>> pending_;
+  bool aborted_ = false;
+};
+
+// Preprocessing and fitting: scan, EM fit (multi-hypothesis initialisation on the first frame,
+// after a lost one and on doubt per pipeline.reinitialise_*), fit quality label.
+class TrackStage {
+ public:
+  TrackStage(const PipelineOptions& options, const Calibration& calibration,
+             Preprocessor* preprocessor, EMFitter* fitter);
+  void Process(FrameWork* work);
+  void SetTemplateColors(const Eigen::MatrixX3d& colours);
+
+  // Totals over the processed frames.
+  double fit_seconds = 0.0, init_seconds = 0.0, quality_seconds = 0.0;
+  int tracked_frames = 0, initialisations = 0;
+
+ private:
+  void Initialise(FrameRecord* record);
+  void Evaluate(FrameRecord* record, Eigen::MatrixX3d* posed);
+
+  const PipelineOptions& options_;
+  const Calibration& calibration_;
+  Preprocessor* preprocessor_;
+  EMFitter* fitter_;
+  Scan scan_;
+  bool need_init_ = true;
+  int doubtful_run_ = 0;  // consecutive doubtful frames
+};
+
+// On-the-fly texturing of the fitted frames, the stream sinks, the vertex colours for the
+// colour term, and the texture snapshots the output stage evaluates.
+class TextureStage {
+ public:
+  // texturer, sinks may be null. evaluate_texture: novel-view quality is measured (every
+  // options.texture_quality_every-th frame of [begin, end) and the last).
+  TextureStage(const PipelineOptions& options, const Calibration& calibration, Texturer* texturer,
+               FrameSinks* sinks, bool evaluate_texture, int begin, int end);
+  // True and *colours set when the fitter's template colours change after this frame.
+  bool Process(FrameWork* work, Eigen::MatrixX3d* colours);
+
+  double texture_seconds = 0.0;
+  std::size_t stream_bytes = 0;  // pose + texture updates
+
+ private:
+  const PipelineOptions& options_;
+  const Calibration& calibration_;
+  Texturer* texturer_;
+  FrameSinks* sinks_;
+  bool evaluate_texture_;
+  int begin_, end_;
+};
+
+// What the output stage needs of the ground truth (absent: subject == nullptr).
+struct GroundTruthContext {
+  const SequenceReader* sequence = nullptr;
+  const Template* subject = nullptr;
+  const Skinning* subject_skinning = nullptr;
+  std::vector<std::pair<int, int>> joint_pairs;  // (tracked joint, subject joint)
+  TruthScene* truth_scene = nullptr;             // novel-view quality (may be null)
+  Eigen::Isometry3d to_truth_world = Eigen::Isometry3d::Identity();
+};
+
+// Ground-truth metrics, per-frame files (meshes, foreground, atlases) and the run's record:
+// fills result (frames, labels, failures, error sums) in frame order, calls progress.
+class OutputStage {
+ public:
+  OutputStage(const PipelineOptions& options, const Template& tmpl,
+              const GroundTruthContext& truth, const std::string& out_dir, int begin, int end,
+              PipelineResult* result, const std::function<void(const PipelineProgress&)>& progress);
+  void Process(FrameWork* work);
+
+  std::vector<Pose> poses;
+  std::vector<int> pose_frames;
+  std::vector<std::string> failures;  // why each failed fit failed
+  double iterations = 0.0;
+  double error_sum = 0.0, joint_sum = 0.0;
+  int evaluated = 0, lost = 0, scored = 0;
+  double psnr_sum = 0.0, ssim_sum = 0.0;
+  int quality_evaluations = 0;
+
+ private:
+  const PipelineOptions& options_;
+  const Template& tmpl_;
+  Skinning skinning_;  // its own: the track stage's is busy
+  GroundTruthContext truth_;
+  std::string out_dir_;
+  int begin_, end_;
+  PipelineResult* result_;
+  std::function<void(const PipelineProgress&)> progress_;
+  PipelineClock::time_point start_;
+};
+
+// Runs frames [begin, end) of source through the stages per options (sequential or
+// pipelined; live: on a clock at rate_hz, dropping what the first queue cannot take) and
+// returns what it measured. Rethrows the first stage's exception after stopping all stages.
+RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int begin, int end,
+                        double rate_hz, TrackStage* track, TextureStage* texture,
+                        OutputStage* output);
+
+// Writes realtime.json (RealtimeStats) into out_dir.
+void WriteRealtimeJson(const std::string& path, const RealtimeStats& stats);
+
+// Writes `image` as a PNG (atomically) and returns the encoded bytes.
+std::vector<unsigned char> WritePngFile(const std::string& path, const cv::Mat& image);
+
+}  // namespace artex

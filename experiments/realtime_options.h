@@ -1,0 +1,67 @@
+// How `artex track` schedules its stages (experiments/pipeline_stages.h, docs/realtime.md):
+// one after another on one thread, or as concurrent stages joined by bounded queues, and the
+// live mode that replays a recording at its frame rate, dropping the frames a busy pipeline
+// cannot take. Section pipeline of the configuration.
+#pragma once
+
+#include <map>
+#include <string>
+#include <vector>
+
+namespace artex {
+
+// kSequential: every stage of a frame on the calling thread before the next frame is read.
+// kPipelined: read, track (preprocess + fit), texture and output stages on their own threads;
+// frame t+1 is tracked while frame t is textured and frame t-1 is evaluated and written. Both
+// give the same poses, labels, texture and metrics (the stages see the same inputs in the
+// same order).
+enum class PipelineConcurrency { kSequential, kPipelined };
+const std::map<std::string, PipelineConcurrency>& PipelineConcurrencyNames();  // sequential, pipelined
+
+struct RealtimeOptions {
+  PipelineConcurrency concurrency = PipelineConcurrency::kPipelined;  // pipeline.concurrency
+  // Frames waiting between two stages (pipeline.queue_depth, >= 1): bounds the memory (one
+  // frame ~1.2 MB of images at 640x480) and the added latency.
+  int queue_depth = 2;
+  // pipeline.live: frames arrive on a clock at live_rate_hz as from a sensor; when a frame
+  // arrives while the track stage's queue is full, the oldest waiting frame is dropped
+  // (counted): nothing queues without bound and the newest frame is tracked next. Sequential:
+  // the frames that arrive while a frame is processed are dropped but the newest.
+  bool live = false;
+  double live_rate_hz = 0.0;  // pipeline.live_rate_hz; 0: the recording's frame rate
+  // pipeline.live_queue_depth (>= 1): live, the frames waiting for the track stage (each adds
+  // up to a frame period of latency when tracking is the slowest stage).
+  int live_queue_depth = 1;
+  // pipeline.colour_delay_frames: the E-step's colour term of frame t uses the texture as it
+  // was after frame t - 1 - this (0: after frame t-1, which makes fitting wait for texturing;
+  // 1: fitting of t overlaps texturing of t-1). The same in both concurrency modes.
+  int colour_delay_frames = 1;
+
+  bool IsValid(std::string* error) const;
+};
+
+struct StageTiming {
+  std::string name;
+  int frames = 0;
+  double busy_seconds = 0.0;  // wall time spent working (waits on queues excluded)
+};
+
+// What the frame loop measured (realtime.json).
+struct RealtimeStats {
+  PipelineConcurrency concurrency = PipelineConcurrency::kSequential;
+  bool live = false;
+  double rate_hz = 0.0;          // live: the replay clock
+  int frames_offered = 0;        // frames of the range: processed + dropped + unreadable
+  int frames_processed = 0;      // readable frames that went through every stage
+  int frames_dropped = 0;        // live only
+  int frames_dropped_after_first = 0;  // live: dropped after the first frame was textured
+  double wall_seconds = 0.0;     // first read to last output
+  double frames_per_second = 0.0;         // processed / wall_seconds
+  double steady_frames_per_second = 0.0;  // after the first frame (its initialisation apart)
+  // Capture (read start; live: the frame's arrival time) to textured model, ms.
+  double latency_median_ms = 0.0, latency_p95_ms = 0.0, latency_max_ms = 0.0;
+  double cpu_utilisation = 0.0;  // process CPU time / wall over the frame loop (1.0 = one core)
+  std::vector<StageTiming> stages;
+};
+
+}  // namespace artex

@@ -1,0 +1,300 @@
+// The pipelined schedule of `artex track` (experiments/pipeline_stages.h): the same poses,
+// labels, metrics and texture as the sequential one, with re-initialisations (doubtful, lost)
+// and the colour feedback; the live mode's accounting; the bounded queue and the colour mailbox
+// under concurrent use. Written to be run under ThreadSanitizer too (suite names *Pipelined*,
+// *Concurrent*): no wall-clock assertions, small inputs.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "experiments/bounded_queue.h"
+#include "experiments/config.h"
+#include "experiments/pipeline.h"
+#include "experiments/pipeline_stages.h"
+#include "models/error.h"
+#include "models/template_generator.h"
+#include "models/template_io.h"
+#include "sensors/virtual_kinect.h"
+
+namespace artex {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr int kFrames = 6;
+
+std::string ReadBytes(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// A 6-frame walk from the virtual Kinect (half-size depth camera, small colour camera, coarse
+// subject) and a coarse tracking template, made once per process.
+class Data {
+ public:
+  static Data& Get() {
+    static Data data;
+    return data;
+  }
+  ~Data() {
+    std::error_code ec;
+    fs::remove_all(root, ec);
+  }
+  fs::path root;
+  std::string sequence, template_path;
+
+ private:
+  Data() {
+    root = fs::temp_directory_path() / ("artex_pipelined_test_" + std::to_string(::getpid()));
+    fs::remove_all(root);
+    fs::create_directories(root);
+    SynthOptions options;
+    options.motion.type = MotionType::kWalk;
+    options.motion.frames = kFrames;
+    options.kinect.SetNoiseLevel(NoiseLevel::kDefault);
+    PinholeCamera& depth = options.kinect.depth_intrinsics;
+    depth.width = 320;
+    depth.height = 240;
+    depth.fx = depth.fy = 262.5;
+    depth.cx = 159.5;
+    depth.cy = 119.5;
+    options.kinect.color_width = 160;
+    options.kinect.color_height = 204;
+    options.texture.size = 256;
+    options.subject_shape.resolution = 0;
+    options.background_frames = 5;
+    sequence = (root / "sequence").string();
+    SynthesizeSequence(options, sequence);
+    BodyShapeOptions shape;
+    shape.resolution = 0;
+    template_path = (root / "template.glb").string();
+    WriteTemplateGlb(template_path, GenerateTemplate(shape));
+  }
+};
+
+Config BaseConfig() {
+  Config config = Config::Load(std::string(ARTEX_SOURCE_DIR) + "/configs/default.yaml");
+  config.Set("texture.atlas_size", "256");
+  config.Set("pipeline.texture", "true");
+  config.Set("pipeline.texture_quality_every", "2");
+  config.Set("pipeline.export_glb", "false");
+  return config;
+}
+
+PipelineResult RunWith(Config config, const std::string& concurrency, const std::string& name) {
+  config.Set("pipeline.concurrency", concurrency);
+  const PipelineOptions options = LoadPipelineOptions(config);
+  return RunPipeline(Data::Get().sequence, Data::Get().template_path, options, config,
+                     (Data::Get().root / name).string());
+}
+
+void ExpectNear(double a, double b, const std::string& what) {
+  if (std::isnan(a) || std::isnan(b)) {
+    EXPECT_EQ(std::isnan(a), std::isnan(b)) << what;
+  } else {
+    EXPECT_NEAR(a, b, 1e-9) << what;
+  }
+}
+
+// Runs `config` both ways and compares everything the run reports.
+void ExpectSameRuns(const Config& config, const std::string& name, int* reinitialised = nullptr) {
+  const PipelineResult seq = RunWith(config, "sequential", name + "_seq");
+  const PipelineResult pip = RunWith(config, "pipelined", name + "_pip");
+  EXPECT_EQ(seq.realtime.concurrency, PipelineConcurrency::kSequential);
+  EXPECT_EQ(pip.realtime.concurrency, PipelineConcurrency::kPipelined);
+  ASSERT_EQ(seq.frames.size(), pip.frames.size());
+  int reinit = 0;
+  for (size_t i = 0; i < seq.frames.size(); ++i) {
+    const FrameRecord& a = seq.frames[i];
+    const FrameRecord& b = pip.frames[i];
+    const std::string at = name + " frame " + std::to_string(i);
+    EXPECT_EQ(a.frame, b.frame) << at;
+    EXPECT_EQ(a.quality.label, b.quality.label) << at;
+    EXPECT_EQ(a.reinitialised, b.reinitialised) << at;
+    EXPECT_EQ(a.fit.iterations, b.fit.iterations) << at;
+    EXPECT_EQ(a.scan_points, b.scan_points) << at;
+    ExpectNear(a.quality.score, b.quality.score, at + " quality score");
+    ExpectNear(a.mean_vertex_error_mm, b.mean_vertex_error_mm, at + " vertex error");
+    ExpectNear(a.mean_joint_error_mm, b.mean_joint_error_mm, at + " joint error");
+    EXPECT_EQ(a.texture.pool_size, b.texture.pool_size) << at;
+    ExpectNear(a.texture_quality.psnr_db, b.texture_quality.psnr_db, at + " PSNR");
+    reinit += a.reinitialised;
+  }
+  if (reinitialised) *reinitialised = reinit;
+  EXPECT_EQ(seq.good_frames, pip.good_frames);
+  EXPECT_EQ(seq.doubtful_frames, pip.doubtful_frames);
+  EXPECT_EQ(seq.lost_frames, pip.lost_frames);
+  EXPECT_EQ(seq.initialisations, pip.initialisations);
+  ExpectNear(seq.mean_vertex_error_mm, pip.mean_vertex_error_mm, name + " mean vertex error");
+  ExpectNear(seq.mean_novel_view_psnr_db, pip.mean_novel_view_psnr_db, name + " mean PSNR");
+  EXPECT_EQ(seq.stream_kbit_per_s, pip.stream_kbit_per_s);
+  // Poses as written (17 significant digits) and the atlas, byte for byte.
+  const fs::path root = Data::Get().root;
+  EXPECT_EQ(ReadBytes(root / (name + "_seq") / "poses.csv"),
+            ReadBytes(root / (name + "_pip") / "poses.csv"));
+  EXPECT_EQ(ReadBytes(root / (name + "_seq") / "texture.png"),
+            ReadBytes(root / (name + "_pip") / "texture.png"));
+  EXPECT_EQ(pip.realtime.frames_processed, kFrames);
+  EXPECT_EQ(pip.realtime.frames_dropped, 0);
+  ASSERT_EQ(pip.realtime.stages.size(), 4u);
+  for (const StageTiming& s : pip.realtime.stages) EXPECT_EQ(s.frames, kFrames) << s.name;
+}
+
+TEST(PipelinedTrackingTest, SameAsSequentialWithDefaultOptions) {
+  Config config = BaseConfig();
+  ExpectSameRuns(config, "default");
+}
+
+TEST(PipelinedTrackingTest, SameAsSequentialWithoutColourDelayAndDepthOneQueues) {
+  Config config = BaseConfig();
+  config.Set("pipeline.colour_delay_frames", "0");
+  config.Set("pipeline.queue_depth", "1");
+  ExpectSameRuns(config, "nodelay");
+}
+
+TEST(PipelinedTrackingTest, SameAsSequentialWithDoubtfulReinitialisations) {
+  // Every frame doubtful (a strict residual for good): re-initialised in place every 2nd.
+  Config config = BaseConfig();
+  config.Set("fitting.quality.good_max_depth_residual", "0.001");
+  config.Set("pipeline.reinitialise_after_doubtful", "2");
+  int reinitialised = 0;
+  ExpectSameRuns(config, "doubtful", &reinitialised);
+  EXPECT_GE(reinitialised, 2);  // the first frame and at least one in place
+}
+
+TEST(PipelinedTrackingTest, SameAsSequentialWithLostFrames) {
+  // Every frame lost (strict residual): subject reset, re-segmented and initialised again.
+  Config config = BaseConfig();
+  config.Set("fitting.quality.good_max_depth_residual", "0.001");
+  config.Set("fitting.quality.lost_max_depth_residual", "0.002");
+  config.Set("pipeline.max_frames", "3");
+  const PipelineResult seq = RunWith(config, "sequential", "lost_seq");
+  const PipelineResult pip = RunWith(config, "pipelined", "lost_pip");
+  ASSERT_EQ(seq.frames.size(), 3u);
+  ASSERT_EQ(pip.frames.size(), 3u);
+  EXPECT_EQ(seq.lost_frames, 3);
+  EXPECT_EQ(pip.lost_frames, seq.lost_frames);
+  EXPECT_EQ(pip.initialisations, seq.initialisations);
+  for (size_t i = 0; i < seq.frames.size(); ++i) {
+    ExpectNear(seq.frames[i].mean_vertex_error_mm, pip.frames[i].mean_vertex_error_mm,
+               "lost frame " + std::to_string(i));
+    EXPECT_EQ(seq.frames[i].scan_points, pip.frames[i].scan_points);
+  }
+  EXPECT_EQ(ReadBytes(Data::Get().root / "lost_seq" / "poses.csv"),
+            ReadBytes(Data::Get().root / "lost_pip" / "poses.csv"));
+}
+
+TEST(PipelinedTrackingTest, LiveModeAccountsForEveryFrame) {
+  // A clock far faster than tracking: frames are dropped, never queued without bound.
+  Config config = BaseConfig();
+  config.Set("pipeline.live", "true");
+  config.Set("pipeline.live_rate_hz", "1000");
+  config.Set("pipeline.texture_quality_every", "0");
+  for (const char* mode : {"pipelined", "sequential"}) {
+    const PipelineResult r = RunWith(config, mode, std::string("live_") + mode);
+    const RealtimeStats& s = r.realtime;
+    EXPECT_TRUE(s.live);
+    EXPECT_EQ(s.rate_hz, 1000.0);
+    EXPECT_GE(s.frames_processed, 1) << mode;
+    EXPECT_EQ(s.frames_processed + s.frames_dropped, kFrames) << mode;
+    EXPECT_EQ(s.frames_offered, kFrames) << mode;
+    EXPECT_EQ(static_cast<int>(r.frames.size()), s.frames_processed) << mode;
+    for (size_t i = 1; i < r.frames.size(); ++i) EXPECT_LT(r.frames[i - 1].frame, r.frames[i].frame);
+    EXPECT_LE(s.latency_median_ms, s.latency_p95_ms);
+    EXPECT_LE(s.latency_p95_ms, s.latency_max_ms);
+  }
+}
+
+TEST(PipelinedTrackingTest, RejectsInvalidOptions) {
+  for (const auto& [key, value] :
+       std::vector<std::pair<std::string, std::string>>{{"pipeline.queue_depth", "0"},
+                                                        {"pipeline.live_queue_depth", "0"},
+                                                        {"pipeline.live_rate_hz", "-1"},
+                                                        {"pipeline.colour_delay_frames", "-1"}}) {
+    Config config = BaseConfig();
+    config.Set(key, value);
+    try {
+      LoadPipelineOptions(config);
+      ADD_FAILURE() << key << "=" << value << " accepted";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(key), std::string::npos) << e.what();
+    }
+  }
+  Config config = BaseConfig();
+  config.Set("pipeline.concurrency", "parallel");
+  EXPECT_ANY_THROW(LoadPipelineOptions(config));
+}
+
+TEST(ConcurrentQueueTest, KeepsOrderBetweenThreadsAndBoundsItsSize) {
+  BoundedQueue<int> queue(3);
+  constexpr int kItems = 2000;
+  std::thread producer([&] {
+    for (int i = 0; i < kItems; ++i) ASSERT_TRUE(queue.Push(int(i)));
+    queue.Close();
+  });
+  std::vector<int> got;
+  int item = 0;
+  while (queue.Pop(&item)) got.push_back(item);
+  producer.join();
+  ASSERT_EQ(static_cast<int>(got.size()), kItems);
+  for (int i = 0; i < kItems; ++i) EXPECT_EQ(got[i], i);
+  EXPECT_FALSE(queue.Push(1));  // closed
+}
+
+TEST(ConcurrentQueueTest, DroppingOldestKeepsTheNewest) {
+  BoundedQueue<int> queue(2);
+  EXPECT_EQ(queue.PushDroppingOldest(1), 0);
+  EXPECT_EQ(queue.PushDroppingOldest(2), 0);
+  EXPECT_EQ(queue.PushDroppingOldest(3), 1);
+  EXPECT_FALSE(queue.TryPush(4));
+  int item = 0;
+  ASSERT_TRUE(queue.Pop(&item));
+  EXPECT_EQ(item, 2);
+  ASSERT_TRUE(queue.Pop(&item));
+  EXPECT_EQ(item, 3);
+  queue.Close();
+  EXPECT_FALSE(queue.Pop(&item));
+  EXPECT_EQ(queue.PushDroppingOldest(5), 1);
+}
+
+TEST(ConcurrentQueueTest, CloseWakesABlockedProducer) {
+  BoundedQueue<int> queue(1);
+  ASSERT_TRUE(queue.Push(1));
+  std::atomic<bool> refused{false};
+  std::thread producer([&] { refused = !queue.Push(2); });
+  queue.Close();
+  producer.join();
+  EXPECT_TRUE(refused.load());
+}
+
+TEST(ConcurrentColourMailboxTest, TakesTheNewestColoursUpToTheAskedFrame) {
+  ColourMailbox mailbox;
+  std::thread poster([&] {
+    for (int n = 0; n < 50; ++n) {
+      Eigen::MatrixX3d c = Eigen::MatrixX3d::Constant(2, 3, n);
+      mailbox.Post(n, c, n % 3 == 0);  // colours change at 0, 3, 6, ...
+    }
+  });
+  Eigen::MatrixX3d colours;
+  ASSERT_TRUE(mailbox.WaitAndTake(4, &colours));  // waits for item 4: newest change is 3
+  EXPECT_EQ(colours(0, 0), 3.0);
+  EXPECT_FALSE(mailbox.WaitAndTake(5, &colours));  // nothing new up to 5
+  ASSERT_TRUE(mailbox.WaitAndTake(49, &colours));
+  EXPECT_EQ(colours(0, 0), 48.0);
+  poster.join();
+  mailbox.Abort();
+  EXPECT_FALSE(mailbox.WaitAndTake(100, &colours));  // aborted: no wait
+}
+
+}  // namespace
+}  // namespace artex
