@@ -30,6 +30,7 @@
 #include <sstream>
 #include <thread>
 
+#include "experiments/file_util.h"
 #include "experiments/pipeline.h"
 #include "models/error.h"
 #include "models/template_generator.h"
@@ -53,14 +54,6 @@ constexpr int kLogTailLines = 6;        // lines of a failed child's log quoted 
 constexpr int kPollMilliseconds = 200;  // progress refresh of the parent's event loop
 constexpr int kDefaultDepthWidth = 640;
 constexpr int kDefaultDepthHeight = 480;
-
-std::string ReadText(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return "";
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 std::string Emit(const YAML::Node& node) {
   YAML::Emitter out;
