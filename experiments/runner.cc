@@ -644,7 +644,7 @@ Experiment ParseExperimentYaml(const std::string& yaml, const std::string& sourc
   if (const YAML::Node t = root["template"]) {
     if (t.IsScalar()) {
       ex.template_path = ResolvePath(t.Scalar(), base_dir);
-      if (!fs::exists(ex.template_path)) {
+      if (std::error_code ec; !fs::exists(ex.template_path, ec)) {
         throw Error(source_name + ": template: file not found: " + ex.template_path);
       }
     } else if (t.IsMap()) {
@@ -707,7 +707,8 @@ Experiment ParseExperimentYaml(const std::string& yaml, const std::string& sourc
     } else {
       throw Error(where + ": expected a folder path or a mapping");
     }
-    if (!seq.synthetic && !fs::exists(seq.folder)) {
+    std::error_code exists_ec;  // e.g. a name too long: not found, no filesystem_error
+    if (!seq.synthetic && !fs::exists(seq.folder, exists_ec)) {
       throw Error(where + ": sequence folder not found: " + seq.folder);
     }
     if (!seq.synthetic) {
@@ -813,7 +814,9 @@ Experiment ParseExperimentYaml(const std::string& yaml, const std::string& sourc
 }  // namespace
 
 Experiment LoadExperiment(const std::string& path) {
-  if (!fs::is_regular_file(path)) throw Error(path + ": experiment file not found");
+  if (std::error_code ec; !fs::is_regular_file(path, ec)) {
+    throw Error(path + ": experiment file not found");
+  }
   return ParseExperiment(ReadText(path), path, fs::path(path).parent_path().string());
 }
 

@@ -25,7 +25,9 @@
 #include <vector>
 
 #include "experiments/atomic_output.h"
+#include "experiments/pose_csv.h"
 #include "experiments/runner.h"
+#include "models/error.h"
 
 namespace artex {
 namespace {
@@ -378,6 +380,43 @@ TEST(FaultFullDiskTest, EveryWriterFailsNamingTheFileAndLeavesNoCompleteOutput) 
   ExpectFullDiskError("experiment", ExperimentArgs(file, disk / "exp"), disk, disk / "exp",
                       TreeBytes(root / "exp"));
   fs::remove_all(root);
+}
+
+
+// ---------------------------------------------------------------------------------------------
+// Findings of the long fuzz run (docs/reliability.md "Fuzzing"), each as it was found.
+
+TEST(FuzzFindingTest, PosesCsvFrameBeyondIntIsAnError) {
+  // poses_csv_fuzzer: a frame column value of 5.6e13 was converted to int (undefined behaviour).
+  const fs::path dir = FreshDir("fuzz_poses");
+  const fs::path path = dir / "poses.csv";
+  std::string row = "55555555555555";
+  for (int i = 0; i < 17 * 3 + 3; ++i) row += ",0";
+  std::ofstream(path) << "frame,x\n" << row << "\n";
+  try {
+    ReadPoseCsv(path.string(), 17);
+    ADD_FAILURE() << "accepted a frame beyond int";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find(path.string() + ":2: frame: expected an integer"),
+              std::string::npos)
+        << e.what();
+  }
+  std::ofstream(path) << "frame,x\n" << "-1" << row.substr(row.find(',')) << "\n";
+  EXPECT_THROW(ReadPoseCsv(path.string(), 17), Error);
+  fs::remove_all(dir);
+}
+
+TEST(FuzzFindingTest, ExperimentSequencePathTooLongIsAnError) {
+  // experiment_fuzzer: a sequence path longer than NAME_MAX made std::filesystem::exists throw
+  // filesystem_error ("File name too long"), which escaped ParseExperiment.
+  const std::string yaml = "name: x\nsequences:\n  - '" + std::string(300, 'a') + "'\n";
+  try {
+    ParseExperiment(yaml, "long.yaml", fs::temp_directory_path().string());
+    ADD_FAILURE() << "accepted a sequence that cannot exist";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("sequence folder not found"), std::string::npos)
+        << e.what();
+  }
 }
 
 }  // namespace
