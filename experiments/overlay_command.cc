@@ -17,6 +17,7 @@
 
 #include "experiments/commands.h"
 #include "experiments/config.h"
+#include "experiments/file_util.h"
 #include "experiments/overlay.h"
 #include "experiments/pipeline.h"
 #include "experiments/pose_csv.h"
@@ -45,20 +46,12 @@ struct OverlayCli {
   bool quiet = false;
 };
 
-std::string ReadText(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error(path + ": cannot open");
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
 // A string field of a JSON file of the run ("" when the file or field is absent).
 std::string JsonField(const std::string& path, const std::string& key) {
   std::error_code ec;
   if (!fs::is_regular_file(path, ec)) return "";
   try {
-    const auto j = nlohmann::json::parse(ReadText(path));
+    const auto j = nlohmann::json::parse(ReadTextOrThrow(path));
     return j.contains(key) && j[key].is_string() ? j[key].get<std::string>() : "";
   } catch (const nlohmann::json::exception& e) {
     throw Error(path + ": not valid JSON: " + e.what());

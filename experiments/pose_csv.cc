@@ -1,6 +1,7 @@
 #include "experiments/pose_csv.h"
 
 #include <cctype>
+#include <cmath>
 #include <cstdlib>
 #include <fstream>
 #include <iomanip>
@@ -12,6 +13,9 @@
 
 namespace artex {
 namespace {
+
+// Largest frame index in a poses.csv frame column (checked before the int conversion).
+constexpr int kMaxPoseCsvFrame = 100000000;
 
 // Splits on commas and whitespace.
 std::vector<std::string> SplitFields(const std::string& text) {
@@ -71,6 +75,13 @@ std::vector<std::pair<int, Pose>> ReadPoseCsv(const std::string& path, int num_j
     Eigen::VectorXd v = ParseNumberList(line, where);
     int frame = static_cast<int>(rows.size());
     if (frame_column) {
+      // Checked before the conversion: a frame beyond int is undefined behaviour (fuzzer finding).
+      if (!(v[0] >= 0 && v[0] <= kMaxPoseCsvFrame) || v[0] != std::floor(v[0])) {
+        std::ostringstream found;
+        found << v[0];
+        throw Error(where + ": frame: expected an integer in [0, " +
+                    std::to_string(kMaxPoseCsvFrame) + "], found " + found.str());
+      }
       frame = static_cast<int>(v[0]);
       v = v.tail(v.size() - 1).eval();
     }

@@ -30,6 +30,7 @@
 #include <sstream>
 #include <thread>
 
+#include "experiments/file_util.h"
 #include "experiments/pipeline.h"
 #include "models/error.h"
 #include "models/template_generator.h"
@@ -53,14 +54,6 @@ constexpr int kLogTailLines = 6;        // lines of a failed child's log quoted 
 constexpr int kPollMilliseconds = 200;  // progress refresh of the parent's event loop
 constexpr int kDefaultDepthWidth = 640;
 constexpr int kDefaultDepthHeight = 480;
-
-std::string ReadText(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return "";
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 std::string Emit(const YAML::Node& node) {
   YAML::Emitter out;
@@ -651,7 +644,7 @@ Experiment ParseExperimentYaml(const std::string& yaml, const std::string& sourc
   if (const YAML::Node t = root["template"]) {
     if (t.IsScalar()) {
       ex.template_path = ResolvePath(t.Scalar(), base_dir);
-      if (!fs::exists(ex.template_path)) {
+      if (std::error_code ec; !fs::exists(ex.template_path, ec)) {
         throw Error(source_name + ": template: file not found: " + ex.template_path);
       }
     } else if (t.IsMap()) {
@@ -714,7 +707,8 @@ Experiment ParseExperimentYaml(const std::string& yaml, const std::string& sourc
     } else {
       throw Error(where + ": expected a folder path or a mapping");
     }
-    if (!seq.synthetic && !fs::exists(seq.folder)) {
+    std::error_code exists_ec;  // e.g. a name too long: not found, no filesystem_error
+    if (!seq.synthetic && !fs::exists(seq.folder, exists_ec)) {
       throw Error(where + ": sequence folder not found: " + seq.folder);
     }
     if (!seq.synthetic) {
@@ -820,7 +814,9 @@ Experiment ParseExperimentYaml(const std::string& yaml, const std::string& sourc
 }  // namespace
 
 Experiment LoadExperiment(const std::string& path) {
-  if (!fs::is_regular_file(path)) throw Error(path + ": experiment file not found");
+  if (std::error_code ec; !fs::is_regular_file(path, ec)) {
+    throw Error(path + ": experiment file not found");
+  }
   return ParseExperiment(ReadText(path), path, fs::path(path).parent_path().string());
 }
 

@@ -57,14 +57,6 @@ std::string Trim(const std::string& s) {
   return s.substr(b, e - b + 1);
 }
 
-std::string ReadText(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return "";
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
 std::string LastLines(const std::string& path, int count) {
   std::ifstream in(path);
   std::vector<std::string> lines;

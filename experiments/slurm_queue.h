@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "experiments/file_util.h"
 #include "experiments/runner.h"
 
 namespace artex {
@@ -77,7 +78,6 @@ class TaskStates {
 };
 
 bool IsActiveState(const std::string& state);
-std::string ReadText(const std::string& path);
 std::string LastLines(const std::string& path, int lines);  // " | "-joined, "" if none
 std::string Trim(const std::string& s);
 
