@@ -17,6 +17,7 @@
 
 #include "experiments/pipeline_output.h"
 #include "experiments/pose_csv.h"
+#include "experiments/shape_output.h"
 #include "experiments/stream_sinks.h"
 #include "experiments/texture_evaluation.h"
 #include "models/error.h"
@@ -202,7 +203,8 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   const FrameWorld world =
       ChooseWorldFrame(&reader, begin, end, options.preprocess, reader.gravity(), &result);
   const Calibration& calibration = world.calibration;
-  const Template tmpl = template_path.empty() ? GenerateTemplate() : ReadTemplateGlb(template_path);
+  // Not const: replaced by the subject's template after the shape calibration (section shape).
+  Template tmpl = template_path.empty() ? GenerateTemplate() : ReadTemplateGlb(template_path);
   std::error_code ec;
   fs::create_directories(out_dir, ec);
   if (ec) throw Error(out_dir + ": cannot create the output folder: " + ec.message());
@@ -247,6 +249,9 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
     if (truth_scene->texture.empty()) truth_scene.reset();
   }
   FrameSinks sinks(options, tmpl, calibration, texturer.get(), out_dir);
+  ShapeEstimator shape(tmpl, options.shape);
+  shape.SetCameraCenter(calibration.depth.world_to_camera.inverse().translation());
+  int shape_calibrated_frame = -1;
   double quality_psnr_sum = 0.0, quality_ssim_sum = 0.0;
   int quality_evaluations = 0;
 
@@ -478,6 +483,16 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
       record.mean_vertex_error_mm = record.max_vertex_error_mm = record.mean_joint_error_mm =
           std::numeric_limits<double>::quiet_NaN();
     }
+    // Subject shape (section shape): accepted frames feed the calibration; once solved (or
+    // refined) the fitter tracks with the subject's template, as do the texturer and exports.
+    if (shape.enabled() && record.fit.ok() && !lost_frame &&
+        shape.AddFrame(scan, frame_pose,
+                       !fitter.ScaleIsFree() || fitter.scale_samples() >=
+                                                    options.fitting.scale_estimation_frames)) {
+      tmpl = shape.SubjectTemplate();
+      fitter.SetRestShape(tmpl);
+      if (shape_calibrated_frame < 0) shape_calibrated_frame = i;
+    }
     if (lost_frame) {
       // Re-initialise on the next frame with enough points; the scale estimate and the
       // texture survive (the same person), the tracked subject component does not.
@@ -579,6 +594,16 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   info.world = world.estimate ? &*world.estimate : nullptr;
   WriteFramesCsv(out_dir + "/frames.csv", result);
   WriteSummaryJson(out_dir + "/summary.json", result, info);
+  if (shape.enabled() || result.has_ground_truth) {
+    ShapeRunInfo shape_info;
+    shape_info.estimator = &shape;
+    shape_info.subject = &tmpl;
+    shape_info.global_scale = poses.empty() ? 1.0 : poses.back().scale;
+    shape_info.calibrated_frame = shape_calibrated_frame;
+    shape_info.truth = subject.get();
+    AddShapeToSummary(out_dir + "/summary.json", result, shape_info);
+    if (shape.enabled()) WriteTemplateGlb(out_dir + "/subject.glb", tmpl, texturer ? &texture : nullptr);
+  }
   WriteMetricsJson(out_dir + "/metrics.json", result);
   return result;
 }

@@ -16,6 +16,7 @@
 #include "solvers/em_fitter.h"
 #include "solvers/fit_quality.h"
 #include "solvers/initializer.h"
+#include "solvers/shape_estimator.h"
 #include "stream/stream_sender.h"
 #include "texture/texture_quality.h"
 #include "texture/texturer.h"
@@ -74,6 +75,7 @@ struct PipelineOptions {
   bool export_atlases = false;
   std::string stream_path;  // also write the tele-presence stream here (.artx; "" none)
   StreamOptions stream;     // section stream
+  ShapeOptions shape;       // section shape: subject shape estimation (mode fixed: none)
 
   bool IsValid(std::string* error) const;
 };

@@ -21,12 +21,18 @@ bool ShapeOptions::IsValid(std::string* error) const {
     msg << "shape.calibration_frames: expected >= 1, found " << calibration_frames;
   } else if (calibration_stride < 1) {
     msg << "shape.calibration_stride: expected >= 1, found " << calibration_stride;
+  } else if (calibration_rounds < 1) {
+    msg << "shape.calibration_rounds: expected >= 1, found " << calibration_rounds;
   } else if (radii.empty() || !std::all_of(radii.begin(), radii.end(), positive)) {
     msg << "shape.radii: expected a non-empty list of radii > 0 (m)";
   } else if (iterations_per_stage < 1) {
     msg << "shape.iterations_per_stage: expected >= 1, found " << iterations_per_stage;
   } else if (!(over_relaxation >= 1.0 && over_relaxation < 2.0)) {
     msg << "shape.over_relaxation: expected a value in [1, 2), found " << over_relaxation;
+  } else if (!(visibility_min_cos >= -1.0 && visibility_min_cos < 1.0)) {
+    msg << "shape.visibility_min_cos: expected a value in [-1, 1), found " << visibility_min_cos;
+  } else if (!(std::isfinite(girth_max_radius) && girth_max_radius > 0.0)) {
+    msg << "shape.girth_max_radius: expected a finite value > 0 (m), found " << girth_max_radius;
   } else if (!(std::isfinite(prior_weight) && prior_weight >= 0.0)) {
     msg << "shape.prior_weight: expected a finite value >= 0, found " << prior_weight;
   } else if (!(std::isfinite(pose_damping) && pose_damping >= 0.0)) {
@@ -113,7 +119,12 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
   Eigen::MatrixX3d posed, normals, sub_posed(n, 3), sub_normals(n, 3);
   SkinningJacobian jacobian;
   Eigen::MatrixXd shape_jacobian;
-  CorrespondenceTargets targets;
+  CorrespondenceTargets targets, self_targets;
+  // Columns of q that move girths only (held at wide radii).
+  std::vector<int> girth_columns;
+  for (int p = 0; p < nq; ++p) {
+    if (model_.expansion().col(p).head(base.num_joints()).isZero()) girth_columns.push_back(p);
+  }
   bool first = true;
   for (double radius : options_.radii) {
     for (int it = 0; it < options_.iterations_per_stage; ++it) {
@@ -136,6 +147,33 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
         esteps[f]->Compute(view, radius, &targets);
         const double total = targets.total_weight();
         if (!(total > 0.0)) continue;
+        if (options_.bias_correction) {
+          Scan self;
+          std::vector<int> visible;
+          for (int v = 0; v < posed.rows(); ++v) {
+            const Eigen::Vector3d x = posed.row(v).transpose();
+            if (!has_camera_ || normals.row(v).dot((camera_center_ - x).normalized()) >
+                                    options_.visibility_min_cos) {
+              visible.push_back(v);
+            }
+          }
+          const int nv = static_cast<int>(visible.size());
+          self.points.resize(nv, 3);
+          self.normals.resize(nv, 3);
+          for (int k = 0; k < nv; ++k) {
+            self.points.row(k) = posed.row(visible[k]);
+            self.normals.row(k) = normals.row(visible[k]);
+          }
+          self.colors = Eigen::MatrixX3d::Zero(nv, 3);
+          self.color_valid.assign(nv, 0);
+          EStep self_estep(self, estep_options);
+          self_estep.Compute(view, radius, &self_targets);
+          for (int i = 0; i < n; ++i) {
+            if (targets.weight[i] > 0.0 && self_targets.weight[i] > 0.0) {
+              targets.mean.row(i) -= self_targets.mean.row(i) - sub_posed.row(i);
+            }
+          }
+        }
         const double c = 1.0 / total;
         model_.PosedJacobian(pose, fit_vertices_, &shape_jacobian);
         const int offset = nq + f * np;
@@ -177,6 +215,14 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
         h(offset + kScaleIndex, offset + kScaleIndex) = 1.0;  // held: no data, no update
         g[offset + kScaleIndex] = 0.0;
       }
+      if (radius > options_.girth_max_radius) {
+        for (int p : girth_columns) {
+          h.row(p).setZero();
+          h.col(p).setZero();
+          h(p, p) = 1.0;
+          g[p] = 0.0;
+        }
+      }
       for (int d = 0; d < dim; ++d) h(d, d) += 1e-4 * h(d, d) + 1e-12;  // Marquardt
       if (!std::isfinite(cost) || !g.allFinite()) break;
       const Eigen::VectorXd step = -options_.over_relaxation * h.ldlt().solve(g);
@@ -208,9 +254,15 @@ bool ShapeEstimator::AddFrame(const Scan& scan, const Pose& pose, bool scale_set
     if (static_cast<int>(scans_.size()) < options_.calibration_frames) return false;
     std::vector<const Scan*> pointers;
     for (const Scan& s : scans_) pointers.push_back(&s);
-    calibration_ = Solve(pointers, &poses_, Eigen::VectorXd::Zero(q_.size()),
-                         options_.prior_weight);
-    calibrated_ = true;
+    const ShapeSolveSummary round = Solve(pointers, &poses_, Eigen::VectorXd::Zero(q_.size()),
+                                          options_.prior_weight);
+    if (rounds_done_ == 0) calibration_.initial_cost = round.initial_cost;
+    calibration_.final_cost = round.final_cost;
+    calibration_.frames += round.frames;
+    calibration_.iterations += round.iterations;
+    calibration_.seconds += round.seconds;
+    calibrated_ = ++rounds_done_ >= options_.calibration_rounds;
+    accepted_ = 0;
     if (refined) *refined = poses_.back();
     scans_.clear();
     poses_.clear();

@@ -33,6 +33,10 @@ struct ShapeOptions {
   // Every n-th accepted frame (with a settled global scale) is a calibration frame: poses
   // further apart constrain the bone lengths better. >= 1.
   int calibration_stride = 2;
+  // Calibration rounds: after a round's solve the tracker continues with the new shape and the
+  // next round collects fresh frames (tracked closer to the truth, so the solve starts nearer
+  // its optimum) and solves again from the current shape. >= 1.
+  int calibration_rounds = 2;
   // Radius E-step schedule (m) of the joint solve, coarse to fine, and GN iterations per stage.
   std::vector<double> radii = {0.06, 0.04, 0.03};
   int iterations_per_stage = 8;
@@ -40,6 +44,17 @@ struct ShapeOptions {
   // factor; the correspondences pull tangentially (along the limbs, where the bone lengths act)
   // only weakly per E-step, plain EM (1) creeps there. In [1, 2).
   double over_relaxation = 1.7;
+  // The radius E-step's mean mu_t of a curved surface lies inside it (chord means: ~5 mm on a
+  // 3 cm limb at radius 3 cm), which biases girths and lengths low. With this on, the bias is
+  // measured on the posed shaped template itself (its E-step against its own vertices, zero
+  // for a perfect fit without the correction) and subtracted from mu_t.
+  bool bias_correction = true;
+  // The camera sees one side of the body and loses points at grazing angles: the self E-step
+  // uses only the template vertices facing the camera (cosine of the normal with the direction
+  // to the camera above this) when the camera centre is known (SetCameraCenter), else all.
+  double visibility_min_cos = 0.3;
+  // Girths are held at stages with a radius above this (m): wide radii bias them most.
+  double girth_max_radius = 0.04;
   double prior_weight = 1e-5;    // towards the template (cost m^2 per unit^2 of a factor)
   double pose_damping = 1e-5;    // per frame on the pose update (per unit^2 / rad^2 / m^2)
   double bone_min = 0.7, bone_max = 1.4;    // bone length factor bounds
@@ -70,11 +85,18 @@ class ShapeEstimator {
   const ShapeOptions& options() const { return options_; }
   const ShapeModel& model() const { return model_; }
   bool enabled() const { return options_.mode != ShapeMode::kFixed; }
-  // True once the calibration solve has run.
+  // True once every calibration round has been solved.
   bool calibrated() const { return calibrated_; }
+  int rounds_done() const { return rounds_done_; }
   const Eigen::VectorXd& parameters() const { return q_; }  // Q entries
   BodyShape shape() const { return model_.Expand(q_); }
   Template SubjectTemplate() const { return model_.Apply(q_); }
+
+  // Depth camera centre in the tracking world frame (for the bias correction's visibility).
+  void SetCameraCenter(const Eigen::Vector3d& center) {
+    camera_center_ = center;
+    has_camera_ = true;
+  }
 
   // Feeds an accepted frame (scan and fitted pose, world frame). scale_settled: the tracker's
   // global scale is final (frames before are no calibration frames). Returns true when the
@@ -87,6 +109,8 @@ class ShapeEstimator {
   ShapeSolveSummary Solve(const std::vector<const Scan*>& scans, std::vector<Pose>* poses,
                           const Eigen::VectorXd& q_ref, double prior_weight);
 
+  // Of all rounds: frames and iterations summed, the first round's initial and the last
+  // round's final cost, seconds summed.
   const ShapeSolveSummary& calibration_summary() const { return calibration_; }
   int refinements() const { return refinements_; }
   double refine_seconds() const { return refine_seconds_; }
@@ -96,6 +120,8 @@ class ShapeEstimator {
 
   ShapeOptions options_;
   ShapeModel model_;
+  Eigen::Vector3d camera_center_ = Eigen::Vector3d::Zero();
+  bool has_camera_ = false;
   std::vector<int> fit_vertices_;
   Eigen::VectorXd q_;
   std::vector<Scan> scans_;
@@ -103,6 +129,7 @@ class ShapeEstimator {
   int accepted_ = 0;       // frames seen with a settled scale
   int after_ = 0;          // frames seen after calibration
   bool calibrated_ = false;
+  int rounds_done_ = 0;
   ShapeSolveSummary calibration_;
   int refinements_ = 0;
   double refine_seconds_ = 0.0;
