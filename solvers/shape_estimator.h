@@ -29,14 +29,14 @@ struct ShapeOptions {
   // bones: per-bone lengths; bones_girth: per-bone lengths and per-segment girth.
   ShapeMode mode = ShapeMode::kFixed;
   bool symmetric = true;       // l_/r_ joints share their parameters
-  int calibration_frames = 8;  // accepted frames in the joint solve (>= 1)
+  int calibration_frames = 5;  // accepted frames per calibration round (>= 1)
   // Every n-th accepted frame (with a settled global scale) is a calibration frame: poses
   // further apart constrain the bone lengths better. >= 1.
   int calibration_stride = 2;
   // Calibration rounds: after a round's solve the tracker continues with the new shape and the
   // next round collects fresh frames (tracked closer to the truth, so the solve starts nearer
   // its optimum) and solves again from the current shape. >= 1.
-  int calibration_rounds = 2;
+  int calibration_rounds = 3;
   // Radius E-step schedule (m) of the joint solve, coarse to fine, and GN iterations per stage.
   std::vector<double> radii = {0.06, 0.04, 0.03};
   int iterations_per_stage = 8;
