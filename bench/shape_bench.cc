@@ -103,9 +103,8 @@ void BM_CalibrationSolve(benchmark::State& state) {
     ShapeEstimator estimator(f.base, o);
     std::vector<Pose> poses(f.poses.begin(), f.poses.begin() + 5);
     const double c0 = CpuSeconds();
-    benchmark::DoNotOptimize(
-        estimator.Solve(scans, &poses, Eigen::VectorXd::Zero(estimator.model().num_parameters()),
-                        o.prior_weight));
+    benchmark::DoNotOptimize(estimator.Solve(
+        scans, &poses, Eigen::VectorXd::Zero(estimator.model().num_parameters()), o.prior_weight));
     cpu += CpuSeconds() - c0;
     ++solves;
   }
@@ -118,5 +117,3 @@ BENCHMARK(BM_CalibrationSolve)->Unit(benchmark::kMillisecond)->Iterations(1);
 
 }  // namespace
 }  // namespace artex
-
-

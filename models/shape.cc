@@ -122,8 +122,8 @@ BodyShape ShapeModel::Expand(const Eigen::VectorXd& q) const {
   }
   const int nj = base_.num_joints();
   const Eigen::VectorXd full =
-      Eigen::VectorXd::Ones(2 * nj) + (q.size() ? Eigen::VectorXd(expansion_ * q)
-                                                 : Eigen::VectorXd::Zero(2 * nj));
+      Eigen::VectorXd::Ones(2 * nj) +
+      (q.size() ? Eigen::VectorXd(expansion_ * q) : Eigen::VectorXd::Zero(2 * nj));
   BodyShape s;
   s.bone_length = full.head(nj);
   s.bone_length[0] = 1.0;
@@ -150,8 +150,7 @@ void ShapeModel::RestGeometry(const Eigen::VectorXd& q, Eigen::MatrixX3d* center
     const double g = w * s.girth[k] + (1.0 - w) * s.girth[k == 0 ? 0 : parent];
     const double l = segment_bone_[k] >= 0 ? s.bone_length[segment_bone_[k]] : 1.0;
     const Eigen::Vector3d a = base_.joints[k].twist_axis.normalized();
-    vertices->row(v) =
-        centers->row(k) + (l * alpha_[v]) * a.transpose() + g * rho_.row(v);
+    vertices->row(v) = centers->row(k) + (l * alpha_[v]) * a.transpose() + g * rho_.row(v);
   }
 }
 
@@ -199,7 +198,8 @@ void ShapeModel::PosedJacobian(const Pose& pose, const std::vector<int>& vertice
     // Posed joint centre c_k = c_root + sum over the chain of s0 W_m bone_length[m] e_m.
     for (int m = k; m > 0; m = base_.joints[m].parent) full.col(m) = world[m] * bone_offset_[m];
     // v' = c_k + s0 W_k (w R^LBS + (1 - w) 1) (L alpha a + g Rot(a, tau theta) rho).
-    const Eigen::Matrix3d g_map = world[k] * (w * swing[k] + (1.0 - w) * Eigen::Matrix3d::Identity());
+    const Eigen::Matrix3d g_map =
+        world[k] * (w * swing[k] + (1.0 - w) * Eigen::Matrix3d::Identity());
     if (segment_bone_[k] >= 0) full.col(segment_bone_[k]) += g_map * (alpha_[v] * a);
     const double angle = tau * twist[k];
     const Eigen::Vector3d r = std::cos(angle) * rho + std::sin(angle) * a.cross(rho);

@@ -22,11 +22,10 @@
 // With `symmetric`, joints named l_X and r_X share their parameters (the l_ one is kept).
 #pragma once
 
+#include <Eigen/Core>
 #include <map>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "models/pose.h"
 #include "models/template.h"
@@ -75,11 +74,11 @@ class ShapeModel {
   Template base_;
   ShapeMode mode_;
   std::vector<std::string> names_;
-  Eigen::MatrixXd expansion_;       // 2J x Q
+  Eigen::MatrixXd expansion_;                 // 2J x Q
   std::vector<Eigen::Vector3d> bone_offset_;  // J: t0_j - t0_parent(j) (root: 0)
-  std::vector<int> segment_bone_;   // J: joint whose bone_length stretches segment j (-1: none)
-  Eigen::VectorXd alpha_;           // V: axial rest coordinate
-  Eigen::MatrixX3d rho_;            // V x 3: radial rest offset
+  std::vector<int> segment_bone_;  // J: joint whose bone_length stretches segment j (-1: none)
+  Eigen::VectorXd alpha_;          // V: axial rest coordinate
+  Eigen::MatrixX3d rho_;           // V x 3: radial rest offset
 };
 
 }  // namespace artex

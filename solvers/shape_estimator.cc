@@ -4,8 +4,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <sstream>
 
 #include "models/error.h"
@@ -48,8 +46,7 @@ bool ShapeOptions::IsValid(std::string* error) const {
   } else if (refine_every < 0) {
     msg << "shape.refine_every: expected >= 0 (0: frozen), found " << refine_every;
   } else if (!(std::isfinite(refine_prior_weight) && refine_prior_weight >= 0.0)) {
-    msg << "shape.refine_prior_weight: expected a finite value >= 0, found "
-        << refine_prior_weight;
+    msg << "shape.refine_prior_weight: expected a finite value >= 0, found " << refine_prior_weight;
   } else if (max_fit_vertices < 0) {
     msg << "shape.max_fit_vertices: expected >= 0 (0: all), found " << max_fit_vertices;
   } else if (!estep.IsValid(error)) {
@@ -194,8 +191,7 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
             local.col(nq + k - 1) = block.col(k);
             index[nq + k - 1] = offset + cols[k];
           }
-          const Eigen::Vector3d e =
-              (posed.row(v) - targets.mean.row(i)).transpose();
+          const Eigen::Vector3d e = (posed.row(v) - targets.mean.row(i)).transpose();
           const Eigen::MatrixXd jtj = w * local.transpose() * local;
           const Eigen::VectorXd jte = w * local.transpose() * e;
           for (int a = 0; a < m; ++a) {
@@ -230,7 +226,8 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
       if (first) summary.initial_cost = cost;
       first = false;
       summary.final_cost = cost;
-      if (std::getenv("ARTEX_SHAPE_DEBUG")) std::fprintf(stderr, "shape solve r=%g it=%d cost=%g total_w=%g q0=%g\n", radius, it, cost, 0.0, q_.size() ? q_[0] : 0.0);
+        std::fprintf(stderr, "shape solve r=%g it=%d cost=%g total_w=%g q0=%g\n", radius, it, cost,
+                     0.0, q_.size() ? q_[0] : 0.0);
       ++summary.iterations;
       q_ += step.head(nq);
       ClampToBounds(&q_);
@@ -238,8 +235,7 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
       if (step.cwiseAbs().maxCoeff() < 1e-5) break;
     }
   }
-  summary.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return summary;
 }
 
@@ -254,8 +250,8 @@ bool ShapeEstimator::AddFrame(const Scan& scan, const Pose& pose, bool scale_set
     if (static_cast<int>(scans_.size()) < options_.calibration_frames) return false;
     std::vector<const Scan*> pointers;
     for (const Scan& s : scans_) pointers.push_back(&s);
-    const ShapeSolveSummary round = Solve(pointers, &poses_, Eigen::VectorXd::Zero(q_.size()),
-                                          options_.prior_weight);
+    const ShapeSolveSummary round =
+        Solve(pointers, &poses_, Eigen::VectorXd::Zero(q_.size()), options_.prior_weight);
     if (rounds_done_ == 0) calibration_.initial_cost = round.initial_cost;
     calibration_.final_cost = round.final_cost;
     calibration_.frames += round.frames;

@@ -55,9 +55,9 @@ struct ShapeOptions {
   double visibility_min_cos = 0.3;
   // Girths are held at stages with a radius above this (m): wide radii bias them most.
   double girth_max_radius = 0.04;
-  double prior_weight = 1e-5;    // towards the template (cost m^2 per unit^2 of a factor)
-  double pose_damping = 1e-5;    // per frame on the pose update (per unit^2 / rad^2 / m^2)
-  double bone_min = 0.7, bone_max = 1.4;    // bone length factor bounds
+  double prior_weight = 1e-5;             // towards the template (cost m^2 per unit^2 of a factor)
+  double pose_damping = 1e-5;             // per frame on the pose update (per unit^2 / rad^2 / m^2)
+  double bone_min = 0.7, bone_max = 1.4;  // bone length factor bounds
   double girth_min = 0.6, girth_max = 1.6;  // girth factor bounds
   // After calibration: refine the shape on every n-th accepted frame (0: frozen).
   int refine_every = 0;
@@ -126,8 +126,8 @@ class ShapeEstimator {
   Eigen::VectorXd q_;
   std::vector<Scan> scans_;
   std::vector<Pose> poses_;
-  int accepted_ = 0;       // frames seen with a settled scale
-  int after_ = 0;          // frames seen after calibration
+  int accepted_ = 0;  // frames seen with a settled scale
+  int after_ = 0;     // frames seen after calibration
   bool calibrated_ = false;
   int rounds_done_ = 0;
   ShapeSolveSummary calibration_;

@@ -81,8 +81,8 @@ TEST(ShapeModelTest, BoneLengthsScaleJointOffsets) {
   const ShapeModel m(t, ShapeMode::kBones, true);
   Eigen::VectorXd q = Eigen::VectorXd::Zero(m.num_parameters());
   const auto& names = m.parameter_names();
-  const int elbow = static_cast<int>(std::find(names.begin(), names.end(), "bone:l_elbow") -
-                                     names.begin());
+  const int elbow =
+      static_cast<int>(std::find(names.begin(), names.end(), "bone:l_elbow") - names.begin());
   ASSERT_LT(elbow, m.num_parameters());
   q[elbow] = 0.2;
   const Template s = m.Apply(q);

@@ -98,6 +98,7 @@ TEST(ShapeEstimatorTest, CalibratesAfterTheConfiguredFramesThenFreezes) {
   ShapeOptions o = Options(ShapeMode::kScale);
   o.calibration_frames = 3;
   o.calibration_stride = 2;
+  o.calibration_rounds = 1;
   o.radii = {0.03};
   o.iterations_per_stage = 12;
   ShapeEstimator estimator(t, o);
