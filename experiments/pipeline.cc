@@ -18,6 +18,7 @@
 #include "experiments/pipeline_output.h"
 #include "experiments/pipeline_stages.h"
 #include "experiments/pose_csv.h"
+#include "experiments/shape_output.h"
 #include "experiments/stream_sinks.h"
 #include "experiments/texture_evaluation.h"
 #include "models/error.h"
@@ -120,7 +121,8 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   const FrameWorld world =
       ChooseWorldFrame(&reader, begin, end, options.preprocess, reader.gravity(), &result);
   const Calibration& calibration = world.calibration;
-  const Template tmpl = template_path.empty() ? GenerateTemplate() : ReadTemplateGlb(template_path);
+  // Not const: replaced by the subject's template after the shape calibration (section shape).
+  Template tmpl = template_path.empty() ? GenerateTemplate() : ReadTemplateGlb(template_path);
   std::error_code ec;
   fs::create_directories(out_dir, ec);
   if (ec) throw Error(out_dir + ": cannot create the output folder: " + ec.message());
@@ -184,14 +186,21 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
     truth.truth_scene = truth_scene.get();
     truth.to_truth_world = world.to_calibration_world;
   }
+  ShapeEstimator shape(tmpl, options.shape);
+  shape.SetCameraCenter(calibration.depth.world_to_camera.inverse().translation());
   TrackStage track(options, calibration, &preprocessor, &fitter);
+  track.SetShape(&shape, &tmpl);
   TextureStage texturing(options, calibration, texturer.get(), &sinks, truth_scene != nullptr,
                          begin, end);
   OutputStage output(options, tmpl, truth, out_dir, begin, end, &result, progress);
   const double rate_hz = options.realtime.live_rate_hz > 0 ? options.realtime.live_rate_hz
                                                            : calibration.frame_rate;
+  // Shape estimation swaps the template the other stages read: one thread then.
+  RealtimeOptions realtime = options.realtime;
+  if (shape.enabled()) realtime.concurrency = PipelineConcurrency::kSequential;
   result.realtime =
-      RunStages(options.realtime, &reader, begin, end, rate_hz, &track, &texturing, &output);
+      RunStages(realtime, &reader, begin, end, rate_hz, &track, &texturing, &output);
+  const int shape_calibrated_frame = track.shape_calibrated_frame;
   const std::vector<Pose>& poses = output.poses;
   const std::vector<std::string>& failures = output.failures;
   const double fit_seconds = track.fit_seconds, init_seconds = track.init_seconds;
@@ -288,6 +297,16 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   info.world = world.estimate ? &*world.estimate : nullptr;
   WriteFramesCsv(out_dir + "/frames.csv", result);
   WriteSummaryJson(out_dir + "/summary.json", result, info);
+  if (shape.enabled() || result.has_ground_truth) {
+    ShapeRunInfo shape_info;
+    shape_info.estimator = &shape;
+    shape_info.subject = &tmpl;
+    shape_info.global_scale = poses.empty() ? 1.0 : poses.back().scale;
+    shape_info.calibrated_frame = shape_calibrated_frame;
+    shape_info.truth = subject.get();
+    AddShapeToSummary(out_dir + "/summary.json", result, shape_info);
+    if (shape.enabled()) WriteTemplateGlb(out_dir + "/subject.glb", tmpl, texturer ? &texture : nullptr);
+  }
   WriteMetricsJson(out_dir + "/metrics.json", result);
   WriteRealtimeJson(out_dir + "/realtime.json", result.realtime);
   return result;

@@ -17,6 +17,7 @@
 #include "solvers/em_fitter.h"
 #include "solvers/fit_quality.h"
 #include "solvers/initializer.h"
+#include "solvers/shape_estimator.h"
 #include "stream/stream_sender.h"
 #include "texture/texture_quality.h"
 #include "texture/texturer.h"
@@ -78,6 +79,7 @@ struct PipelineOptions {
   // Sequential or pipelined stages, live replay (pipeline.concurrency, .queue_depth, .live,
   // .live_rate_hz, .colour_delay_frames; experiments/realtime_options.h).
   RealtimeOptions realtime;
+  ShapeOptions shape;       // section shape: subject shape estimation (mode fixed: none)
 
   bool IsValid(std::string* error) const;
 };

@@ -483,6 +483,7 @@ bool PipelineOptions::IsValid(std::string* error) const {
     return false;
   }
   if (texture && !texturing.IsValid(error)) return false;
+  if (!shape.IsValid(error)) return false;
   if (!held_out.IsValid(&inner)) {
     if (error) *error = "pipeline.texture_quality_*: " + inner;
     return false;
@@ -508,8 +509,39 @@ bool PipelineOptions::IsValid(std::string* error) const {
   return false;
 }
 
+// Section shape (solvers/shape_estimator.h).
+void BindShape(const Config& c, ShapeOptions* o) {
+  c.CheckKeys({"mode", "symmetric", "calibration_frames", "calibration_stride", "calibration_rounds", "radii",
+               "iterations_per_stage", "over_relaxation", "bias_correction",
+               "visibility_min_cos", "girth_max_radius", "prior_weight", "pose_damping",
+               "bone_min", "bone_max", "girth_min", "girth_max", "refine_every",
+               "refine_prior_weight", "max_fit_vertices"});
+  c.GetEnum("mode", ShapeModeNames(), &o->mode);
+  c.Get("symmetric", &o->symmetric);
+  c.Get("calibration_frames", &o->calibration_frames);
+  c.Get("calibration_stride", &o->calibration_stride);
+  c.Get("calibration_rounds", &o->calibration_rounds);
+  c.Get("radii", &o->radii);
+  c.Get("iterations_per_stage", &o->iterations_per_stage);
+  c.Get("over_relaxation", &o->over_relaxation);
+  c.Get("bias_correction", &o->bias_correction);
+  c.Get("visibility_min_cos", &o->visibility_min_cos);
+  c.Get("girth_max_radius", &o->girth_max_radius);
+  c.Get("prior_weight", &o->prior_weight);
+  c.Get("pose_damping", &o->pose_damping);
+  c.Get("bone_min", &o->bone_min);
+  c.Get("bone_max", &o->bone_max);
+  c.Get("girth_min", &o->girth_min);
+  c.Get("girth_max", &o->girth_max);
+  c.Get("refine_every", &o->refine_every);
+  c.Get("refine_prior_weight", &o->refine_prior_weight);
+  c.Get("max_fit_vertices", &o->max_fit_vertices);
+  std::string why;
+  if (!o->IsValid(&why)) throw Error(c.Path("") + " " + why);
+}
+
 PipelineOptions LoadPipelineOptions(const Config& config) {
-  config.CheckKeys({"input", "preprocess", "fitting", "texture", "pipeline", "stream"});
+  config.CheckKeys({"input", "preprocess", "fitting", "texture", "pipeline", "stream", "shape"});
   PipelineOptions o;
   BindInput(config.Section("input"), &o.input);
   BindPreprocess(config.Section("preprocess"), &o.preprocess);
@@ -525,6 +557,8 @@ PipelineOptions LoadPipelineOptions(const Config& config) {
   BindTexture(config.Section("texture"), &o.texturing);
   BindPipeline(config.Section("pipeline"), &o);
   BindStream(config.Section("stream"), &o.stream);
+  BindShape(config.Section("shape"), &o.shape);
+  o.shape.estep = o.fitting.estep;  // the tracker's correspondence weights
   std::string why;
   if (!o.IsValid(&why)) throw Error(config.Path("") + " " + why);
   return o;

@@ -280,6 +280,15 @@ void TrackStage::Process(FrameWork* work) {
   // A lost frame's pose is not texture: it would paint the room onto the body.
   work->texture_frame = !lost_frame && (options_.texture_doubtful_frames ||
                                         record.quality.label == FitQualityLabel::kGood);
+  if (shape_ != nullptr && tmpl_ != nullptr && shape_->enabled() && record.fit.ok() &&
+      !lost_frame &&
+      shape_->AddFrame(scan_, work->pose,
+                       !fitter_->ScaleIsFree() ||
+                           fitter_->scale_samples() >= options_.fitting.scale_estimation_frames)) {
+    *tmpl_ = shape_->SubjectTemplate();
+    fitter_->SetRestShape(*tmpl_);
+    if (shape_calibrated_frame < 0) shape_calibrated_frame = record.frame;
+  }
   if (lost_frame) {
     // Re-initialise on the next frame with enough points; the scale estimate and the
     // texture survive (the same person), the tracked subject component does not.

@@ -77,6 +77,14 @@ class TrackStage {
              Preprocessor* preprocessor, EMFitter* fitter);
   void Process(FrameWork* work);
   void SetTemplateColors(const Eigen::MatrixX3d& colours);
+  // Subject shape (section shape): accepted frames feed `shape`; once it solves, *tmpl becomes
+  // the subject's template and the fitter tracks with it. Other stages read *tmpl, so the
+  // pipeline runs sequentially with shape estimation on (RunPipeline).
+  void SetShape(ShapeEstimator* shape, Template* tmpl) {
+    shape_ = shape;
+    tmpl_ = tmpl;
+  }
+  int shape_calibrated_frame = -1;  // record.frame of the first swap (-1: none)
 
   // Totals over the processed frames.
   double fit_seconds = 0.0, init_seconds = 0.0, quality_seconds = 0.0;
@@ -90,6 +98,8 @@ class TrackStage {
   const Calibration& calibration_;
   Preprocessor* preprocessor_;
   EMFitter* fitter_;
+  ShapeEstimator* shape_ = nullptr;
+  Template* tmpl_ = nullptr;
   Scan scan_;
   bool need_init_ = true;
   int doubtful_run_ = 0;  // consecutive doubtful frames

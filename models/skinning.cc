@@ -118,12 +118,23 @@ Skinning::Skinning(const Template& tmpl, const SkinningOptions& options)
       for (int c = 0; c < 3; ++c) cols.push_back(JointParameterIndex(i) + c);
     }
   }
-  axis_foot_.resize(num_vertices, 3);
-  offset_.resize(num_vertices, 3);
-  radial_.resize(num_vertices, 3);
   layout_.column_set_.resize(num_vertices);
   layout_.block_offset_.resize(num_vertices + 1);
   layout_.block_offset_[0] = 0;
+  for (int v = 0; v < num_vertices; ++v) {
+    const int k = template_.vertex_joint[v];
+    layout_.column_set_[v] = k;
+    layout_.block_offset_[v + 1] =
+        layout_.block_offset_[v] + 3 * static_cast<int>(layout_.columns_[k].size());
+  }
+  PrecomputeRestOffsets();
+}
+
+void Skinning::PrecomputeRestOffsets() {
+  const int num_vertices = template_.num_vertices();
+  axis_foot_.resize(num_vertices, 3);
+  offset_.resize(num_vertices, 3);
+  radial_.resize(num_vertices, 3);
   for (int v = 0; v < num_vertices; ++v) {
     const int k = template_.vertex_joint[v];
     const Eigen::Vector3d& a = axes_[k];
@@ -133,10 +144,25 @@ Skinning::Skinning(const Template& tmpl, const SkinningOptions& options)
     axis_foot_.row(v) = foot.transpose();
     offset_.row(v) = (x - t).transpose();
     radial_.row(v) = (x - foot).transpose();
-    layout_.column_set_[v] = k;
-    layout_.block_offset_[v + 1] =
-        layout_.block_offset_[v] + 3 * static_cast<int>(layout_.columns_[k].size());
   }
+}
+
+void Skinning::SetRestGeometry(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3d& centers) {
+  if (vertices.rows() != template_.num_vertices() || centers.rows() != template_.num_joints()) {
+    std::ostringstream msg;
+    msg << "Skinning::SetRestGeometry: expected " << template_.num_vertices() << " vertices and "
+        << template_.num_joints() << " joint centres, found " << vertices.rows() << " and "
+        << centers.rows();
+    throw Error(msg.str());
+  }
+  if (!vertices.allFinite() || !centers.allFinite()) {
+    throw Error("Skinning::SetRestGeometry: found a non-finite rest coordinate");
+  }
+  template_.vertices = vertices;
+  for (int j = 0; j < template_.num_joints(); ++j) {
+    template_.joints[j].center = centers.row(j).transpose();
+  }
+  PrecomputeRestOffsets();
 }
 
 void Skinning::ComputeJointFrames(const Pose& pose, std::vector<JointFrame>* frames) const {

@@ -75,9 +75,15 @@ class Skinning {
   // J x 3 posed joint centres (each joint centre moves with its parent's chain):
   // s0 R0 T_root o ... o T_parent(j) (t_j) + t0.
   void PosedJointCenters(const Pose& pose, Eigen::MatrixX3d* centers) const;
+  // Replaces the rest geometry, vertices V x 3 and joint centres J x 3 (same counts), keeping
+  // the rig (parents, twist axes, skinning constants): a subject shape (models/shape.h) without
+  // a new Skinning, so references to this one stay valid. Throws artex::Error on a wrong shape
+  // or a non-finite value (the Skinning is then unchanged).
+  void SetRestGeometry(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3d& centers);
 
  private:
   struct JointFrame;  // per-call, per-joint transforms (defined in skinning.cc)
+  void PrecomputeRestOffsets();  // axis_foot_, offset_, radial_ from template_
   void ComputeJointFrames(const Pose& pose, std::vector<JointFrame>* frames) const;
   template <bool kWithJacobian>
   void Evaluate(const Pose& pose, Eigen::MatrixX3d* posed, SkinningJacobian* jacobian) const;

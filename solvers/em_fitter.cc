@@ -315,6 +315,19 @@ void EMFitter::SetTemplateColors(const Eigen::MatrixX3d& colors) {
   template_colors_ = colors;
 }
 
+void EMFitter::SetRestShape(const Template& shaped) {
+  Eigen::MatrixX3d centers(shaped.num_joints(), 3);
+  for (int j = 0; j < shaped.num_joints(); ++j) centers.row(j) = shaped.joints[j].center.transpose();
+  skinning_->SetRestGeometry(shaped.vertices, centers);
+  if (subset_skinning_) {
+    Eigen::MatrixX3d subset(static_cast<int>(fit_vertices_.size()), 3);
+    for (size_t i = 0; i < fit_vertices_.size(); ++i) {
+      subset.row(static_cast<int>(i)) = shaped.vertices.row(fit_vertices_[i]);
+    }
+    subset_skinning_->SetRestGeometry(subset, centers);
+  }
+}
+
 void EMFitter::Reset(bool keep_scale) {
   history_.clear();
   frame_ = 0;

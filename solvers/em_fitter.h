@@ -229,6 +229,11 @@ class EMFitter {
   const Pose& initial_pose() const { return initial_pose_; }
   // Per-vertex template colours (T x 3, [0,1]) for the colour term; empty disables it.
   void SetTemplateColors(const Eigen::MatrixX3d& colors);
+  // Replaces the template's rest geometry (vertices, joint centres) by a subject shape's with
+  // the same rig and vertex count (models/shape.h); history, scale estimate and the fitted
+  // vertex subset are kept, skinning() stays the same object. Throws artex::Error on a
+  // mismatched template (vertex or joint count).
+  void SetRestShape(const Template& shaped);
   // The guess FitFrame would start the next frame from (options.prediction).
   Pose PredictNextPose() const;
   // True when the next frame is a tracking frame (an accepted or kept pose exists).

@@ -590,5 +590,41 @@ TEST(PipelineTest, TrackCommandExitStatus) {
   EXPECT_NE(output.find("radius"), std::string::npos) << output;
 }
 
+// Section shape: a bones_girth calibration swaps the subject's template in, which is written as
+// subject.glb (same rig, vertex count and UVs) with its parameters in summary.json; a bad mode
+// is an error naming the key.
+TEST(PipelineTest, ShapeCalibrationWritesTheSubjectTemplate) {
+  Config config = SmallConfig();
+  config.Set("shape.mode", "bones_girth");
+  config.Set("shape.calibration_frames", "1");
+  config.Set("shape.calibration_rounds", "1");
+  config.Set("shape.iterations_per_stage", "2");
+  config.Set("fitting.scale_estimation_frames", "2");
+  const fs::path out = OutDir("run_shape");
+  const PipelineResult r = Track(PipelineTestData::Get().sequence(), out.string(), config);
+  EXPECT_EQ(static_cast<int>(r.frames.size()), kFrames);
+  std::ifstream in(out / "summary.json");
+  const nlohmann::json summary = nlohmann::json::parse(in);
+  ASSERT_TRUE(summary.contains("shape"));
+  const nlohmann::json& shape = summary.at("shape");
+  EXPECT_EQ(shape.at("mode").get<std::string>(), "bones_girth");
+  EXPECT_TRUE(shape.at("calibrated").get<bool>());
+  EXPECT_GE(shape.at("calibrated_after_frame").get<int>(), 1);
+  EXPECT_EQ(shape.at("parameters").size(), 21u);
+  EXPECT_GT(shape.at("calibration").at("iterations").get<int>(), 0);
+  ASSERT_TRUE(fs::exists(out / "subject.glb"));
+  const Template subject = ReadTemplateGlb((out / "subject.glb").string());
+  const Template base = ReadTemplateGlb(PipelineTestData::Get().template_path());
+  EXPECT_EQ(subject.num_vertices(), base.num_vertices());
+  EXPECT_EQ(subject.num_joints(), base.num_joints());
+  EXPECT_EQ(subject.uvs.rows(), base.uvs.rows());
+  EXPECT_GT((subject.vertices - base.vertices).cwiseAbs().maxCoeff(), 1e-6);
+
+  Config bad = SmallConfig();
+  bad.Set("shape.mode", "sculpted");
+  const std::string msg = ErrorOf([&] { LoadPipelineOptions(bad); });
+  EXPECT_NE(msg.find("shape.mode"), std::string::npos) << msg;
+}
+
 }  // namespace
 }  // namespace artex

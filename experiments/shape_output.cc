@@ -1,0 +1,105 @@
+#include "experiments/shape_output.h"
+
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "models/error.h"
+#include "models/mesh_export.h"
+
+namespace artex {
+
+namespace {
+double Finite(double x) { return std::isfinite(x) ? x : std::numeric_limits<double>::quiet_NaN(); }
+}  // namespace
+
+void AddShapeToSummary(const std::string& summary_path, const PipelineResult& result,
+                       const ShapeRunInfo& info) {
+  nlohmann::json summary;
+  {
+    std::ifstream in(summary_path);
+    if (!in) throw Error(summary_path + ": cannot read the run summary");
+    try {
+      in >> summary;
+    } catch (const std::exception& e) {
+      throw Error(summary_path + ": not valid JSON: " + e.what());
+    }
+  }
+  const ShapeEstimator& est = *info.estimator;
+  const Template& subject = *info.subject;
+  nlohmann::json shape;
+  shape["mode"] = ShapeModeName(est.options().mode);
+  shape["calibrated"] = est.calibrated();
+  shape["calibrated_after_frame"] = info.calibrated_frame;
+  shape["global_scale"] = info.global_scale;
+  nlohmann::json params = nlohmann::json::object();
+  for (int p = 0; p < est.model().num_parameters(); ++p) {
+    params[est.model().parameter_names()[p]] = 1.0 + est.parameters()[p];
+  }
+  shape["parameters"] = params;
+  const BodyShape body = est.shape();
+  nlohmann::json joints = nlohmann::json::array();
+  double bone_sum = 0.0, bone_max = 0.0;
+  int bones = 0;
+  for (int j = 0; j < subject.num_joints(); ++j) {
+    nlohmann::json jj;
+    jj["name"] = subject.joints[j].name;
+    jj["girth"] = body.girth[j];
+    if (j > 0) {
+      const int p = subject.joints[j].parent;
+      const double length =
+          info.global_scale * (subject.joints[j].center - subject.joints[p].center).norm();
+      jj["bone_length_factor"] = body.bone_length[j];
+      jj["bone_length_m"] = length;
+      if (info.truth) {
+        const int tj = info.truth->FindJoint(subject.joints[j].name);
+        const int tp = info.truth->FindJoint(subject.joints[p].name);
+        if (tj >= 0 && tp >= 0) {
+          const double truth =
+              (info.truth->joints[tj].center - info.truth->joints[tp].center).norm();
+          const double error = 1000.0 * std::abs(length - truth);
+          jj["bone_length_truth_m"] = truth;
+          jj["bone_length_error_mm"] = error;
+          bone_sum += error;
+          bone_max = std::max(bone_max, error);
+          ++bones;
+        }
+      }
+    }
+    joints.push_back(jj);
+  }
+  shape["joints"] = joints;
+  if (bones > 0) {
+    shape["mean_bone_length_error_mm"] = bone_sum / bones;
+    shape["max_bone_length_error_mm"] = bone_max;
+  }
+  const ShapeSolveSummary& c = est.calibration_summary();
+  shape["calibration"] = {{"frames", c.frames},
+                          {"iterations", c.iterations},
+                          {"initial_cost", c.initial_cost},
+                          {"final_cost", c.final_cost},
+                          {"seconds", c.seconds}};
+  shape["refinements"] = est.refinements();
+  shape["refine_seconds"] = est.refine_seconds();
+  if (result.has_ground_truth) {
+    double vertex = 0.0, joint = 0.0;
+    int n = 0;
+    for (const FrameRecord& r : result.frames) {
+      if (r.skipped || !r.fit.ok() || r.frame <= info.calibrated_frame) continue;
+      if (!std::isfinite(r.mean_vertex_error_mm)) continue;
+      vertex += r.mean_vertex_error_mm;
+      joint += r.mean_joint_error_mm;
+      ++n;
+    }
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    shape["frames_after_calibration"] = n;
+    shape["mean_vertex_error_mm_after_calibration"] = n ? Finite(vertex / n) : nan;
+    shape["mean_joint_error_mm_after_calibration"] = n ? Finite(joint / n) : nan;
+  }
+  summary["shape"] = shape;
+  WriteFileAtomically(summary_path, summary.dump(2) + "\n");
+}
+
+}  // namespace artex

@@ -1,0 +1,218 @@
+#include "models/shape.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "models/error.h"
+#include "models/so3.h"
+
+namespace artex {
+
+const std::map<std::string, ShapeMode>& ShapeModeNames() {
+  static const std::map<std::string, ShapeMode> kNames = {{"fixed", ShapeMode::kFixed},
+                                                          {"scale", ShapeMode::kScale},
+                                                          {"bones", ShapeMode::kBones},
+                                                          {"bones_girth", ShapeMode::kBonesGirth}};
+  return kNames;
+}
+
+const char* ShapeModeName(ShapeMode mode) {
+  switch (mode) {
+    case ShapeMode::kFixed:
+      return "fixed";
+    case ShapeMode::kScale:
+      return "scale";
+    case ShapeMode::kBones:
+      return "bones";
+    case ShapeMode::kBonesGirth:
+      return "bones_girth";
+  }
+  return "?";
+}
+
+BodyShape BodyShape::Identity(int num_joints) {
+  BodyShape s;
+  s.bone_length = Eigen::VectorXd::Ones(num_joints);
+  s.girth = Eigen::VectorXd::Ones(num_joints);
+  return s;
+}
+
+namespace {
+// Index of the l_ counterpart of an r_ joint (-1 when none or not an r_ joint).
+int MirrorOf(const Template& t, int j) {
+  const std::string& name = t.joints[j].name;
+  if (name.rfind("r_", 0) != 0) return -1;
+  return t.FindJoint("l_" + name.substr(2));
+}
+}  // namespace
+
+ShapeModel::ShapeModel(const Template& base, ShapeMode mode, bool symmetric)
+    : base_(base), mode_(mode) {
+  std::string error;
+  if (!base_.IsValid(&error)) throw Error("ShapeModel: invalid template: " + error);
+  const int nj = base_.num_joints();
+  const int nv = base_.num_vertices();
+  bone_offset_.assign(nj, Eigen::Vector3d::Zero());
+  for (int j = 1; j < nj; ++j) {
+    bone_offset_[j] = base_.joints[j].center - base_.joints[base_.joints[j].parent].center;
+  }
+  // Segment stretch: the child bone along the twist axis, a leaf's own bone, else none.
+  segment_bone_.assign(nj, -1);
+  for (int j = 0; j < nj; ++j) {
+    bool has_child = false;
+    double best = 0.9;
+    for (int c = j + 1; c < nj; ++c) {
+      if (base_.joints[c].parent != j) continue;
+      has_child = true;
+      const double n = bone_offset_[c].norm();
+      if (n <= 0) continue;
+      const double cosine = bone_offset_[c].dot(base_.joints[j].twist_axis) / n;
+      if (cosine >= best) {
+        best = cosine;
+        segment_bone_[j] = c;
+      }
+    }
+    if (!has_child && j > 0) segment_bone_[j] = j;
+  }
+  alpha_.resize(nv);
+  rho_.resize(nv, 3);
+  for (int v = 0; v < nv; ++v) {
+    const int k = base_.vertex_joint[v];
+    const Eigen::Vector3d a = base_.joints[k].twist_axis.normalized();
+    const Eigen::Vector3d o = base_.vertices.row(v).transpose() - base_.joints[k].center;
+    alpha_[v] = a.dot(o);
+    rho_.row(v) = (o - alpha_[v] * a).transpose();
+  }
+  // Reduced parameters.
+  std::vector<std::vector<int>> rows;  // full rows of each reduced parameter
+  if (mode_ == ShapeMode::kScale) {
+    names_.push_back("scale");
+    rows.emplace_back();
+    for (int j = 1; j < nj; ++j) rows.back().push_back(j);
+    for (int j = 0; j < nj; ++j) rows.back().push_back(nj + j);
+  } else if (mode_ == ShapeMode::kBones || mode_ == ShapeMode::kBonesGirth) {
+    const int groups = mode_ == ShapeMode::kBones ? 1 : 2;
+    for (int g = 0; g < groups; ++g) {
+      std::vector<int> index_of(nj, -1);
+      for (int j = g == 0 ? 1 : 0; j < nj; ++j) {
+        const int mirror = symmetric ? MirrorOf(base_, j) : -1;
+        if (mirror >= 0 && index_of[mirror] >= 0) {
+          rows[index_of[mirror]].push_back(g * nj + j);
+          continue;
+        }
+        index_of[j] = static_cast<int>(rows.size());
+        names_.push_back((g == 0 ? "bone:" : "girth:") + base_.joints[j].name);
+        rows.push_back({g * nj + j});
+      }
+    }
+  }
+  expansion_ = Eigen::MatrixXd::Zero(2 * nj, static_cast<int>(names_.size()));
+  for (size_t p = 0; p < rows.size(); ++p) {
+    for (int r : rows[p]) expansion_(r, static_cast<int>(p)) = 1.0;
+  }
+}
+
+BodyShape ShapeModel::Expand(const Eigen::VectorXd& q) const {
+  if (q.size() != num_parameters()) {
+    std::ostringstream msg;
+    msg << "shape parameters: expected " << num_parameters() << " entries (mode "
+        << ShapeModeName(mode_) << "), found " << q.size();
+    throw Error(msg.str());
+  }
+  const int nj = base_.num_joints();
+  const Eigen::VectorXd full =
+      Eigen::VectorXd::Ones(2 * nj) +
+      (q.size() ? Eigen::VectorXd(expansion_ * q) : Eigen::VectorXd::Zero(2 * nj));
+  BodyShape s;
+  s.bone_length = full.head(nj);
+  s.bone_length[0] = 1.0;
+  s.girth = full.tail(nj);
+  return s;
+}
+
+void ShapeModel::RestGeometry(const Eigen::VectorXd& q, Eigen::MatrixX3d* centers,
+                              Eigen::MatrixX3d* vertices) const {
+  const BodyShape s = Expand(q);
+  const int nj = base_.num_joints();
+  centers->resize(nj, 3);
+  centers->row(0) = base_.joints[0].center.transpose();
+  for (int j = 1; j < nj; ++j) {
+    centers->row(j) =
+        centers->row(base_.joints[j].parent) + s.bone_length[j] * bone_offset_[j].transpose();
+  }
+  const int nv = base_.num_vertices();
+  vertices->resize(nv, 3);
+  for (int v = 0; v < nv; ++v) {
+    const int k = base_.vertex_joint[v];
+    const int parent = std::max(0, base_.joints[k].parent);
+    const double w = base_.lbs_weight[v];
+    const double g = w * s.girth[k] + (1.0 - w) * s.girth[k == 0 ? 0 : parent];
+    const double l = segment_bone_[k] >= 0 ? s.bone_length[segment_bone_[k]] : 1.0;
+    const Eigen::Vector3d a = base_.joints[k].twist_axis.normalized();
+    vertices->row(v) = centers->row(k) + (l * alpha_[v]) * a.transpose() + g * rho_.row(v);
+  }
+}
+
+Template ShapeModel::Apply(const Eigen::VectorXd& q) const {
+  Template t = base_;
+  Eigen::MatrixX3d centers;
+  RestGeometry(q, &centers, &t.vertices);
+  for (int j = 0; j < t.num_joints(); ++j) t.joints[j].center = centers.row(j).transpose();
+  return t;
+}
+
+void ShapeModel::PosedJacobian(const Pose& pose, const std::vector<int>& vertices,
+                               Eigen::MatrixXd* jacobian) const {
+  const int nj = base_.num_joints();
+  if (pose.num_joints() != nj) {
+    std::ostringstream msg;
+    msg << "ShapeModel::PosedJacobian: pose has " << pose.num_joints() << " joints, expected "
+        << nj;
+    throw Error(msg.str());
+  }
+  // Per joint: W_j = R0 Q_parent(j) (Q: chain linear part), swing R^LBS and twist angle.
+  std::vector<Eigen::Matrix3d> chain(nj), world(nj), swing(nj);
+  std::vector<double> twist(nj);
+  for (int j = 0; j < nj; ++j) {
+    const int p = base_.joints[j].parent;
+    const Eigen::Matrix3d parent_linear = p >= 0 ? chain[p] : Eigen::Matrix3d::Identity();
+    chain[j] = parent_linear * pose.joint_rotations[j];
+    world[j] = pose.scale * pose.rotation * parent_linear;
+    const SwingTwist st =
+        DecomposeSwingTwist(pose.joint_rotations[j], base_.joints[j].twist_axis.normalized());
+    swing[j] = st.swing;
+    twist[j] = st.twist_angle;
+  }
+  const int n = vertices.empty() ? base_.num_vertices() : static_cast<int>(vertices.size());
+  Eigen::Matrix<double, 3, Eigen::Dynamic> full(3, 2 * nj);
+  jacobian->resize(3 * n, num_parameters());
+  for (int i = 0; i < n; ++i) {
+    const int v = vertices.empty() ? i : vertices[i];
+    const int k = base_.vertex_joint[v];
+    const double w = base_.lbs_weight[v];
+    const double tau = base_.slerp_tau[v];
+    const Eigen::Vector3d a = base_.joints[k].twist_axis.normalized();
+    const Eigen::Vector3d rho = rho_.row(v).transpose();
+    full.setZero();
+    // Posed joint centre c_k = c_root + sum over the chain of s0 W_m bone_length[m] e_m.
+    for (int m = k; m > 0; m = base_.joints[m].parent) full.col(m) = world[m] * bone_offset_[m];
+    // v' = c_k + s0 W_k (w R^LBS + (1 - w) 1) (L alpha a + g Rot(a, tau theta) rho).
+    const Eigen::Matrix3d g_map =
+        world[k] * (w * swing[k] + (1.0 - w) * Eigen::Matrix3d::Identity());
+    if (segment_bone_[k] >= 0) full.col(segment_bone_[k]) += g_map * (alpha_[v] * a);
+    const double angle = tau * twist[k];
+    const Eigen::Vector3d r = std::cos(angle) * rho + std::sin(angle) * a.cross(rho);
+    const Eigen::Vector3d dg = g_map * r;
+    if (k == 0) {
+      full.col(nj) += dg;
+    } else {
+      full.col(nj + k) += w * dg;
+      full.col(nj + base_.joints[k].parent) += (1.0 - w) * dg;
+    }
+    full.col(0).setZero();  // the root's bone length is unused
+    jacobian->middleRows<3>(3 * i) = full * expansion_;
+  }
+}
+
+}  // namespace artex

@@ -1,0 +1,277 @@
+#include "solvers/shape_estimator.h"
+
+#include <Eigen/Cholesky>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+
+#include "models/error.h"
+#include "models/normals.h"
+#include "models/skinning.h"
+
+namespace artex {
+
+bool ShapeOptions::IsValid(std::string* error) const {
+  std::ostringstream msg;
+  const auto positive = [](double x) { return std::isfinite(x) && x > 0.0; };
+  if (calibration_frames < 1) {
+    msg << "shape.calibration_frames: expected >= 1, found " << calibration_frames;
+  } else if (calibration_stride < 1) {
+    msg << "shape.calibration_stride: expected >= 1, found " << calibration_stride;
+  } else if (calibration_rounds < 1) {
+    msg << "shape.calibration_rounds: expected >= 1, found " << calibration_rounds;
+  } else if (radii.empty() || !std::all_of(radii.begin(), radii.end(), positive)) {
+    msg << "shape.radii: expected a non-empty list of radii > 0 (m)";
+  } else if (iterations_per_stage < 1) {
+    msg << "shape.iterations_per_stage: expected >= 1, found " << iterations_per_stage;
+  } else if (!(over_relaxation >= 1.0 && over_relaxation < 2.0)) {
+    msg << "shape.over_relaxation: expected a value in [1, 2), found " << over_relaxation;
+  } else if (!(visibility_min_cos >= -1.0 && visibility_min_cos < 1.0)) {
+    msg << "shape.visibility_min_cos: expected a value in [-1, 1), found " << visibility_min_cos;
+  } else if (!(std::isfinite(girth_max_radius) && girth_max_radius > 0.0)) {
+    msg << "shape.girth_max_radius: expected a finite value > 0 (m), found " << girth_max_radius;
+  } else if (!(std::isfinite(prior_weight) && prior_weight >= 0.0)) {
+    msg << "shape.prior_weight: expected a finite value >= 0, found " << prior_weight;
+  } else if (!(std::isfinite(pose_damping) && pose_damping >= 0.0)) {
+    msg << "shape.pose_damping: expected a finite value >= 0, found " << pose_damping;
+  } else if (!(positive(bone_min) && bone_min <= 1.0 && std::isfinite(bone_max) &&
+               bone_max >= 1.0)) {
+    msg << "shape.bone_min/bone_max: expected 0 < bone_min <= 1 <= bone_max, found " << bone_min
+        << ", " << bone_max;
+  } else if (!(positive(girth_min) && girth_min <= 1.0 && std::isfinite(girth_max) &&
+               girth_max >= 1.0)) {
+    msg << "shape.girth_min/girth_max: expected 0 < girth_min <= 1 <= girth_max, found "
+        << girth_min << ", " << girth_max;
+  } else if (refine_every < 0) {
+    msg << "shape.refine_every: expected >= 0 (0: frozen), found " << refine_every;
+  } else if (!(std::isfinite(refine_prior_weight) && refine_prior_weight >= 0.0)) {
+    msg << "shape.refine_prior_weight: expected a finite value >= 0, found " << refine_prior_weight;
+  } else if (max_fit_vertices < 0) {
+    msg << "shape.max_fit_vertices: expected >= 0 (0: all), found " << max_fit_vertices;
+  } else if (!estep.IsValid(error)) {
+    if (error) *error = "shape.estep: " + *error;
+    return false;
+  }
+  if (msg.str().empty()) return true;
+  if (error) *error = msg.str();
+  return false;
+}
+
+namespace {
+ShapeOptions Checked(const ShapeOptions& options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw Error(error);
+  return options;
+}
+}  // namespace
+
+ShapeEstimator::ShapeEstimator(const Template& base, const ShapeOptions& options)
+    : options_(Checked(options)), model_(base, options.mode, options.symmetric) {
+  q_ = Eigen::VectorXd::Zero(model_.num_parameters());
+  const int v = base.num_vertices();
+  const int stride = options_.max_fit_vertices > 0 && v > options_.max_fit_vertices
+                         ? (v + options_.max_fit_vertices - 1) / options_.max_fit_vertices
+                         : 1;
+  for (int i = 0; i < v; i += stride) fit_vertices_.push_back(i);
+}
+
+ShapeEstimator::~ShapeEstimator() = default;
+
+void ShapeEstimator::ClampToBounds(Eigen::VectorXd* q) const {
+  const int nj = model_.base().num_joints();
+  const Eigen::MatrixXd& e = model_.expansion();
+  for (int p = 0; p < q->size(); ++p) {
+    // A parameter moves girth rows only (bones_girth's girths) or bone rows (also kScale).
+    bool bone = false;
+    for (int r = 0; r < nj; ++r) bone = bone || e(r, p) != 0.0;
+    const double lo = (bone ? options_.bone_min : options_.girth_min) - 1.0;
+    const double hi = (bone ? options_.bone_max : options_.girth_max) - 1.0;
+    (*q)[p] = std::clamp((*q)[p], lo, hi);
+  }
+}
+
+ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
+                                        std::vector<Pose>* poses, const Eigen::VectorXd& q_ref,
+                                        double prior_weight) {
+  const auto start = std::chrono::steady_clock::now();
+  ShapeSolveSummary summary;
+  const int nf = static_cast<int>(scans.size());
+  summary.frames = nf;
+  if (nf == 0 || static_cast<int>(poses->size()) != nf || model_.num_parameters() == 0) {
+    return summary;
+  }
+  const Template& base = model_.base();
+  const int nq = model_.num_parameters();
+  const int np = base.num_pose_parameters();
+  const int dim = nq + nf * np;
+  const int n = static_cast<int>(fit_vertices_.size());
+  std::vector<std::unique_ptr<EStep>> esteps;
+  EStepOptions estep_options = options_.estep;
+  estep_options.mode = EStepMode::kRadius;
+  for (const Scan* s : scans) esteps.push_back(std::make_unique<EStep>(*s, estep_options));
+  const Eigen::MatrixXd ete = model_.expansion().transpose() * model_.expansion();
+
+  SkinningOptions serial;
+  Eigen::MatrixX3d posed, normals, sub_posed(n, 3), sub_normals(n, 3);
+  SkinningJacobian jacobian;
+  Eigen::MatrixXd shape_jacobian;
+  CorrespondenceTargets targets, self_targets;
+  // Columns of q that move girths only (held at wide radii).
+  std::vector<int> girth_columns;
+  for (int p = 0; p < nq; ++p) {
+    if (model_.expansion().col(p).head(base.num_joints()).isZero()) girth_columns.push_back(p);
+  }
+  bool first = true;
+  for (double radius : options_.radii) {
+    for (int it = 0; it < options_.iterations_per_stage; ++it) {
+      const Template shaped = model_.Apply(q_);
+      const Skinning skinning(shaped, serial);
+      Eigen::MatrixXd h = Eigen::MatrixXd::Zero(dim, dim);
+      Eigen::VectorXd g = Eigen::VectorXd::Zero(dim);
+      double cost = 0.0;
+      for (int f = 0; f < nf; ++f) {
+        const Pose& pose = (*poses)[f];
+        skinning.ApplyWithJacobian(pose, &posed, &jacobian);
+        ComputeVertexNormals(posed, shaped.triangles, &normals);
+        for (int i = 0; i < n; ++i) {
+          sub_posed.row(i) = posed.row(fit_vertices_[i]);
+          sub_normals.row(i) = normals.row(fit_vertices_[i]);
+        }
+        PosedTemplateView view;
+        view.vertices = &sub_posed;
+        view.normals = &sub_normals;
+        esteps[f]->Compute(view, radius, &targets);
+        const double total = targets.total_weight();
+        if (!(total > 0.0)) continue;
+        if (options_.bias_correction) {
+          Scan self;
+          std::vector<int> visible;
+          for (int v = 0; v < posed.rows(); ++v) {
+            const Eigen::Vector3d x = posed.row(v).transpose();
+            if (!has_camera_ || normals.row(v).dot((camera_center_ - x).normalized()) >
+                                    options_.visibility_min_cos) {
+              visible.push_back(v);
+            }
+          }
+          const int nv = static_cast<int>(visible.size());
+          self.points.resize(nv, 3);
+          self.normals.resize(nv, 3);
+          for (int k = 0; k < nv; ++k) {
+            self.points.row(k) = posed.row(visible[k]);
+            self.normals.row(k) = normals.row(visible[k]);
+          }
+          self.colors = Eigen::MatrixX3d::Zero(nv, 3);
+          self.color_valid.assign(nv, 0);
+          EStep self_estep(self, estep_options);
+          self_estep.Compute(view, radius, &self_targets);
+          for (int i = 0; i < n; ++i) {
+            if (targets.weight[i] > 0.0 && self_targets.weight[i] > 0.0) {
+              targets.mean.row(i) -= self_targets.mean.row(i) - sub_posed.row(i);
+            }
+          }
+        }
+        const double c = 1.0 / total;
+        model_.PosedJacobian(pose, fit_vertices_, &shape_jacobian);
+        const int offset = nq + f * np;
+        std::vector<int> index;
+        Eigen::Matrix<double, 3, Eigen::Dynamic> local;
+        for (int i = 0; i < n; ++i) {
+          const double w = c * targets.weight[i];
+          if (!(w > 0.0)) continue;
+          const int v = fit_vertices_[i];
+          const std::vector<int>& cols = jacobian.Columns(v);
+          const auto block = jacobian.Block(v);
+          const int m = nq + static_cast<int>(cols.size()) - 1;  // the scale column is held
+          local.resize(3, m);
+          index.resize(m);
+          local.leftCols(nq) = shape_jacobian.middleRows<3>(3 * i);
+          for (int p = 0; p < nq; ++p) index[p] = p;
+          for (size_t k = 1; k < cols.size(); ++k) {
+            local.col(nq + k - 1) = block.col(k);
+            index[nq + k - 1] = offset + cols[k];
+          }
+          const Eigen::Vector3d e = (posed.row(v) - targets.mean.row(i)).transpose();
+          const Eigen::MatrixXd jtj = w * local.transpose() * local;
+          const Eigen::VectorXd jte = w * local.transpose() * e;
+          for (int a = 0; a < m; ++a) {
+            g[index[a]] += jte[a];
+            for (int b = 0; b < m; ++b) h(index[a], index[b]) += jtj(a, b);
+          }
+          cost += w * e.squaredNorm();
+        }
+      }
+      const Eigen::VectorXd dq = q_ - q_ref;
+      cost += prior_weight * dq.dot(ete * dq);
+      h.topLeftCorner(nq, nq) += prior_weight * ete;
+      g.head(nq) += prior_weight * ete * dq;
+      for (int f = 0; f < nf; ++f) {
+        const int offset = nq + f * np;
+        for (int p = 1; p < np; ++p) h(offset + p, offset + p) += options_.pose_damping;
+        h(offset + kScaleIndex, offset + kScaleIndex) = 1.0;  // held: no data, no update
+        g[offset + kScaleIndex] = 0.0;
+      }
+      if (radius > options_.girth_max_radius) {
+        for (int p : girth_columns) {
+          h.row(p).setZero();
+          h.col(p).setZero();
+          h(p, p) = 1.0;
+          g[p] = 0.0;
+        }
+      }
+      for (int d = 0; d < dim; ++d) h(d, d) += 1e-4 * h(d, d) + 1e-12;  // Marquardt
+      if (!std::isfinite(cost) || !g.allFinite()) break;
+      const Eigen::VectorXd step = -options_.over_relaxation * h.ldlt().solve(g);
+      if (!step.allFinite()) break;
+      if (first) summary.initial_cost = cost;
+      first = false;
+      summary.final_cost = cost;
+        std::fprintf(stderr, "shape solve r=%g it=%d cost=%g total_w=%g q0=%g\n", radius, it, cost,
+                     0.0, q_.size() ? q_[0] : 0.0);
+      ++summary.iterations;
+      q_ += step.head(nq);
+      ClampToBounds(&q_);
+      for (int f = 0; f < nf; ++f) (*poses)[f].Retract(step.segment(nq + f * np, np));
+      if (step.cwiseAbs().maxCoeff() < 1e-5) break;
+    }
+  }
+  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return summary;
+}
+
+bool ShapeEstimator::AddFrame(const Scan& scan, const Pose& pose, bool scale_settled,
+                              Pose* refined) {
+  if (!enabled()) return false;
+  if (!calibrated_) {
+    if (!scale_settled) return false;
+    if (accepted_++ % options_.calibration_stride != 0) return false;
+    scans_.push_back(scan);
+    poses_.push_back(pose);
+    if (static_cast<int>(scans_.size()) < options_.calibration_frames) return false;
+    std::vector<const Scan*> pointers;
+    for (const Scan& s : scans_) pointers.push_back(&s);
+    const ShapeSolveSummary round =
+        Solve(pointers, &poses_, Eigen::VectorXd::Zero(q_.size()), options_.prior_weight);
+    if (rounds_done_ == 0) calibration_.initial_cost = round.initial_cost;
+    calibration_.final_cost = round.final_cost;
+    calibration_.frames += round.frames;
+    calibration_.iterations += round.iterations;
+    calibration_.seconds += round.seconds;
+    calibrated_ = ++rounds_done_ >= options_.calibration_rounds;
+    accepted_ = 0;
+    if (refined) *refined = poses_.back();
+    scans_.clear();
+    poses_.clear();
+    return true;
+  }
+  if (options_.refine_every <= 0 || ++after_ % options_.refine_every != 0) return false;
+  std::vector<Pose> one = {pose};
+  const Eigen::VectorXd reference = q_;
+  const ShapeSolveSummary s = Solve({&scan}, &one, reference, options_.refine_prior_weight);
+  ++refinements_;
+  refine_seconds_ += s.seconds;
+  if (refined) *refined = one[0];
+  return true;
+}
+
+}  // namespace artex

@@ -1,0 +1,138 @@
+// Subject shape estimation while tracking (docs/fitting.md "Subject shape"): the template's
+// shape parameters (models/shape.h) are estimated jointly with the poses of a calibration
+// phase, the first `calibration_frames` accepted frames (every `calibration_stride`-th, for
+// several poses), by Gauss-Newton over the same one-to-many correspondence energy the tracker
+// minimises (solvers/estep.h E-steps, radius schedule, data term normalised per frame):
+//   E(q, delta_1..N) = sum_f (1 / sum_t P_ft) sum_t P_ft |S(v_t; q, theta_f (+) delta_f) - mu_ft|^2
+//                      + prior_weight |E (q - q_ref)|^2 + pose_damping sum_f |delta_f|^2,
+// q clamped to the bounds after every step. The global scale s0 of each pose is held (it is the
+// tracker's estimate; the shape is relative to it). Afterwards the shape is frozen, or refined
+// every `refine_every` frames by the same solve on that one frame with a strong prior
+// (refine_prior_weight) towards the current estimate.
+#pragma once
+
+#include <Eigen/Core>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "models/pose.h"
+#include "models/shape.h"
+#include "models/template.h"
+#include "sensors/scan.h"
+#include "solvers/estep.h"
+
+namespace artex {
+
+struct ShapeOptions {
+  // fixed: the template as given (the paper; no estimation); scale: one uniform factor;
+  // bones: per-bone lengths; bones_girth: per-bone lengths and per-segment girth.
+  ShapeMode mode = ShapeMode::kFixed;
+  bool symmetric = true;       // l_/r_ joints share their parameters
+  int calibration_frames = 5;  // accepted frames per calibration round (>= 1)
+  // Every n-th accepted frame (with a settled global scale) is a calibration frame: poses
+  // further apart constrain the bone lengths better. >= 1.
+  int calibration_stride = 2;
+  // Calibration rounds: after a round's solve the tracker continues with the new shape and the
+  // next round collects fresh frames (tracked closer to the truth, so the solve starts nearer
+  // its optimum) and solves again from the current shape. >= 1.
+  int calibration_rounds = 3;
+  // Radius E-step schedule (m) of the joint solve, coarse to fine, and GN iterations per stage.
+  std::vector<double> radii = {0.06, 0.04, 0.03};
+  int iterations_per_stage = 8;
+  // Over-relaxed EM (as EMFitterOptions::over_relaxation): the GN step is scaled by this
+  // factor; the correspondences pull tangentially (along the limbs, where the bone lengths act)
+  // only weakly per E-step, plain EM (1) creeps there. In [1, 2).
+  double over_relaxation = 1.7;
+  // The radius E-step's mean mu_t of a curved surface lies inside it (chord means: ~5 mm on a
+  // 3 cm limb at radius 3 cm), which biases girths and lengths low. With this on, the bias is
+  // measured on the posed shaped template itself (its E-step against its own vertices, zero
+  // for a perfect fit without the correction) and subtracted from mu_t.
+  bool bias_correction = true;
+  // The camera sees one side of the body and loses points at grazing angles: the self E-step
+  // uses only the template vertices facing the camera (cosine of the normal with the direction
+  // to the camera above this) when the camera centre is known (SetCameraCenter), else all.
+  double visibility_min_cos = 0.3;
+  // Girths are held at stages with a radius above this (m): wide radii bias them most.
+  double girth_max_radius = 0.04;
+  double prior_weight = 1e-5;             // towards the template (cost m^2 per unit^2 of a factor)
+  double pose_damping = 1e-5;             // per frame on the pose update (per unit^2 / rad^2 / m^2)
+  double bone_min = 0.7, bone_max = 1.4;  // bone length factor bounds
+  double girth_min = 0.6, girth_max = 1.6;  // girth factor bounds
+  // After calibration: refine the shape on every n-th accepted frame (0: frozen).
+  int refine_every = 0;
+  double refine_prior_weight = 1e-2;  // towards the current estimate
+  int max_fit_vertices = 3000;        // template vertices in the solve (voxel subset; 0: all)
+  EStepOptions estep;                 // the correspondence weights (colour term unused)
+
+  bool IsValid(std::string* error) const;
+};
+
+struct ShapeSolveSummary {
+  int frames = 0;
+  int iterations = 0;
+  double initial_cost = 0.0;  // data + priors at the start (per frame mean of m^2)
+  double final_cost = 0.0;
+  double seconds = 0.0;
+};
+
+class ShapeEstimator {
+ public:
+  // Throws artex::Error on invalid options or template.
+  ShapeEstimator(const Template& base, const ShapeOptions& options);
+  ~ShapeEstimator();
+
+  const ShapeOptions& options() const { return options_; }
+  const ShapeModel& model() const { return model_; }
+  bool enabled() const { return options_.mode != ShapeMode::kFixed; }
+  // True once every calibration round has been solved.
+  bool calibrated() const { return calibrated_; }
+  int rounds_done() const { return rounds_done_; }
+  const Eigen::VectorXd& parameters() const { return q_; }  // Q entries
+  BodyShape shape() const { return model_.Expand(q_); }
+  Template SubjectTemplate() const { return model_.Apply(q_); }
+
+  // Depth camera centre in the tracking world frame (for the bias correction's visibility).
+  void SetCameraCenter(const Eigen::Vector3d& center) {
+    camera_center_ = center;
+    has_camera_ = true;
+  }
+
+  // Feeds an accepted frame (scan and fitted pose, world frame). scale_settled: the tracker's
+  // global scale is final (frames before are no calibration frames). Returns true when the
+  // shape changed (calibration solved, or refined): the caller swaps SubjectTemplate() in.
+  // *pose (optional) receives the frame's pose refined with the new shape.
+  bool AddFrame(const Scan& scan, const Pose& pose, bool scale_settled, Pose* refined = nullptr);
+
+  // The joint solve over the given frames from the current shape, prior towards q_ref with
+  // `prior_weight`; updates parameters() and *poses. Public for tests.
+  ShapeSolveSummary Solve(const std::vector<const Scan*>& scans, std::vector<Pose>* poses,
+                          const Eigen::VectorXd& q_ref, double prior_weight);
+
+  // Of all rounds: frames and iterations summed, the first round's initial and the last
+  // round's final cost, seconds summed.
+  const ShapeSolveSummary& calibration_summary() const { return calibration_; }
+  int refinements() const { return refinements_; }
+  double refine_seconds() const { return refine_seconds_; }
+
+ private:
+  void ClampToBounds(Eigen::VectorXd* q) const;
+
+  ShapeOptions options_;
+  ShapeModel model_;
+  Eigen::Vector3d camera_center_ = Eigen::Vector3d::Zero();
+  bool has_camera_ = false;
+  std::vector<int> fit_vertices_;
+  Eigen::VectorXd q_;
+  std::vector<Scan> scans_;
+  std::vector<Pose> poses_;
+  int accepted_ = 0;  // frames seen with a settled scale
+  int after_ = 0;     // frames seen after calibration
+  bool calibrated_ = false;
+  int rounds_done_ = 0;
+  ShapeSolveSummary calibration_;
+  int refinements_ = 0;
+  double refine_seconds_ = 0.0;
+};
+
+}  // namespace artex

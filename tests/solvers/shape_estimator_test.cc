@@ -1,0 +1,165 @@
+#include "solvers/shape_estimator.h"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "models/error.h"
+#include "models/normals.h"
+#include "models/skinning.h"
+#include "models/so3.h"
+#include "models/template_generator.h"
+
+namespace artex {
+namespace {
+
+const Template& Coarse() {
+  static const Template t = [] {
+    BodyShapeOptions o;
+    o.resolution = 0;
+    return GenerateTemplate(o);
+  }();
+  return t;
+}
+
+Pose RandomPose(int joints, std::mt19937* rng, double spread) {
+  std::normal_distribution<double> n(0.0, spread);
+  Pose p = Pose::Identity(joints);
+  p.translation = Eigen::Vector3d(0.0, 0.0, 2.5);
+  p.rotation = ExpSO3(Eigen::Vector3d(0.0, n(*rng), 0.0));
+  for (auto& r : p.joint_rotations) r = ExpSO3(Eigen::Vector3d(n(*rng), n(*rng), n(*rng)));
+  return p;
+}
+
+// A noise-free "scan": every vertex of the posed subject with its normal.
+Scan ScanOf(const Template& subject, const Pose& pose) {
+  Scan scan;
+  Skinning(subject).Apply(pose, &scan.points);
+  ComputeVertexNormals(scan.points, subject.triangles, &scan.normals);
+  scan.colors = Eigen::MatrixX3d::Zero(scan.points.rows(), 3);
+  scan.color_valid.assign(scan.points.rows(), 0);
+  return scan;
+}
+
+ShapeOptions Options(ShapeMode mode) {
+  ShapeOptions o;
+  o.mode = mode;
+  o.prior_weight = 1e-8;
+  o.max_fit_vertices = 0;
+  return o;
+}
+
+// Known shape parameters are recovered from noise-free scans of a subject with that shape,
+// jointly with (perturbed) poses, starting from the template.
+TEST(ShapeEstimatorTest, RecoversKnownShapeFromNoiseFreeScans) {
+  const Template& t = Coarse();
+  for (ShapeMode mode : {ShapeMode::kBones, ShapeMode::kBonesGirth}) {
+    ShapeEstimator estimator(t, Options(mode));
+    const ShapeModel& model = estimator.model();
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> u(-0.12, 0.12);
+    Eigen::VectorXd truth(model.num_parameters());
+    for (int i = 0; i < truth.size(); ++i) truth[i] = u(rng);
+    const Template subject = model.Apply(truth);
+    std::vector<Scan> scans;
+    std::vector<Pose> poses;
+    std::normal_distribution<double> noise(0.0, 0.03);
+    for (int f = 0; f < 4; ++f) {
+      const Pose pose = RandomPose(t.num_joints(), &rng, 0.35);
+      scans.push_back(ScanOf(subject, pose));
+      Eigen::VectorXd d = Eigen::VectorXd::Zero(pose.num_parameters());
+      for (int i = 1; i < d.size(); ++i) d[i] = noise(rng);
+      poses.push_back(pose.Retracted(d));  // the tracker's pose, a little off
+    }
+    std::vector<const Scan*> pointers;
+    for (const Scan& s : scans) pointers.push_back(&s);
+    const ShapeSolveSummary summary =
+        estimator.Solve(pointers, &poses, Eigen::VectorXd::Zero(truth.size()), 1e-8);
+    EXPECT_GT(summary.iterations, 0);
+    EXPECT_LT(summary.final_cost, 0.2 * summary.initial_cost);
+    // Bone lengths along the body are observed only through the ends and bends of the limbs
+    // (the correspondences pull little along a surface): a few per cent remain on the least
+    // observable parameters of this coarse mesh.
+    const Eigen::VectorXd error = (estimator.parameters() - truth).cwiseAbs();
+    EXPECT_LT(error.mean(), 0.01) << ShapeModeName(mode) << ": initial mean error "
+                                  << truth.cwiseAbs().mean();
+    EXPECT_LT(error.maxCoeff(), 0.04) << ShapeModeName(mode);
+    // The fitted surface: mean vertex distance to the truth, against the template's.
+    Eigen::MatrixX3d ours, before;
+    Skinning(estimator.SubjectTemplate()).Apply(poses[0], &ours);
+    Skinning(t).Apply(poses[0], &before);
+    EXPECT_GT((before - scans[0].points).rowwise().norm().mean(), 5e-3);
+    EXPECT_LT((ours - scans[0].points).rowwise().norm().mean(), 1.5e-3) << ShapeModeName(mode);
+  }
+}
+
+TEST(ShapeEstimatorTest, CalibratesAfterTheConfiguredFramesThenFreezes) {
+  const Template& t = Coarse();
+  ShapeOptions o = Options(ShapeMode::kScale);
+  o.calibration_frames = 3;
+  o.calibration_stride = 2;
+  o.calibration_rounds = 1;
+  o.radii = {0.03};
+  o.iterations_per_stage = 12;
+  ShapeEstimator estimator(t, o);
+  const Template subject = estimator.model().Apply(Eigen::VectorXd::Constant(1, 0.05));
+  std::mt19937 rng(5);
+  int changed_at = -1;
+  for (int f = 0; f < 9; ++f) {
+    const Pose pose = RandomPose(t.num_joints(), &rng, 0.2);
+    Pose refined;
+    // The first frame has no settled scale: it is no calibration frame.
+    if (estimator.AddFrame(ScanOf(subject, pose), pose, /*scale_settled=*/f > 0, &refined)) {
+      EXPECT_EQ(changed_at, -1) << "frozen after calibration (refine_every 0)";
+      changed_at = f;
+      EXPECT_TRUE(refined.AllFinite());
+    }
+  }
+  EXPECT_EQ(changed_at, 5);  // frames 1, 3, 5
+  EXPECT_TRUE(estimator.calibrated());
+  EXPECT_EQ(estimator.calibration_summary().frames, 3);
+  EXPECT_NEAR(estimator.parameters()[0], 0.05, 0.01);
+}
+
+TEST(ShapeEstimatorTest, FixedModeNeverChangesTheTemplate) {
+  const Template& t = Coarse();
+  ShapeEstimator estimator(t, ShapeOptions());
+  EXPECT_FALSE(estimator.enabled());
+  EXPECT_EQ(estimator.parameters().size(), 0);
+  std::mt19937 rng(2);
+  for (int f = 0; f < 12; ++f) {
+    const Pose pose = RandomPose(t.num_joints(), &rng, 0.2);
+    EXPECT_FALSE(estimator.AddFrame(ScanOf(t, pose), pose, true));
+  }
+  EXPECT_LT((estimator.SubjectTemplate().vertices - t.vertices).cwiseAbs().maxCoeff(), 1e-15);
+}
+
+TEST(ShapeEstimatorTest, BoundsHoldAndOptionsAreChecked) {
+  const Template& t = Coarse();
+  ShapeOptions o = Options(ShapeMode::kScale);
+  o.bone_max = 1.02;
+  o.girth_max = 1.02;
+  o.radii = {0.05, 0.03};
+  ShapeEstimator estimator(t, o);
+  const Template subject = estimator.model().Apply(Eigen::VectorXd::Constant(1, 0.1));
+  std::mt19937 rng(9);
+  std::vector<Scan> scans;
+  std::vector<Pose> poses;
+  for (int f = 0; f < 2; ++f) {
+    poses.push_back(RandomPose(t.num_joints(), &rng, 0.2));
+    scans.push_back(ScanOf(subject, poses.back()));
+  }
+  estimator.Solve({&scans[0], &scans[1]}, &poses, Eigen::VectorXd::Zero(1), 1e-8);
+  EXPECT_NEAR(estimator.parameters()[0], 0.02, 1e-12);  // pushed to the bound
+  ShapeOptions bad;
+  bad.calibration_frames = 0;
+  EXPECT_THROW(ShapeEstimator(t, bad), Error);
+  bad = ShapeOptions();
+  bad.bone_min = 1.2;
+  std::string why;
+  EXPECT_FALSE(bad.IsValid(&why));
+  EXPECT_NE(why.find("bone_min"), std::string::npos) << why;
+}
+
+}  // namespace
+}  // namespace artex
