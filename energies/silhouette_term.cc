@@ -52,8 +52,7 @@ void FindSilhouetteViolations(const SilhouetteMap& map, const Eigen::MatrixX3d& 
       ++targets->violations;
       continue;
     }
-    const float surface = i < static_cast<int>(map.subject_depth.size()) ? map.subject_depth[i]
-                                                                          : 0.0f;
+    const float surface = map.subject_depth[i];
     if (options.front_weight > 0.0 && surface > 0.0f && z < surface - depth_margin) {
       targets->depth_weight[t] = options.front_weight;
       targets->target.row(t) = map.camera.Unproject(uv.x(), uv.y(), surface).transpose();

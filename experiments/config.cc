@@ -143,30 +143,31 @@ void Config::Get(const std::string& key, std::string* value) const {
   *value = Convert<std::string>(Lookup(impl_->node, key), Path(key), "a string");
 }
 
-void Config::Get(const std::string& key, std::vector<double>* value) const {
-  if (!Has(key)) return;
-  const YAML::Node n = Lookup(impl_->node, key);
-  if (!n.IsSequence()) throw Error(Path(key) + ": expected a list of numbers");
-  std::vector<double> out;
+namespace {
+// A YAML sequence at `path` whose items are each Convert<T>-ed ("path[i]: expected ...").
+template <typename T>
+std::vector<T> ConvertList(const YAML::Node& n, const std::string& path, const char* list,
+                           const char* item) {
+  if (!n.IsSequence()) throw Error(path + ": expected " + list);
+  std::vector<T> out;
   for (std::size_t i = 0; i < n.size(); ++i) {
     std::ostringstream p;
-    p << Path(key) << "[" << i << "]";
-    out.push_back(Convert<double>(n[i], p.str(), "a number"));
+    p << path << "[" << i << "]";
+    out.push_back(Convert<T>(n[i], p.str(), item));
   }
-  *value = out;
+  return out;
+}
+}  // namespace
+
+void Config::Get(const std::string& key, std::vector<double>* value) const {
+  if (!Has(key)) return;
+  *value = ConvertList<double>(Lookup(impl_->node, key), Path(key), "a list of numbers", "a number");
 }
 
 void Config::Get(const std::string& key, std::vector<std::string>* value) const {
   if (!Has(key)) return;
-  const YAML::Node n = Lookup(impl_->node, key);
-  if (!n.IsSequence()) throw Error(Path(key) + ": expected a list of names");
-  std::vector<std::string> out;
-  for (std::size_t i = 0; i < n.size(); ++i) {
-    std::ostringstream p;
-    p << Path(key) << "[" << i << "]";
-    out.push_back(Convert<std::string>(n[i], p.str(), "a name"));
-  }
-  *value = out;
+  *value = ConvertList<std::string>(Lookup(impl_->node, key), Path(key), "a list of names",
+                                    "a name");
 }
 
 void Config::CheckKeys(const std::vector<std::string>& valid) const {

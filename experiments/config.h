@@ -42,9 +42,7 @@ class Config {
     if (!Has(key)) return;
     std::string s;
     Get(key, &s);
-    auto it = choices.find(s);
-    if (it == choices.end()) ThrowChoice(key, s, choices);
-    *value = it->second;
+    *value = Choice(key, s, choices);
   }
   // A list of names, each mapped through `choices` (an unknown one lists the valid ones).
   template <typename Enum>
@@ -54,11 +52,7 @@ class Config {
     std::vector<std::string> names;
     Get(key, &names);
     std::vector<Enum> out;
-    for (const std::string& s : names) {
-      auto it = choices.find(s);
-      if (it == choices.end()) ThrowChoice(key, s, choices);
-      out.push_back(it->second);
-    }
+    for (const std::string& s : names) out.push_back(Choice(key, s, choices));
     *value = out;
   }
   // Throws when the mapping holds a key not in `valid`, listing the valid keys.
@@ -69,6 +63,14 @@ class Config {
   std::string ToYaml() const;  // for writing the resolved configuration
 
  private:
+  // `name` mapped through `choices`; an unknown name throws, listing the valid ones.
+  template <typename Enum>
+  Enum Choice(const std::string& key, const std::string& name,
+              const std::map<std::string, Enum>& choices) const {
+    auto it = choices.find(name);
+    if (it == choices.end()) ThrowChoice(key, name, choices);
+    return it->second;
+  }
   template <typename Enum>
   [[noreturn]] void ThrowChoice(const std::string& key, const std::string& found,
                                 const std::map<std::string, Enum>& choices) const {
