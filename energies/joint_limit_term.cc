@@ -3,6 +3,7 @@
 #include <cmath>
 #include <sstream>
 
+#include "models/error.h"
 #include "models/so3.h"
 
 namespace artex {
@@ -29,6 +30,94 @@ bool JointLimitOptions::IsValid(int num_joints, std::string* error) const {
   }
   if (error) *error = msg.str();
   return false;
+}
+
+namespace {
+
+// Degrees, rotation-vector components of a left (or central) joint in the rest frame. About
+// +x: positive bends the segment's far end towards -z for a downward segment (hip extension,
+// knee flexion) and towards +z for an upward one (spine, neck and head bending forwards).
+// About +z: positive moves a downward left segment outwards (hip abduction). The ranges are a
+// healthy adult's active range of motion with a margin, since the rotation-vector components
+// of a combined rotation are not its Euler angles.
+struct AnatomicalEntry {
+  const char* name;
+  double min_deg[3];
+  double max_deg[3];
+};
+
+constexpr AnatomicalEntry kAnatomical[] = {
+    // The pelvis joint turns the whole body below the root like the global rotation does:
+    // a small box keeps the two from trading a contorted spine for a turned pelvis.
+    {"pelvis", {-30, -30, -30}, {30, 30, 30}},
+    {"spine", {-35, -40, -35}, {55, 40, 35}},
+    {"chest", {-35, -40, -35}, {55, 40, 35}},
+    {"neck", {-50, -70, -45}, {55, 70, 45}},
+    {"head", {-40, -60, -40}, {45, 60, 40}},
+    {"l_hip", {-125, -55, -35}, {35, 55, 55}},
+    {"l_knee", {-10, -25, -20}, {150, 25, 20}},
+    {"l_ankle", {-55, -35, -35}, {55, 35, 35}},
+    {"l_wrist", {-90, -90, -90}, {90, 90, 90}},
+};
+
+constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
+
+}  // namespace
+
+bool AnatomicalJointBox(const std::string& joint_name, JointBox* box) {
+  const bool right = joint_name.rfind("r_", 0) == 0;
+  const std::string left = right ? "l_" + joint_name.substr(2) : joint_name;
+  for (const AnatomicalEntry& e : kAnatomical) {
+    if (left != e.name) continue;
+    for (int c = 0; c < 3; ++c) {
+      box->min[c] = e.min_deg[c] * kDegToRad;
+      box->max[c] = e.max_deg[c] * kDegToRad;
+    }
+    if (right) {  // mirror x -> -x: a rotation vector (x, y, z) becomes (x, -y, -z)
+      for (int c = 1; c < 3; ++c) {
+        const double lo = box->min[c];
+        box->min[c] = -box->max[c];
+        box->max[c] = -lo;
+      }
+    }
+    return true;
+  }
+  return false;
+}
+
+JointLimitOptions ResolveJointLimits(const JointLimitOptions& options,
+                                     const std::vector<std::string>& joint_names) {
+  JointLimitOptions resolved = options;
+  const bool own = !options.per_joint_min.empty();
+  const int n = static_cast<int>(joint_names.size());
+  resolved.per_joint_min.resize(n);
+  resolved.per_joint_max.resize(n);
+  for (int j = 0; j < n; ++j) {
+    JointBox box{own ? options.per_joint_min[j] : options.default_min,
+                 own ? options.per_joint_max[j] : options.default_max};
+    if (options.preset == JointLimitPreset::kAnatomical) AnatomicalJointBox(joint_names[j], &box);
+    const auto it = options.joints.find(joint_names[j]);
+    if (it != options.joints.end()) box = it->second;
+    resolved.per_joint_min[j] = box.min;
+    resolved.per_joint_max[j] = box.max;
+  }
+  for (const auto& [name, box] : options.joints) {
+    bool found = false;
+    for (const std::string& j : joint_names) found = found || j == name;
+    if (!found) {
+      std::string known;
+      for (const std::string& j : joint_names) known += (known.empty() ? "" : ", ") + j;
+      throw Error("fitting options: joint_limits.joints." + name +
+                  ": expected a joint of the template (" + known + "), found none of that name");
+    }
+  }
+  return resolved;
+}
+
+const std::map<std::string, JointLimitPreset>& JointLimitPresetNames() {
+  static const std::map<std::string, JointLimitPreset> names = {
+      {"uniform", JointLimitPreset::kUniform}, {"anatomical", JointLimitPreset::kAnatomical}};
+  return names;
 }
 
 JointLimitTerm::JointLimitTerm(const JointLimitOptions& options, int num_joints)

@@ -102,10 +102,12 @@ std::string NoUsableFrameMessage(const std::string& sequence_dir, int frames,
 
 }  // namespace
 
-PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& template_path,
-                           const PipelineOptions& options, const Config& resolved_config,
-                           const std::string& out_dir,
-                           const std::function<void(const PipelineProgress&)>& progress) {
+namespace {
+
+PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& template_path,
+                          const PipelineOptions& options, const Config& resolved_config,
+                          const std::string& out_dir,
+                          const std::function<void(const PipelineProgress&)>& progress) {
   std::string why;
   if (!options.IsValid(&why)) throw Error(why);
   const std::unique_ptr<FrameSource> source = OpenFrameSource(sequence_dir, options.input);
@@ -201,6 +203,7 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   result.realtime =
       RunStages(realtime, &reader, begin, end, rate_hz, &track, &texturing, &output);
   const int shape_calibrated_frame = track.shape_calibrated_frame;
+  result.shape_calibrated_frame = shape_calibrated_frame;
   const std::vector<Pose>& poses = output.poses;
   const std::vector<std::string>& failures = output.failures;
   const double fit_seconds = track.fit_seconds, init_seconds = track.init_seconds;
@@ -309,6 +312,46 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   }
   WriteMetricsJson(out_dir + "/metrics.json", result);
   WriteRealtimeJson(out_dir + "/realtime.json", result.realtime);
+  return result;
+}
+
+}  // namespace
+
+PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& template_path,
+                           const PipelineOptions& options, const Config& resolved_config,
+                           const std::string& out_dir,
+                           const std::function<void(const PipelineProgress&)>& progress) {
+  if (!options.shape.retrack || options.shape.mode == ShapeMode::kFixed) {
+    return RunOnePass(sequence_dir, template_path, options, resolved_config, out_dir, progress);
+  }
+  // Pass 1: calibrate the subject's shape, fitting only.
+  std::string why;
+  if (!options.IsValid(&why)) throw Error(why);
+  PipelineOptions first = options;
+  first.texture = false;
+  first.export_glb = first.export_bvh = first.export_textured_mesh = false;
+  first.export_meshes = first.export_foreground = first.export_atlases = false;
+  first.atlas_frames.clear();
+  first.stream_path.clear();
+  const std::string shape_dir = out_dir + "/shape_pass";
+  const PipelineResult calibration =
+      RunOnePass(sequence_dir, template_path, first, resolved_config, shape_dir, progress);
+  // Pass 2: the whole sequence with the subject's template, its shape fixed.
+  PipelineOptions second = options;
+  second.shape.mode = ShapeMode::kFixed;
+  const bool calibrated = calibration.shape_calibrated_frame >= 0;
+  PipelineResult result =
+      RunOnePass(sequence_dir, calibrated ? shape_dir + "/subject.glb" : template_path, second,
+                 resolved_config, out_dir, progress);
+  result.shape_calibrated_frame = calibration.shape_calibrated_frame;
+  result.warnings.insert(
+      result.warnings.begin(),
+      calibrated ? "shape.retrack: tracked twice; the second pass used the subject's template "
+                   "calibrated after frame " +
+                       std::to_string(calibration.shape_calibrated_frame) +
+                       " of the first (shape_pass/ of the run)"
+                 : "shape.retrack: the first pass never calibrated the shape (too few accepted "
+                   "frames); the second pass used the given template");
   return result;
 }
 

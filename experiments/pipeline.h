@@ -138,6 +138,8 @@ struct PipelineResult {
   bool has_stream = false;
   StreamSummary stream;  // with options.stream_path
   std::vector<std::string> warnings;
+  // The frame after which the subject's shape was calibrated (shape.mode != fixed); -1: never.
+  int shape_calibrated_frame = -1;
   bool glb_written = false;
   AnimatedGlbSummary glb;  // tracked.glb against artex's skinning (residuals in mm)
   RealtimeStats realtime;  // throughput, latency, drops, stage timings (realtime.json)
@@ -156,6 +158,9 @@ struct PipelineProgress {
 // (resolved), poses.csv, frames.csv, summary.json, metrics.json (with ground truth),
 // texture.png, labels.png, tracked.glb, realtime.json (throughput, latency, live drops),
 // meshes/ on request. The stages run per options.realtime (experiments/pipeline_stages.h).
+// With shape.retrack (and a shape mode other than fixed) the sequence is tracked twice: the
+// first pass (fitting only) calibrates the subject into out_dir/shape_pass/ (subject.glb,
+// frames.csv, summary.json), the second tracks it with that template and writes the rest.
 // Throws artex::Error on bad input and when no frame is usable (every frame unreadable or its fit failed), listing the reasons.
 PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& template_path,
                            const PipelineOptions& options, const Config& resolved_config,

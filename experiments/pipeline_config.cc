@@ -1,4 +1,5 @@
 // Configuration keys of the pipeline (docs/configuration.md lists them with their defaults).
+#include <cmath>
 #include <map>
 #include <sstream>
 #include <string>
@@ -229,6 +230,29 @@ void BindInitializer(const Config& c, InitializerOptions* o) {
   BindIcpInit(c.Section("icp"), &o->icp);
 }
 
+// fitting.joint_limits: {weight, preset, joints: {NAME: {min_deg: [x, y, z], max_deg: [...]}}}.
+void BindJointLimits(const Config& c, JointLimitOptions* o) {
+  c.CheckKeys({"weight", "preset", "joints"});
+  c.Get("weight", &o->weight);
+  c.GetEnum("preset", JointLimitPresetNames(), &o->preset);
+  const Config joints = c.Section("joints");
+  for (const std::string& name : joints.Keys()) {
+    const Config j = joints.Section(name);
+    j.CheckKeys({"min_deg", "max_deg"});
+    JointBox box;
+    for (const auto& [key, out] : {std::pair{"min_deg", &box.min}, std::pair{"max_deg", &box.max}}) {
+      std::vector<double> deg;
+      j.Get(key, &deg);
+      if (deg.size() != 3) {
+        throw Error(j.Path(key) + ": expected 3 angles in degrees (x, y, z), found " +
+                    std::to_string(deg.size()) + " values");
+      }
+      *out = Eigen::Vector3d(deg[0], deg[1], deg[2]) * (M_PI / 180.0);
+    }
+    o->joints[name] = box;
+  }
+}
+
 void BindFitting(const Config& c, EMFitterOptions* o) {
   c.CheckKeys({"correspondence", "solver", "estep", "k", "voxel_fraction", "epsilon",
                "lambda_color", "use_color", "normalize_per_scan_point", "icp_metric",
@@ -236,14 +260,14 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
                "first_frame_iterations_per_stage", "tracking_iterations_per_stage",
                "max_iterations", "over_relaxation", "relative_cost_tolerance",
                "parameter_tolerance", "normalize_data_term", "tikhonov", "temporal",
-               "smoothness", "joint_limit_weight", "scale_mode", "scale_estimation_frames",
+               "smoothness", "joint_limits", "scale_mode", "scale_estimation_frames",
                "scale_max_radius", "scale_prior_weight", "icp_first_frame",
                "constant_velocity_prediction", "max_fit_vertices", "min_scan_points",
                "max_mean_motion", "max_scale_change", "ceres_max_iterations", "solver_threads",
                "candidate_margin", "normal_refresh_iterations", "tracking_tikhonov",
                "fit_vertex_selection", "scale_estimator", "scale_sample_max_distance",
                "scale_sample_min_pair_fraction", "icp_init", "init", "quality", "prediction",
-               "kalman", "particle", "temporal_prior_on_prediction", "silhouette", "unobserved_joints"});
+               "kalman", "particle", "temporal_prior_on_prediction", "silhouette", "unobserved_joints", "upright"});
   c.GetEnum("correspondence", CorrespondenceModelNames(), &o->correspondence);
   c.GetEnum("solver", FitSolverTypeNames(), &o->solver.type);
   c.GetEnum("estep",
@@ -276,13 +300,17 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   BindWeights(c.Section("tikhonov"), &o->tikhonov.update);
   BindWeights(c.Section("temporal"), &o->tikhonov.temporal);
   BindWeights(c.Section("smoothness"), &o->smoothness);
-  c.Get("joint_limit_weight", &o->joint_limits.weight);
+  BindJointLimits(c.Section("joint_limits"), &o->joint_limits);
   const Config sil = c.Section("silhouette");
   sil.CheckKeys({"weight", "depth_margin", "front_weight", "max_radius"});
   sil.Get("max_radius", &o->silhouette.max_radius);
   sil.Get("front_weight", &o->silhouette.front_weight);
   sil.Get("weight", &o->silhouette.weight);
   sil.Get("depth_margin", &o->silhouette.depth_margin);
+  const Config upright = c.Section("upright");
+  upright.CheckKeys({"weight", "max_tilt_deg"});
+  upright.Get("weight", &o->upright.weight);
+  upright.Get("max_tilt_deg", &o->upright.max_tilt_deg);
   const Config unobserved = c.Section("unobserved_joints");
   unobserved.CheckKeys({"weight", "min_observed_fraction"});
   unobserved.Get("weight", &o->unobserved_joints.weight);
@@ -484,6 +512,11 @@ bool PipelineOptions::IsValid(std::string* error) const {
   }
   if (texture && !texturing.IsValid(error)) return false;
   if (!shape.IsValid(error)) return false;
+  if (shape.retrack && realtime.live) {
+    if (error) *error = "shape.retrack: expected a recorded run, found pipeline.live: true (a live "
+                        "run cannot be tracked twice)";
+    return false;
+  }
   if (!held_out.IsValid(&inner)) {
     if (error) *error = "pipeline.texture_quality_*: " + inner;
     return false;
@@ -511,12 +544,13 @@ bool PipelineOptions::IsValid(std::string* error) const {
 
 // Section shape (solvers/shape_estimator.h).
 void BindShape(const Config& c, ShapeOptions* o) {
-  c.CheckKeys({"mode", "symmetric", "calibration_frames", "calibration_stride", "calibration_rounds", "radii",
+  c.CheckKeys({"mode", "retrack", "symmetric", "calibration_frames", "calibration_stride", "calibration_rounds", "radii",
                "iterations_per_stage", "over_relaxation", "bias_correction",
                "visibility_min_cos", "girth_max_radius", "prior_weight", "pose_damping",
                "bone_min", "bone_max", "girth_min", "girth_max", "refine_every",
                "refine_prior_weight", "max_fit_vertices"});
   c.GetEnum("mode", ShapeModeNames(), &o->mode);
+  c.Get("retrack", &o->retrack);
   c.Get("symmetric", &o->symmetric);
   c.Get("calibration_frames", &o->calibration_frames);
   c.Get("calibration_stride", &o->calibration_stride);

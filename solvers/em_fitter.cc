@@ -160,6 +160,8 @@ bool EMFitterOptions::IsValid(std::string* error) const {
     msg << "icp." << inner;
   } else if (!unobserved_joints.IsValid(&inner)) {
     msg << "unobserved_joints." << inner;
+  } else if (!upright.IsValid(&inner)) {
+    msg << "upright." << inner;
   } else if (!silhouette.IsValid(&inner)) {
     msg << "silhouette." << inner;
   } else if (!prediction.IsValid(&inner)) {
@@ -253,7 +255,10 @@ struct EMFitter::FrameState {
 EMFitter::EMFitter(const Template& tmpl, const EMFitterOptions& options) : options_(options) {
   std::string error;
   if (!options.IsValid(&error)) throw Error("fitting options: " + error);
-  if (!options.joint_limits.IsValid(tmpl.num_joints(), &error)) {
+  std::vector<std::string> joint_names;
+  for (const Joint& j : tmpl.joints) joint_names.push_back(j.name);
+  options_.joint_limits = ResolveJointLimits(options.joint_limits, joint_names);
+  if (!options_.joint_limits.IsValid(tmpl.num_joints(), &error)) {
     throw Error("fitting options: joint_limits." + error);
   }
   skinning_ = std::make_unique<Skinning>(tmpl);
@@ -563,6 +568,7 @@ EMIterationInfo EMFitter::Iterate() {
   TikhonovTerm tikhonov(tikhonov_options, model.num_joints(),
                         st.has_previous ? &st.previous : nullptr);
   JointLimitTerm joint_limits(options_.joint_limits, model.num_joints());
+  UprightTerm upright(options_.upright, 0);  // joint 0: the root joint (the pelvis)
   const bool prior_scale = options_.scale_mode == ScaleMode::kEstimateThenPrior &&
                            scale_samples() >= options_.scale_estimation_frames;
   ScalePriorTerm scale_prior(options_.scale_prior_weight, scale_estimate_);
@@ -575,6 +581,7 @@ EMIterationInfo EMFitter::Iterate() {
   if (silhouette_term) problem.terms.push_back(silhouette_term.get());
   if (unobserved_term) problem.terms.push_back(unobserved_term.get());
   if (options_.joint_limits.weight > 0.0) problem.terms.push_back(&joint_limits);
+  if (options_.upright.weight > 0.0) problem.terms.push_back(&upright);
   if (st.smoothness) problem.terms.push_back(st.smoothness.get());
   if (prior_scale) problem.terms.push_back(&scale_prior);
   const bool em_scale = options_.scale_mode == ScaleMode::kFree ||

@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "energies/joint_limit_term.h"
+#include "energies/upright_term.h"
 #include "energies/one_to_many_correspondence.h"
 #include "energies/one_to_one_correspondence.h"
 #include "energies/silhouette_term.h"
@@ -99,6 +100,7 @@ struct EMFitterOptions {
   // iteration and frame to frame since the cost barely changes along them.
   PoseGroupWeights tracking_update = {0.0, 0.0, 0.0, 3e-3};
   JointLimitOptions joint_limits;  // soft joint boxes (weight 0: off)
+  UprightOptions upright;          // the pelvis's tilt from world up (weight 0: off)
   // Free space (energies/silhouette_term.h): fitted vertices that project where the camera saw
   // something else behind them are pulled towards the subject's silhouette; used when the scan
   // carries a SilhouetteMap (preprocessing builds one unless preprocess.silhouette.enabled is

@@ -226,8 +226,6 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
       if (first) summary.initial_cost = cost;
       first = false;
       summary.final_cost = cost;
-        std::fprintf(stderr, "shape solve r=%g it=%d cost=%g total_w=%g q0=%g\n", radius, it, cost,
-                     0.0, q_.size() ? q_[0] : 0.0);
       ++summary.iterations;
       q_ += step.head(nq);
       ClampToBounds(&q_);

@@ -28,6 +28,11 @@ struct ShapeOptions {
   // fixed: the template as given (the paper; no estimation); scale: one uniform factor;
   // bones: per-bone lengths; bones_girth: per-bone lengths and per-segment girth.
   ShapeMode mode = ShapeMode::kFixed;
+  // Offline recordings: after the run that calibrates the shape (fitting only, into
+  // OUT/shape_pass/), track the whole sequence again with the subject's template (shape fixed).
+  // The first frames, fitted before the calibration, then use the subject's shape too; costs a
+  // second fitting pass. Not with pipeline.live.
+  bool retrack = false;
   bool symmetric = true;       // l_/r_ joints share their parameters
   int calibration_frames = 5;  // accepted frames per calibration round (>= 1)
   // Every n-th accepted frame (with a settled global scale) is a calibration frame: poses

@@ -13,6 +13,7 @@
 #include "energies/pose_smoothness_term.h"
 #include "energies/silhouette_term.h"
 #include "energies/unobserved_joint_term.h"
+#include "energies/upright_term.h"
 #include "energies/tikhonov_term.h"
 #include "models/error.h"
 #include "models/so3.h"
@@ -244,6 +245,60 @@ TEST_F(FittingTermsTest, JointLimitJacobianAndHinge) {
   EXPECT_NEAR(r.norm(), std::sqrt(3.0) * 0.1, 1e-12);
   options.per_joint_min.resize(2);
   EXPECT_FALSE(options.IsValid(model_.num_joints(), nullptr));
+}
+
+TEST_F(FittingTermsTest, AnatomicalLimitsMirrorAndOverride) {
+  JointBox left, right;
+  ASSERT_TRUE(AnatomicalJointBox("l_hip", &left));
+  ASSERT_TRUE(AnatomicalJointBox("r_hip", &right));
+  EXPECT_FALSE(AnatomicalJointBox("tail", &left));
+  ASSERT_TRUE(AnatomicalJointBox("l_hip", &left));
+  // Mirrored through x = 0: x limits equal, y and z negated and swapped.
+  EXPECT_EQ(right.min.x(), left.min.x());
+  EXPECT_EQ(right.max.z(), -left.min.z());
+  EXPECT_EQ(right.min.z(), -left.max.z());
+  // Hip flexion (-x: the leg forwards) is allowed far beyond extension (+x).
+  EXPECT_LT(left.min.x(), -2.0);
+  EXPECT_LT(left.max.x(), 0.7);
+  JointBox knee;
+  ASSERT_TRUE(AnatomicalJointBox("l_knee", &knee));
+  EXPECT_GT(knee.max.x(), 2.0);   // bends backwards
+  EXPECT_GT(knee.min.x(), -0.3);  // not forwards
+
+  JointLimitOptions options;
+  options.weight = 1.0;
+  options.preset = JointLimitPreset::kAnatomical;
+  options.joints["b"] = JointBox{Eigen::Vector3d::Constant(-0.2), Eigen::Vector3d::Constant(0.2)};
+  const JointLimitOptions resolved = ResolveJointLimits(options, {"a", "b", "l_knee"});
+  ASSERT_EQ(resolved.per_joint_min.size(), 3u);
+  EXPECT_EQ(resolved.per_joint_min[0], options.default_min);  // unknown name: the default box
+  EXPECT_EQ(resolved.per_joint_max[1], Eigen::Vector3d::Constant(0.2));  // the override
+  EXPECT_EQ(resolved.per_joint_max[2], knee.max);
+  options.joints["no_such_joint"] = JointBox{};
+  EXPECT_THROW(ResolveJointLimits(options, {"a", "b"}), Error);
+}
+
+TEST_F(FittingTermsTest, UprightJacobianAndHinge) {
+  UprightOptions options;
+  options.weight = 2.0;
+  options.max_tilt_deg = 5.0;
+  ASSERT_TRUE(options.IsValid(nullptr));
+  // The random anchor and delta tilt the root joint by tens of degrees: beyond the margin.
+  UprightTerm term(options, 0);
+  CheckJacobian(term, delta_, 1e-5);
+  UprightTerm global_only(options, -1);
+  CheckJacobian(global_only, delta_, 1e-5);
+  // Upright: no residual. Tilted 40 degrees about z by the global rotation: 35 degrees beyond.
+  anchor_ = Pose::Identity(model_.num_joints());
+  EXPECT_EQ(Residuals(term, Eigen::VectorXd::Zero(p_))[0], 0.0);
+  anchor_.rotation = ExpSO3(Eigen::Vector3d(0.0, 0.0, 40.0 * M_PI / 180.0));
+  EXPECT_NEAR(Residuals(term, Eigen::VectorXd::Zero(p_))[0], std::sqrt(2.0) * 35.0 * M_PI / 180.0,
+              1e-12);
+  // A pelvis turned back by the same amount makes the lower body upright again.
+  anchor_.joint_rotations[0] = ExpSO3(Eigen::Vector3d(0.0, 0.0, -40.0 * M_PI / 180.0));
+  EXPECT_NEAR(Residuals(term, Eigen::VectorXd::Zero(p_))[0], 0.0, 1e-12);
+  options.max_tilt_deg = 180.0;
+  EXPECT_FALSE(options.IsValid(nullptr));
 }
 
 TEST_F(FittingTermsTest, PoseSmoothnessJacobianAndPrediction) {
