@@ -3,8 +3,6 @@
 // `artex track` on a TUM folder, clear errors, and the real skeltrack TUM recording read in
 // place (skipped when absent).
 #include <gtest/gtest.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -31,11 +29,7 @@ using testing_util::ReadFileBytes;
 
 constexpr int kFrames = 5;
 
-struct Result {
-  int status = -1;
-  std::string out;
-  std::string err;
-};
+using Result = testing_util::CommandResult;
 
 int CountLines(const std::string& text) {
   int n = 0;
@@ -61,19 +55,7 @@ class InputCliTest : public ::testing::Test {
 
   static std::string Path(const std::string& name) { return (*dir_ / name).string(); }
 
-  static Result Run(const std::string& args) {
-    static int counter = 0;
-    const std::string out = Path("stdout" + std::to_string(counter));
-    const std::string err = Path("stderr" + std::to_string(counter++));
-    const std::string command =
-        "'" + std::string(ARTEX_BINARY) + "' " + args + " > '" + out + "' 2> '" + err + "'";
-    const int raw = std::system(command.c_str());
-    Result r;
-    r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-    r.out = ReadFileBytes(out);
-    r.err = ReadFileBytes(err);
-    return r;
-  }
+  static Result Run(const std::string& args) { return testing_util::RunArtex(args, *dir_); }
 
   // A 5-frame synthetic walk (no noise, 320 x 240 depth, the colour camera equal to the depth
   // camera so that it can pose as a registered TUM recording), made once.
