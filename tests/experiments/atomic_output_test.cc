@@ -22,28 +22,19 @@
 
 #include "models/error.h"
 #include "tests/error_of.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
 
 namespace fs = std::filesystem;
+using testing_util::ReadFileBytes;
 
 fs::path FreshDir(const std::string& name) {
-  const fs::path dir =
-      fs::temp_directory_path() / ("artex_atomic_test_" + name + "_" + std::to_string(getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
+  return testing_util::FreshTempDir("atomic_test_" + name);
 }
 
 void WriteText(const fs::path& path, const std::string& text) { std::ofstream(path) << text; }
-
-std::string ReadText(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 std::vector<std::string> Entries(const fs::path& dir) {
   std::vector<std::string> names;
@@ -66,11 +57,11 @@ TEST(AtomicOutputTest, CommitReplacesTheEarlierResultWithoutStaleFiles) {
   {
     AtomicOutputFolder folder((out.string() + "/"), "test");
     WriteText(fs::path(folder.path()) / "result.txt", "new");
-    EXPECT_EQ(ReadText(out / "result.txt"), "old");  // the earlier result until the commit
+    EXPECT_EQ(ReadFileBytes(out / "result.txt"), "old");  // the earlier result until the commit
     folder.Commit();
   }
   EXPECT_EQ(Entries(out), (std::vector<std::string>{kOutputMarker, "result.txt"}));
-  EXPECT_EQ(ReadText(out / "result.txt"), "new");
+  EXPECT_EQ(ReadFileBytes(out / "result.txt"), "new");
   EXPECT_EQ(Entries(root), (std::vector<std::string>{"out"}));  // no temporaries left
 }
 
@@ -87,7 +78,7 @@ TEST(AtomicOutputTest, AnAbandonedRunLeavesTheEarlierResult) {
     WriteText(fs::path(folder.path()) / "result.txt", "half");
     // An error: no Commit().
   }
-  EXPECT_EQ(ReadText(out / "result.txt"), "old");
+  EXPECT_EQ(ReadFileBytes(out / "result.txt"), "old");
   EXPECT_EQ(Entries(root), (std::vector<std::string>{"out"}));
 }
 
@@ -99,7 +90,7 @@ TEST(AtomicOutputTest, FoldersArtexDidNotWriteAreNeverReplaced) {
   std::string what = ErrorOf([&] { AtomicOutputFolder((root / "mine").string(), "test"); });
   EXPECT_NE(what.find("mine"), std::string::npos) << what;
   EXPECT_NE(what.find("not an artex output folder"), std::string::npos) << what;
-  EXPECT_EQ(ReadText(root / "mine" / "notes.txt"), "keep");
+  EXPECT_EQ(ReadFileBytes(root / "mine" / "notes.txt"), "keep");
   WriteText(root / "file", "x");
   what = ErrorOf([&] { AtomicOutputFolder((root / "file").string(), "test"); });
   EXPECT_NE(what.find("found a file"), std::string::npos) << what;

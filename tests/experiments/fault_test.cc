@@ -28,26 +28,17 @@
 #include "experiments/pose_csv.h"
 #include "experiments/runner.h"
 #include "models/error.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
 
 namespace fs = std::filesystem;
+using testing_util::ReadFileBytes;
 using Files = std::map<std::string, std::string>;  // relative path -> bytes
 
 fs::path FreshDir(const std::string& name) {
-  const fs::path dir =
-      fs::temp_directory_path() / ("artex_fault_test_" + name + "_" + std::to_string(getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
-
-std::string ReadText(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
+  return testing_util::FreshTempDir("fault_test_" + name);
 }
 
 std::string Quote(const std::vector<std::string>& argv) {
@@ -61,7 +52,7 @@ int RunCommand(const std::vector<std::string>& argv, std::string* err = nullptr)
   const std::string log = (fs::temp_directory_path() /
                            ("artex_fault_test_" + std::to_string(getpid()) + ".log")).string();
   const int status = std::system((Quote(argv) + " > /dev/null 2>'" + log + "'").c_str());
-  if (err) *err = ReadText(log);
+  if (err) *err = ReadFileBytes(log);
   fs::remove(log);
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
@@ -96,7 +87,7 @@ Files Snapshot(const fs::path& dir, const std::vector<std::string>& volatile_nam
     const std::string name = e.path().filename().string();
     bool is_volatile = false;
     for (const auto& v : volatile_names) is_volatile = is_volatile || name == v;
-    files[fs::relative(e.path(), dir).string()] = is_volatile ? "" : ReadText(e.path());
+    files[fs::relative(e.path(), dir).string()] = is_volatile ? "" : ReadFileBytes(e.path());
   }
   return files;
 }

@@ -3,8 +3,6 @@
 // `artex track` on a TUM folder, clear errors, and the real skeltrack TUM recording read in
 // place (skipped when absent).
 #include <gtest/gtest.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -20,26 +18,18 @@
 #include "sensors/frame_source.h"
 #include "sensors/sequence.h"
 #include "sensors/virtual_kinect.h"
+#include "tests/solvers/virtual_kinect_scans.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
 
 namespace fs = std::filesystem;
+using testing_util::ReadFileBytes;
 
 constexpr int kFrames = 5;
 
-struct Result {
-  int status = -1;
-  std::string out;
-  std::string err;
-};
-
-std::string ReadText(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using Result = testing_util::CommandResult;
 
 int CountLines(const std::string& text) {
   int n = 0;
@@ -52,10 +42,7 @@ int CountLines(const std::string& text) {
 class InputCliTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = new fs::path(fs::temp_directory_path() /
-                        ("artex_input_cli_test_" + std::to_string(::getpid())));
-    fs::remove_all(*dir_);
-    fs::create_directories(*dir_);
+    dir_ = new fs::path(testing_util::FreshTempDir("input_cli_test"));
   }
   static void TearDownTestSuite() {
     fs::remove_all(*dir_);
@@ -68,42 +55,20 @@ class InputCliTest : public ::testing::Test {
 
   static std::string Path(const std::string& name) { return (*dir_ / name).string(); }
 
-  static Result Run(const std::string& args) {
-    static int counter = 0;
-    const std::string out = Path("stdout" + std::to_string(counter));
-    const std::string err = Path("stderr" + std::to_string(counter++));
-    const std::string command =
-        "'" + std::string(ARTEX_BINARY) + "' " + args + " > '" + out + "' 2> '" + err + "'";
-    const int raw = std::system(command.c_str());
-    Result r;
-    r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-    r.out = ReadText(out);
-    r.err = ReadText(err);
-    return r;
-  }
+  static Result Run(const std::string& args) { return testing_util::RunArtex(args, *dir_); }
 
   // A 5-frame synthetic walk (no noise, 320 x 240 depth, the colour camera equal to the depth
   // camera so that it can pose as a registered TUM recording), made once.
   static const std::string& Synthetic() {
     static const std::string folder = [] {
-      SynthOptions options;
-      options.motion.type = MotionType::kWalk;
-      options.motion.frames = kFrames;
+      SynthOptions options = testing_util::SmallSequenceOptions(kFrames);
       options.kinect.SetNoiseLevel(NoiseLevel::kOff);
-      PinholeCamera& depth = options.kinect.depth_intrinsics;
-      depth.width = 320;
-      depth.height = 240;
-      depth.fx = depth.fy = 262.5;
-      depth.cx = 159.5;
-      depth.cy = 119.5;
       options.kinect.color_width = 320;
       options.kinect.color_height = 240;
       options.kinect.color_vertical_fov_deg = 2 * std::atan(120.0 / 262.5) * 180.0 / M_PI;
       options.kinect.color_offset_m = Eigen::Vector3d::Zero();
       options.kinect.color_yaw_deg = 0;
       options.kinect.color_pitch_deg = 0;
-      options.texture.size = 256;
-      options.subject_shape.resolution = 0;
       options.background_frames = 3;
       const std::string out = Path("synthetic");
       SynthesizeSequence(options, out);
@@ -303,12 +268,12 @@ TEST_F(InputCliTest, TrackRunsOnATumFolder) {
   EXPECT_NE(r.err.find("track: input: TUM RGB-D folder"), std::string::npos) << r.err;
   EXPECT_NE(r.out.find("frames: " + std::to_string(kFrames)), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("0 skipped"), std::string::npos) << r.out;
-  const std::string poses = ReadText(fs::path(out) / "poses.csv");
+  const std::string poses = ReadFileBytes(fs::path(out) / "poses.csv");
   EXPECT_EQ(CountLines(poses), kFrames + 1) << poses;  // header + one row per frame
   // --intrinsics FILE is recorded in the run's configuration (absolute path).
-  EXPECT_NE(
-      ReadText(fs::path(out) / "config.yaml").find(fs::absolute(tum).string() + "/camera.yaml"),
-      std::string::npos);
+  EXPECT_NE(ReadFileBytes(fs::path(out) / "config.yaml")
+                .find(fs::absolute(tum).string() + "/camera.yaml"),
+            std::string::npos);
   // The overlay finds the recording through the run (summary.json) and reads it as TUM.
   const Result overlay = Run("overlay -q '" + out + "' -o '" + Path("tum_overlay") + "'");
   ASSERT_EQ(overlay.status, 0) << overlay.err;
@@ -334,12 +299,12 @@ TEST_F(InputCliTest, ExperimentRunsARecordedTumFolder) {
   bool found = false;
   for (const auto& e : fs::recursive_directory_iterator(fs::path(out) / "runs" / "lab")) {
     if (e.path().filename() == "poses.csv") {
-      EXPECT_EQ(CountLines(ReadText(e.path())), kFrames + 1);
+      EXPECT_EQ(CountLines(ReadFileBytes(e.path())), kFrames + 1);
       found = true;
     }
   }
   EXPECT_TRUE(found);
-  EXPECT_NE(ReadText(fs::path(out) / "results.csv").find(",lab,"), std::string::npos);
+  EXPECT_NE(ReadFileBytes(fs::path(out) / "results.csv").find(",lab,"), std::string::npos);
 }
 
 TEST_F(InputCliTest, ImportsTheRealSkeltrackRecordingInPlace) {

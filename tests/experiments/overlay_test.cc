@@ -19,6 +19,8 @@
 #include "models/template_io.h"
 #include "sensors/sequence.h"
 #include "sensors/virtual_kinect.h"
+#include "tests/solvers/virtual_kinect_scans.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
@@ -30,24 +32,10 @@ constexpr int kFrames = 5;
 class OverlayTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = new fs::path(fs::temp_directory_path() /
-                        ("artex_overlay_test_" + std::to_string(::getpid())));
-    fs::remove_all(*dir_);
-    fs::create_directories(*dir_);
-    SynthOptions options;
+    dir_ = new fs::path(testing_util::FreshTempDir("overlay_test"));
+    SynthOptions options = testing_util::SmallSequenceOptions(kFrames);
     options.motion.type = MotionType::kArmRaise;
-    options.motion.frames = kFrames;
     options.kinect.SetNoiseLevel(NoiseLevel::kOff);
-    PinholeCamera& depth = options.kinect.depth_intrinsics;
-    depth.width = 320;
-    depth.height = 240;
-    depth.fx = depth.fy = 262.5;
-    depth.cx = 159.5;
-    depth.cy = 119.5;
-    options.kinect.color_width = 160;
-    options.kinect.color_height = 204;
-    options.texture.size = 256;
-    options.subject_shape.resolution = 0;
     options.background_frames = 2;
     SynthesizeSequence(options, Sequence());
     // A "run" whose fitted poses are the ground truth.

@@ -5,7 +5,6 @@
 
 #include <gtest/gtest.h>
 #include <sys/wait.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -23,25 +22,20 @@
 
 #include "experiments/config.h"
 #include "models/error.h"
-#include "models/template_generator.h"
 #include "models/template_io.h"
 #include "sensors/virtual_kinect.h"
 #include "tests/error_of.h"
+#include "tests/solvers/virtual_kinect_scans.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
 
 namespace fs = std::filesystem;
+using testing_util::ReadFileBytes;
 
 constexpr int kFrames = 6;
 constexpr int kAtlasSize = 256;
-
-std::string ReadText(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 std::vector<std::string> Lines(const std::string& text) {
   std::vector<std::string> lines;
@@ -63,56 +57,11 @@ std::vector<std::string> Fields(const std::string& line) {
 
 // Per-process fixture data: a 6-frame walk from the virtual Kinect (default noise, half-size
 // depth camera, small colour camera, coarse subject) and a coarse tracking template, made once.
-class PipelineTestData {
- public:
-  static PipelineTestData& Get() {
-    static PipelineTestData data;
-    return data;
-  }
-  ~PipelineTestData() {
-    std::error_code ec;
-    fs::remove_all(root_, ec);
-  }
-  const fs::path& root() const { return root_; }
-  const std::string& sequence() const { return sequence_; }
-  const std::string& template_path() const { return template_path_; }
-  int template_vertices() const { return template_vertices_; }
-
- private:
-  PipelineTestData() {
-    root_ = fs::temp_directory_path() / ("artex_pipeline_test_" + std::to_string(::getpid()));
-    fs::remove_all(root_);
-    fs::create_directories(root_);
-    SynthOptions options;
-    options.motion.type = MotionType::kWalk;
-    options.motion.frames = kFrames;
-    options.kinect.SetNoiseLevel(NoiseLevel::kDefault);
-    PinholeCamera& depth = options.kinect.depth_intrinsics;
-    depth.width = 320;
-    depth.height = 240;
-    depth.fx = depth.fy = 262.5;
-    depth.cx = 159.5;
-    depth.cy = 119.5;
-    options.kinect.color_width = 160;
-    options.kinect.color_height = 204;
-    options.texture.size = 256;
-    options.subject_shape.resolution = 0;
-    options.background_frames = 5;
-    sequence_ = (root_ / "sequence").string();
-    SynthesizeSequence(options, sequence_);
-
-    BodyShapeOptions shape;
-    shape.resolution = 0;
-    const Template tmpl = GenerateTemplate(shape);
-    template_vertices_ = tmpl.num_vertices();
-    template_path_ = (root_ / "template.glb").string();
-    WriteTemplateGlb(template_path_, tmpl);
-  }
-
-  fs::path root_;
-  std::string sequence_, template_path_;
-  int template_vertices_ = 0;
-};
+const testing_util::SequenceFixture& TestData() {
+  static const testing_util::SequenceFixture data("pipeline_test",
+                                                  testing_util::SmallSequenceOptions(kFrames));
+  return data;
+}
 
 // The default configuration with a small texture atlas (texturing on).
 Config SmallConfig() {
@@ -125,15 +74,14 @@ Config SmallConfig() {
 PipelineResult Track(const std::string& sequence, const std::string& out,
                      const Config& config = SmallConfig()) {
   const PipelineOptions options = LoadPipelineOptions(config);
-  return RunPipeline(sequence, PipelineTestData::Get().template_path(), options, config, out);
+  return RunPipeline(sequence, TestData().template_path, options, config, out);
 }
 
-fs::path OutDir(const std::string& name) { return PipelineTestData::Get().root() / name; }
+fs::path OutDir(const std::string& name) { return TestData().root / name; }
 
 // One complete run, shared by the output checks.
 const PipelineResult& FirstRun() {
-  static const PipelineResult result =
-      Track(PipelineTestData::Get().sequence(), OutDir("run_a").string());
+  static const PipelineResult result = Track(TestData().sequence, OutDir("run_a").string());
   return result;
 }
 
@@ -167,7 +115,7 @@ TEST(PipelineTest, ResultCoversEveryFrameWithFiniteErrors) {
 TEST(PipelineTest, PosesAndFramesCsvHaveOneRowPerFrame) {
   FirstRun();
   const fs::path out = OutDir("run_a");
-  const std::vector<std::string> poses = Lines(ReadText(out / "poses.csv"));
+  const std::vector<std::string> poses = Lines(ReadFileBytes(out / "poses.csv"));
   ASSERT_EQ(static_cast<int>(poses.size()), kFrames + 1);
   const std::vector<std::string> header = Fields(poses[0]);
   ASSERT_EQ(static_cast<int>(header.size()), 1 + 7 + 3 * kDefaultNumJoints);
@@ -184,7 +132,7 @@ TEST(PipelineTest, PosesAndFramesCsvHaveOneRowPerFrame) {
     EXPECT_NO_THROW(Pose::FromVector(v, kDefaultNumJoints));
   }
 
-  const std::vector<std::string> frames = Lines(ReadText(out / "frames.csv"));
+  const std::vector<std::string> frames = Lines(ReadFileBytes(out / "frames.csv"));
   ASSERT_EQ(static_cast<int>(frames.size()), kFrames + 1);
   const std::vector<std::string> columns = Fields(frames[0]);
   int error_column = -1;
@@ -203,7 +151,7 @@ TEST(PipelineTest, PosesAndFramesCsvHaveOneRowPerFrame) {
 TEST(PipelineTest, MetricsAndSummaryJsonParse) {
   const PipelineResult& r = FirstRun();
   const fs::path out = OutDir("run_a");
-  const nlohmann::json metrics = nlohmann::json::parse(ReadText(out / "metrics.json"));
+  const nlohmann::json metrics = nlohmann::json::parse(ReadFileBytes(out / "metrics.json"));
   EXPECT_EQ(metrics.at("frames").get<int>(), kFrames);
   EXPECT_EQ(metrics.at("skipped_frames").get<int>(), 0);
   EXPECT_TRUE(metrics.at("has_ground_truth").get<bool>());
@@ -214,7 +162,7 @@ TEST(PipelineTest, MetricsAndSummaryJsonParse) {
   }
   EXPECT_NEAR(metrics.at("mean_vertex_error_mm").get<double>(), r.mean_vertex_error_mm, 1e-9);
 
-  const nlohmann::json summary = nlohmann::json::parse(ReadText(out / "summary.json"));
+  const nlohmann::json summary = nlohmann::json::parse(ReadFileBytes(out / "summary.json"));
   ASSERT_EQ(static_cast<int>(summary.at("frames").size()), kFrames);
   EXPECT_TRUE(summary.at("frames")[0].contains("texture"));
   // The resolved configuration reloads to the same options.
@@ -239,7 +187,7 @@ TEST(PipelineTest, TextureAndTrackedGlbAreReadable) {
 
   GlbTexture texture;
   const Template tracked = ReadTemplateGlb((out / "tracked.glb").string(), &texture);
-  EXPECT_EQ(tracked.num_vertices(), PipelineTestData::Get().template_vertices());
+  EXPECT_EQ(tracked.num_vertices(), testing_util::CoarseTemplate().num_vertices());
   EXPECT_EQ(tracked.num_joints(), kDefaultNumJoints);
   ASSERT_FALSE(texture.png.empty());
   const cv::Mat embedded = cv::imdecode(texture.png, cv::IMREAD_COLOR);
@@ -252,27 +200,29 @@ TEST(PipelineTest, TextureAndTrackedGlbAreReadable) {
 
 TEST(PipelineTest, TwoRunsGiveIdenticalPoses) {
   FirstRun();
-  Track(PipelineTestData::Get().sequence(), OutDir("run_b").string());
-  const std::string a = ReadText(OutDir("run_a") / "poses.csv");
-  const std::string b = ReadText(OutDir("run_b") / "poses.csv");
+  Track(TestData().sequence, OutDir("run_b").string());
+  const std::string a = ReadFileBytes(OutDir("run_a") / "poses.csv");
+  const std::string b = ReadFileBytes(OutDir("run_b") / "poses.csv");
   ASSERT_FALSE(a.empty());
   EXPECT_EQ(a, b);
-  EXPECT_EQ(ReadText(OutDir("run_a") / "texture.png"), ReadText(OutDir("run_b") / "texture.png"));
+  EXPECT_EQ(ReadFileBytes(OutDir("run_a") / "texture.png"),
+            ReadFileBytes(OutDir("run_b") / "texture.png"));
 }
 
 TEST(PipelineTest, BuiltInDefaultsAreConfigsDefaultYaml) {
   // `artex track` without -c must behave as the README's `-c configs/default.yaml`.
   Config none;
   none.Set("texture.atlas_size", std::to_string(kAtlasSize));
-  Track(PipelineTestData::Get().sequence(), OutDir("run_builtin").string(), none);
+  Track(TestData().sequence, OutDir("run_builtin").string(), none);
   FirstRun();
-  EXPECT_EQ(ReadText(OutDir("run_builtin") / "poses.csv"), ReadText(OutDir("run_a") / "poses.csv"));
-  EXPECT_EQ(ReadText(OutDir("run_builtin") / "texture.png"),
-            ReadText(OutDir("run_a") / "texture.png"));
+  EXPECT_EQ(ReadFileBytes(OutDir("run_builtin") / "poses.csv"),
+            ReadFileBytes(OutDir("run_a") / "poses.csv"));
+  EXPECT_EQ(ReadFileBytes(OutDir("run_builtin") / "texture.png"),
+            ReadFileBytes(OutDir("run_a") / "texture.png"));
 }
 
 TEST(PipelineTest, MissingSequenceFolderNamesIt) {
-  const std::string missing = (PipelineTestData::Get().root() / "no_such_sequence").string();
+  const std::string missing = (TestData().root / "no_such_sequence").string();
   const std::string msg = ErrorOf([&] { Track(missing, OutDir("run_missing").string()); });
   EXPECT_NE(msg.find("no_such_sequence"), std::string::npos) << msg;
   EXPECT_FALSE(fs::exists(OutDir("run_missing") / "metrics.json"));
@@ -412,8 +362,7 @@ TEST(PipelineTest, InvalidOptionValuesAreRejected) {
   PipelineOptions options;
   options.max_frames = -1;
   const std::string msg = ErrorOf([&] {
-    RunPipeline(PipelineTestData::Get().sequence(), "", options, Config(),
-                OutDir("run_invalid").string());
+    RunPipeline(TestData().sequence, "", options, Config(), OutDir("run_invalid").string());
   });
   EXPECT_NE(msg.find("max_frames"), std::string::npos) << msg;
   EXPECT_FALSE(fs::exists(OutDir("run_invalid")));
@@ -421,9 +370,9 @@ TEST(PipelineTest, InvalidOptionValuesAreRejected) {
 
 TEST(PipelineTest, UnreadableFramesAreSkippedWarnedAndCounted) {
   const fs::path copy = OutDir("sequence_damaged");
-  fs::copy(PipelineTestData::Get().sequence(), copy, fs::copy_options::recursive);
+  fs::copy(TestData().sequence, copy, fs::copy_options::recursive);
   // Frame 2 without its colour image, frame 4 without its depth image (names from frames.csv).
-  const std::vector<std::string> rows = Lines(ReadText(copy / "frames.csv"));
+  const std::vector<std::string> rows = Lines(ReadFileBytes(copy / "frames.csv"));
   ASSERT_EQ(static_cast<int>(rows.size()), kFrames + 1);
   const std::vector<std::string> header = Fields(rows[0]);
   ASSERT_EQ(header.size(), 5u);
@@ -449,32 +398,32 @@ TEST(PipelineTest, UnreadableFramesAreSkippedWarnedAndCounted) {
     }
   }
   EXPECT_EQ(r.lost_fraction, 0.0);
-  const std::vector<std::string> poses = Lines(ReadText(OutDir("run_damaged") / "poses.csv"));
+  const std::vector<std::string> poses = Lines(ReadFileBytes(OutDir("run_damaged") / "poses.csv"));
   ASSERT_EQ(static_cast<int>(poses.size()), 1 + kFrames - 2);
   std::vector<int> written;
   for (size_t i = 1; i < poses.size(); ++i) written.push_back(std::stoi(Fields(poses[i])[0]));
   EXPECT_EQ(written, (std::vector<int>{0, 1, 3, 5}));
   const nlohmann::json metrics =
-      nlohmann::json::parse(ReadText(OutDir("run_damaged") / "metrics.json"));
+      nlohmann::json::parse(ReadFileBytes(OutDir("run_damaged") / "metrics.json"));
   EXPECT_EQ(metrics.at("skipped_frames").get<int>(), 2);
   const nlohmann::json summary =
-      nlohmann::json::parse(ReadText(OutDir("run_damaged") / "summary.json"));
+      nlohmann::json::parse(ReadFileBytes(OutDir("run_damaged") / "summary.json"));
   EXPECT_EQ(summary.at("warnings").size(), 2u);
 }
 
 // Runs a shell command; returns its exit status and its combined output in *output.
 int RunCommand(const std::string& command, std::string* output) {
-  const fs::path log = PipelineTestData::Get().root() / "command.log";
+  const fs::path log = TestData().root / "command.log";
   const int status = std::system((command + " > '" + log.string() + "' 2>&1").c_str());
-  *output = ReadText(log);
+  *output = ReadFileBytes(log);
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
 TEST(PipelineTest, NobodyInViewIsLostAndTheReturnReinitialises) {
   // The person leaves the view in frames 2 and 3 (all depth zero) and comes back in frame 4.
   const fs::path copy = OutDir("sequence_empty");
-  fs::copy(PipelineTestData::Get().sequence(), copy, fs::copy_options::recursive);
-  const std::vector<std::string> rows = Lines(ReadText(copy / "frames.csv"));
+  fs::copy(TestData().sequence, copy, fs::copy_options::recursive);
+  const std::vector<std::string> rows = Lines(ReadFileBytes(copy / "frames.csv"));
   for (int f : {2, 3}) {
     const fs::path depth = copy / Fields(rows[f + 1])[3];
     const cv::Mat d = cv::imread(depth.string(), cv::IMREAD_UNCHANGED);
@@ -509,7 +458,7 @@ TEST(PipelineTest, NobodyInViewIsLostAndTheReturnReinitialises) {
   EXPECT_NEAR(r.mean_vertex_error_mm, sum / (kFrames - 2), 1e-9);
   EXPECT_EQ(r.max_vertex_error_mm, worst);
   const nlohmann::json metrics =
-      nlohmann::json::parse(ReadText(OutDir("run_empty") / "metrics.json"));
+      nlohmann::json::parse(ReadFileBytes(OutDir("run_empty") / "metrics.json"));
   EXPECT_EQ(metrics.at("failed_frames").get<int>(), 2);
   EXPECT_EQ(metrics.at("lost_frames").get<int>(), 2);
   EXPECT_EQ(metrics.at("evaluated_frames").get<int>(), kFrames - 2);
@@ -519,8 +468,8 @@ TEST(PipelineTest, NobodyInViewIsLostAndTheReturnReinitialises) {
 // reason, never a small error and 0 % lost (issue 20: it reported 6 mm and exited 0).
 TEST(PipelineTest, NoUsableFrameIsAnErrorListingTheReasons) {
   const fs::path copy = OutDir("sequence_all_zero");
-  fs::copy(PipelineTestData::Get().sequence(), copy, fs::copy_options::recursive);
-  const std::vector<std::string> rows = Lines(ReadText(copy / "frames.csv"));
+  fs::copy(TestData().sequence, copy, fs::copy_options::recursive);
+  const std::vector<std::string> rows = Lines(ReadFileBytes(copy / "frames.csv"));
   for (int f = 0; f < kFrames; ++f) {
     const fs::path depth = copy / Fields(rows[f + 1])[3];
     const cv::Mat d = cv::imread(depth.string(), cv::IMREAD_UNCHANGED);
@@ -539,8 +488,7 @@ TEST(PipelineTest, NoUsableFrameIsAnErrorListingTheReasons) {
   const std::string binary = ARTEX_BINARY;
   std::string output;
   EXPECT_NE(RunCommand("'" + binary + "' track '" + copy.string() + "' -t '" +
-                           PipelineTestData::Get().template_path() + "' -o '" +
-                           OutDir("cli_all_zero").string() +
+                           TestData().template_path + "' -o '" + OutDir("cli_all_zero").string() +
                            "' -q --set texture.atlas_size=" + std::to_string(kAtlasSize),
                        &output),
             0)
@@ -550,40 +498,40 @@ TEST(PipelineTest, NoUsableFrameIsAnErrorListingTheReasons) {
 }
 
 TEST(PipelineTest, TrackCommandExitStatus) {
-  const PipelineTestData& data = PipelineTestData::Get();
+  const testing_util::SequenceFixture& data = TestData();
   const std::string binary = ARTEX_BINARY;
   ASSERT_TRUE(fs::exists(binary)) << binary;
-  const fs::path config = data.root() / "small.yaml";
+  const fs::path config = data.root / "small.yaml";
   {
     std::ofstream out(config);
     out << "texture:\n  atlas_size: " << kAtlasSize << "\n";
   }
   std::string output;
-  const std::string missing = (data.root() / "missing_sequence").string();
+  const std::string missing = (data.root / "missing_sequence").string();
   EXPECT_NE(RunCommand("'" + binary + "' track '" + missing + "' -o '" +
-                           (data.root() / "cli_missing").string() + "' -q",
+                           (data.root / "cli_missing").string() + "' -q",
                        &output),
             0);
   EXPECT_NE(output.find("missing_sequence"), std::string::npos) << output;
 
-  const fs::path out = data.root() / "cli_out";
-  EXPECT_EQ(RunCommand("'" + binary + "' track '" + data.sequence() + "' -c '" + config.string() +
-                           "' -t '" + data.template_path() + "' -o '" + out.string() + "' -q",
+  const fs::path out = data.root / "cli_out";
+  EXPECT_EQ(RunCommand("'" + binary + "' track '" + data.sequence + "' -c '" + config.string() +
+                           "' -t '" + data.template_path + "' -o '" + out.string() + "' -q",
                        &output),
             0)
       << output;
   EXPECT_NE(output.find("mean vertex error"), std::string::npos) << output;
-  EXPECT_EQ(static_cast<int>(Lines(ReadText(out / "poses.csv")).size()), kFrames + 1);
+  EXPECT_EQ(static_cast<int>(Lines(ReadFileBytes(out / "poses.csv")).size()), kFrames + 1);
   EXPECT_TRUE(fs::exists(out / "tracked.glb"));
 
   // A configuration with an unknown key fails and names the file.
-  const fs::path bad = data.root() / "bad_config.yaml";
+  const fs::path bad = data.root / "bad_config.yaml";
   {
     std::ofstream o(bad);
     o << "fitting:\n  radius: 0.1\n";
   }
-  EXPECT_NE(RunCommand("'" + binary + "' track '" + data.sequence() + "' -c '" + bad.string() +
-                           "' -o '" + (data.root() / "cli_bad").string() + "' -q",
+  EXPECT_NE(RunCommand("'" + binary + "' track '" + data.sequence + "' -c '" + bad.string() +
+                           "' -o '" + (data.root / "cli_bad").string() + "' -q",
                        &output),
             0);
   EXPECT_NE(output.find("bad_config.yaml"), std::string::npos) << output;
@@ -601,7 +549,7 @@ TEST(PipelineTest, ShapeCalibrationWritesTheSubjectTemplate) {
   config.Set("shape.iterations_per_stage", "2");
   config.Set("fitting.scale_estimation_frames", "2");
   const fs::path out = OutDir("run_shape");
-  const PipelineResult r = Track(PipelineTestData::Get().sequence(), out.string(), config);
+  const PipelineResult r = Track(TestData().sequence, out.string(), config);
   EXPECT_EQ(static_cast<int>(r.frames.size()), kFrames);
   std::ifstream in(out / "summary.json");
   const nlohmann::json summary = nlohmann::json::parse(in);
@@ -614,7 +562,7 @@ TEST(PipelineTest, ShapeCalibrationWritesTheSubjectTemplate) {
   EXPECT_GT(shape.at("calibration").at("iterations").get<int>(), 0);
   ASSERT_TRUE(fs::exists(out / "subject.glb"));
   const Template subject = ReadTemplateGlb((out / "subject.glb").string());
-  const Template base = ReadTemplateGlb(PipelineTestData::Get().template_path());
+  const Template base = ReadTemplateGlb(TestData().template_path);
   EXPECT_EQ(subject.num_vertices(), base.num_vertices());
   EXPECT_EQ(subject.num_joints(), base.num_joints());
   EXPECT_EQ(subject.uvs.rows(), base.uvs.rows());

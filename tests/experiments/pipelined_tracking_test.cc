@@ -5,15 +5,12 @@
 // *Concurrent*): no wall-clock assertions, small inputs.
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
-#include <unistd.h>
 
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <memory>
-#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -23,14 +20,15 @@
 #include "experiments/pipeline.h"
 #include "experiments/pipeline_stages.h"
 #include "models/error.h"
-#include "models/template_generator.h"
-#include "models/template_io.h"
 #include "sensors/virtual_kinect.h"
+#include "tests/solvers/virtual_kinect_scans.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
 
 namespace fs = std::filesystem;
+using testing_util::ReadFileBytes;
 
 // ARTEX_TEST_TBB_THREADS=N limits oneTBB to N threads for the whole test. The ThreadSanitizer
 // tier sets 1 for these tests: the stage threads' own synchronisation (queues, mailbox) is what
@@ -46,56 +44,13 @@ const std::unique_ptr<tbb::global_control> kTbbLimit = []() -> std::unique_ptr<t
 
 constexpr int kFrames = 6;
 
-std::string ReadBytes(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
 // A 6-frame walk from the virtual Kinect (half-size depth camera, small colour camera, coarse
 // subject) and a coarse tracking template, made once per process.
-class Data {
- public:
-  static Data& Get() {
-    static Data data;
-    return data;
-  }
-  ~Data() {
-    std::error_code ec;
-    fs::remove_all(root, ec);
-  }
-  fs::path root;
-  std::string sequence, template_path;
-
- private:
-  Data() {
-    root = fs::temp_directory_path() / ("artex_pipelined_test_" + std::to_string(::getpid()));
-    fs::remove_all(root);
-    fs::create_directories(root);
-    SynthOptions options;
-    options.motion.type = MotionType::kWalk;
-    options.motion.frames = kFrames;
-    options.kinect.SetNoiseLevel(NoiseLevel::kDefault);
-    PinholeCamera& depth = options.kinect.depth_intrinsics;
-    depth.width = 320;
-    depth.height = 240;
-    depth.fx = depth.fy = 262.5;
-    depth.cx = 159.5;
-    depth.cy = 119.5;
-    options.kinect.color_width = 160;
-    options.kinect.color_height = 204;
-    options.texture.size = 256;
-    options.subject_shape.resolution = 0;
-    options.background_frames = 5;
-    sequence = (root / "sequence").string();
-    SynthesizeSequence(options, sequence);
-    BodyShapeOptions shape;
-    shape.resolution = 0;
-    template_path = (root / "template.glb").string();
-    WriteTemplateGlb(template_path, GenerateTemplate(shape));
-  }
-};
+const testing_util::SequenceFixture& TestData() {
+  static const testing_util::SequenceFixture data("pipelined_test",
+                                                  testing_util::SmallSequenceOptions(kFrames));
+  return data;
+}
 
 Config BaseConfig() {
   Config config = Config::Load(std::string(ARTEX_SOURCE_DIR) + "/configs/default.yaml");
@@ -109,8 +64,8 @@ Config BaseConfig() {
 PipelineResult RunWith(Config config, const std::string& concurrency, const std::string& name) {
   config.Set("pipeline.concurrency", concurrency);
   const PipelineOptions options = LoadPipelineOptions(config);
-  return RunPipeline(Data::Get().sequence, Data::Get().template_path, options, config,
-                     (Data::Get().root / name).string());
+  return RunPipeline(TestData().sequence, TestData().template_path, options, config,
+                     (TestData().root / name).string());
 }
 
 void ExpectNear(double a, double b, const std::string& what) {
@@ -154,11 +109,11 @@ void ExpectSameRuns(const Config& config, const std::string& name, int* reinitia
   ExpectNear(seq.mean_novel_view_psnr_db, pip.mean_novel_view_psnr_db, name + " mean PSNR");
   EXPECT_EQ(seq.stream_kbit_per_s, pip.stream_kbit_per_s);
   // Poses as written (17 significant digits) and the atlas, byte for byte.
-  const fs::path root = Data::Get().root;
-  EXPECT_EQ(ReadBytes(root / (name + "_seq") / "poses.csv"),
-            ReadBytes(root / (name + "_pip") / "poses.csv"));
-  EXPECT_EQ(ReadBytes(root / (name + "_seq") / "texture.png"),
-            ReadBytes(root / (name + "_pip") / "texture.png"));
+  const fs::path root = TestData().root;
+  EXPECT_EQ(ReadFileBytes(root / (name + "_seq") / "poses.csv"),
+            ReadFileBytes(root / (name + "_pip") / "poses.csv"));
+  EXPECT_EQ(ReadFileBytes(root / (name + "_seq") / "texture.png"),
+            ReadFileBytes(root / (name + "_pip") / "texture.png"));
   EXPECT_EQ(pip.realtime.frames_processed, kFrames);
   EXPECT_EQ(pip.realtime.frames_dropped, 0);
   ASSERT_EQ(pip.realtime.stages.size(), 4u);
@@ -205,8 +160,8 @@ TEST(PipelinedTrackingTest, SameAsSequentialWithLostFrames) {
                "lost frame " + std::to_string(i));
     EXPECT_EQ(seq.frames[i].scan_points, pip.frames[i].scan_points);
   }
-  EXPECT_EQ(ReadBytes(Data::Get().root / "lost_seq" / "poses.csv"),
-            ReadBytes(Data::Get().root / "lost_pip" / "poses.csv"));
+  EXPECT_EQ(ReadFileBytes(TestData().root / "lost_seq" / "poses.csv"),
+            ReadFileBytes(TestData().root / "lost_pip" / "poses.csv"));
 }
 
 TEST(PipelinedTrackingTest, LiveModeAccountsForEveryFrame) {

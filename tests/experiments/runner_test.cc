@@ -1,5 +1,6 @@
 #include "experiments/runner.h"
 
+#include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -15,32 +16,22 @@
 #include <thread>
 #include <vector>
 
-#include <gtest/gtest.h>
-
 #include "models/error.h"
 #include "tests/error_of.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
 namespace fs = std::filesystem;
+using testing_util::ReadFileBytes;
 
 fs::path FreshDir(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / ("artex_runner_test_" + name + "_" + std::to_string(getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
+  return testing_util::FreshTempDir("runner_test_" + name);
 }
 
 void WriteText(const fs::path& path, const std::string& text) {
   std::ofstream out(path);
   out << text;
-}
-
-std::string ReadText(const fs::path& path) {
-  std::ifstream in(path);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
 }
 
 const char* kSynthSequences =
@@ -305,16 +296,20 @@ TEST(ExperimentRunTest, KilledRunResumesWithIdenticalResultsAndRerunSkips) {
   WriteText(file, kTinyExperiment);
 
   // Reference: uninterrupted, two runs at a time.
-  ASSERT_EQ(std::system((ArtexCommand(file, dir / "ref", 2) + " 2>" + (dir / "ref.log").string()).c_str()), 0)
-      << ReadText(dir / "ref.log");
+  ASSERT_EQ(std::system(
+                (ArtexCommand(file, dir / "ref", 2) + " 2>" + (dir / "ref.log").string()).c_str()),
+            0)
+      << ReadFileBytes(dir / "ref.log");
   const auto reference = ReadResults(dir / "ref" / "results.csv");
   ASSERT_FALSE(reference.empty());
   EXPECT_EQ(CountDone(dir / "ref"), 4);
   EXPECT_TRUE(reference.count("walk|0|mean_vertex_error_mm"));
   EXPECT_TRUE(reference.count("arms|1|seam_rms_after"));
   EXPECT_TRUE(fs::exists(dir / "ref" / "summary.md"));
-  EXPECT_NE(ReadText(dir / "ref" / "summary.md").find("mean_vertex_error_mm"), std::string::npos);
-  const std::string run_json = ReadText(dir / "ref" / "runs" / "walk" / "texture.lambda=1" / "run.json");
+  EXPECT_NE(ReadFileBytes(dir / "ref" / "summary.md").find("mean_vertex_error_mm"),
+            std::string::npos);
+  const std::string run_json =
+      ReadFileBytes(dir / "ref" / "runs" / "walk" / "texture.lambda=1" / "run.json");
   EXPECT_NE(run_json.find("git_revision"), std::string::npos);
   EXPECT_TRUE(fs::exists(dir / "ref" / "runs" / "walk" / "texture.lambda=1" / "trace.csv"));
   EXPECT_TRUE(fs::exists(dir / "ref" / "runs" / "walk" / "texture.lambda=1" / "config.yaml"));
@@ -340,7 +335,8 @@ TEST(ExperimentRunTest, KilledRunResumesWithIdenticalResultsAndRerunSkips) {
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
-  ASSERT_FALSE(exited) << "the runner ended before it could be interrupted: " << ReadText(dir / "killed.log");
+  ASSERT_FALSE(exited) << "the runner ended before it could be interrupted: "
+                       << ReadFileBytes(dir / "killed.log");
   kill(-pid, SIGKILL);
   int status = 0;
   waitpid(pid, &status, 0);
@@ -349,9 +345,10 @@ TEST(ExperimentRunTest, KilledRunResumesWithIdenticalResultsAndRerunSkips) {
   EXPECT_LT(done_at_kill, 4) << "nothing was interrupted";
 
   // Resume: completes the rest; identical (non-timing) results, no duplicates.
-  ASSERT_EQ(std::system((ArtexCommand(file, out, 1) + " 2>" + (dir / "resume.log").string()).c_str()), 0)
-      << ReadText(dir / "resume.log");
-  const std::string resume_log = ReadText(dir / "resume.log");
+  ASSERT_EQ(
+      std::system((ArtexCommand(file, out, 1) + " 2>" + (dir / "resume.log").string()).c_str()), 0)
+      << ReadFileBytes(dir / "resume.log");
+  const std::string resume_log = ReadFileBytes(dir / "resume.log");
   EXPECT_NE(resume_log.find(std::to_string(done_at_kill) + " already complete"), std::string::npos) << resume_log;
   EXPECT_EQ(CountDone(out), 4);
   EXPECT_EQ(ReadResults(out / "results.csv"), reference);
@@ -363,7 +360,8 @@ TEST(ExperimentRunTest, KilledRunResumesWithIdenticalResultsAndRerunSkips) {
   // Rerun: everything skipped, nothing recomputed.
   const auto done_time = fs::last_write_time(out / "runs" / "walk" / "texture.lambda=0" / "DONE");
   ASSERT_EQ(std::system((ArtexCommand(file, out, 2) + " 2>" + (dir / "rerun.log").string()).c_str()), 0);
-  EXPECT_NE(ReadText(dir / "rerun.log").find("4 already complete"), std::string::npos) << ReadText(dir / "rerun.log");
+  EXPECT_NE(ReadFileBytes(dir / "rerun.log").find("4 already complete"), std::string::npos)
+      << ReadFileBytes(dir / "rerun.log");
   EXPECT_EQ(fs::last_write_time(out / "runs" / "walk" / "texture.lambda=0" / "DONE"), done_time);
   EXPECT_EQ(ReadResults(out / "results.csv"), reference);
 
@@ -373,13 +371,20 @@ TEST(ExperimentRunTest, KilledRunResumesWithIdenticalResultsAndRerunSkips) {
   WriteText(file, changed);
   const int rc = std::system((ArtexCommand(file, out, 1) + " 2>" + (dir / "changed.log").string()).c_str());
   EXPECT_NE(rc, 0);
-  EXPECT_NE(ReadText(dir / "changed.log").find("different inputs"), std::string::npos) << ReadText(dir / "changed.log");
+  EXPECT_NE(ReadFileBytes(dir / "changed.log").find("different inputs"), std::string::npos)
+      << ReadFileBytes(dir / "changed.log");
   // ... unless asked to recompute changed runs (the sequences are unchanged and reused).
-  ASSERT_EQ(std::system((ArtexCommand(file, out, 2) + " --replace-changed 2>" + (dir / "replaced.log").string()).c_str()), 0)
-      << ReadText(dir / "replaced.log");
+  ASSERT_EQ(std::system((ArtexCommand(file, out, 2) + " --replace-changed 2>" +
+                         (dir / "replaced.log").string())
+                            .c_str()),
+            0)
+      << ReadFileBytes(dir / "replaced.log");
   EXPECT_EQ(CountDone(out), 4);
-  EXPECT_NE(ReadText(dir / "replaced.log").find("0 already complete"), std::string::npos) << ReadText(dir / "replaced.log");
-  EXPECT_NE(ReadText(out / "runs" / "arms" / "texture.lambda=1" / "run_config.yaml").find("atlas_size: 64"), std::string::npos);
+  EXPECT_NE(ReadFileBytes(dir / "replaced.log").find("0 already complete"), std::string::npos)
+      << ReadFileBytes(dir / "replaced.log");
+  EXPECT_NE(ReadFileBytes(out / "runs" / "arms" / "texture.lambda=1" / "run_config.yaml")
+                .find("atlas_size: 64"),
+            std::string::npos);
   fs::remove_all(dir);
 }
 

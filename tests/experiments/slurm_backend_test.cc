@@ -18,29 +18,20 @@
 #include "experiments/slurm_queue.h"
 #include "models/error.h"
 #include "tests/error_of.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
 namespace fs = std::filesystem;
+using testing_util::ReadFileBytes;
 
 fs::path FreshDir(const std::string& name) {
-  const fs::path dir =
-      fs::temp_directory_path() / ("artex_slurm_test_" + name + "_" + std::to_string(getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
+  return testing_util::FreshTempDir("slurm_test_" + name);
 }
 
 void WriteText(const fs::path& path, const std::string& text) {
   std::ofstream out(path);
   out << text;
-}
-
-std::string ReadText(const fs::path& path) {
-  std::ifstream in(path);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
 }
 
 // A fake Slurm command: a shell script in bin/ (its arguments are appended to bin/<name>.args).
@@ -153,7 +144,7 @@ TEST(SlurmBackendTest, RefusedSubmissionQuotesSlurm) {
   EXPECT_NE(msg.find("sbatch refused the job array"), std::string::npos) << msg;
   EXPECT_NE(msg.find("exit 1: sbatch: error: invalid partition specified: nope"), std::string::npos)
       << msg;
-  EXPECT_NE(ReadText(dir / "bin" / "sbatch.args").find("--parsable"), std::string::npos);
+  EXPECT_NE(ReadFileBytes(dir / "bin" / "sbatch.args").find("--parsable"), std::string::npos);
   fs::remove_all(dir);
 }
 
@@ -193,10 +184,10 @@ TEST(SlurmBackendTest, RerunSubmitsOnlyRunsWhoseTaskEndedWithoutCompleting) {
   EXPECT_EQ(first.runs_unfinished, 4);
   EXPECT_EQ(first.runs_resubmitted, 0);
   const fs::path sub = out / "slurm" / "submit-001";
-  EXPECT_EQ(ReadText(sub / "job_id"), "42\n");
-  EXPECT_NE(ReadText(sub / "job.sh").find("--array=0-3\n"), std::string::npos);
+  EXPECT_EQ(ReadFileBytes(sub / "job_id"), "42\n");
+  EXPECT_NE(ReadFileBytes(sub / "job.sh").find("--array=0-3\n"), std::string::npos);
   EXPECT_EQ(slurm::LoadSubmission(sub.string()).tasks.size(), 4u);
-  EXPECT_NE(ReadText(out / "slurm" / "experiment.txt").find("fake.yaml"), std::string::npos);
+  EXPECT_NE(ReadFileBytes(out / "slurm" / "experiment.txt").find("fake.yaml"), std::string::npos);
 
   // Task 0 still running, task 1 cancelled (squeue), task 2 started and vanished (killed),
   // task 3 complete. Runs 1 and 2 are pending again; run 3 is no longer pending.
@@ -242,7 +233,8 @@ TEST(SlurmBackendTest, RunsBeyondMaxArraySizeAreSplitIntoSeveralArrays) {
   EXPECT_EQ(subs[0].tasks.size(), 2u);
   EXPECT_EQ(subs[2].tasks.size(), 1u);
   EXPECT_EQ(subs[2].tasks[0].label, "seq/texture.lambda=4");
-  EXPECT_NE(ReadText(fs::path(subs[1].dir) / "job.sh").find("--array=0-1\n"), std::string::npos);
+  EXPECT_NE(ReadFileBytes(fs::path(subs[1].dir) / "job.sh").find("--array=0-1\n"),
+            std::string::npos);
   EXPECT_NE(summary.note.find("as job arrays 100 ("), std::string::npos) << summary.note;
   fs::remove_all(dir);
 }
@@ -264,11 +256,11 @@ TEST(SlurmBackendTest, FailingTaskLogsAndMarksItsExit) {
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 1);
   const fs::path sub = out / "slurm" / "submit-001";
-  EXPECT_EQ(ReadText(sub / "state" / "0.exit").rfind("1 ", 0), 0u)
-      << ReadText(sub / "state" / "0.exit");
+  EXPECT_EQ(ReadFileBytes(sub / "state" / "0.exit").rfind("1 ", 0), 0u)
+      << ReadFileBytes(sub / "state" / "0.exit");
   EXPECT_TRUE(fs::exists(sub / "state" / "0.started"));
   const std::string log =
-      ReadText(out / "runs" / "seq" / "slurm-logs" / "texture.lambda=0" / "slurm-5_0.log");
+      ReadFileBytes(out / "runs" / "seq" / "slurm-logs" / "texture.lambda=0" / "slurm-5_0.log");
   EXPECT_NE(log.find("artex experiment-task 5_0: seq/texture.lambda=0 on "), std::string::npos)
       << log;
   EXPECT_NE(log.find("FAILED"), std::string::npos) << log;

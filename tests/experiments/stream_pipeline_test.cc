@@ -2,7 +2,6 @@
 // atlases and texture quality against ground truth in metrics.json, `artex stream encode RUN/`
 // of the same run, and `artex stream play` against the sender's run and the ground truth.
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
@@ -13,9 +12,8 @@
 #include "experiments/config.h"
 #include "experiments/pipeline.h"
 #include "experiments/stream_evaluation.h"
-#include "models/template_generator.h"
-#include "models/template_io.h"
 #include "sensors/virtual_kinect.h"
+#include "tests/solvers/virtual_kinect_scans.h"
 
 namespace artex {
 namespace {
@@ -25,54 +23,35 @@ namespace fs = std::filesystem;
 class StreamPipelineTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    root_ = new fs::path(fs::temp_directory_path() /
-                         ("artex_stream_pipeline_test_" + std::to_string(::getpid())));
-    fs::remove_all(*root_);
-    fs::create_directories(*root_);
-    SynthOptions options;
-    options.motion.type = MotionType::kWalk;
-    options.motion.frames = 8;
-    PinholeCamera& depth = options.kinect.depth_intrinsics;
-    depth.width = 320;
-    depth.height = 240;
-    depth.fx = depth.fy = 262.5;
-    depth.cx = 159.5;
-    depth.cy = 119.5;
+    SynthOptions options = testing_util::SmallSequenceOptions(8);
     options.kinect.color_width = 320;
     options.kinect.color_height = 406;
-    options.texture.size = 256;
-    options.subject_shape.resolution = 0;
-    options.background_frames = 5;
-    SynthesizeSequence(options, (*root_ / "sequence").string());
-    BodyShapeOptions shape;
-    shape.resolution = 0;
-    WriteTemplateGlb((*root_ / "template.glb").string(), GenerateTemplate(shape));
+    data_ = new testing_util::SequenceFixture("stream_pipeline_test", options);
 
     Config config;
     config.Set("texture.atlas_size", "256");
     config.Set("pipeline.export_atlases", "true");
     config.Set("pipeline.texture_quality_every", "4");
-    config.Set("pipeline.stream", "'" + (*root_ / "track.artx").string() + "'");
+    config.Set("pipeline.stream", "'" + (data_->root / "track.artx").string() + "'");
     config.Set("stream.keyframe_interval", "4");
     config.Set("stream.texture_kbps", "600");
-    result_ = new PipelineResult(
-        RunPipeline((*root_ / "sequence").string(), (*root_ / "template.glb").string(),
-                    LoadPipelineOptions(config), config, (*root_ / "run").string()));
+    result_ = new PipelineResult(RunPipeline(data_->sequence, data_->template_path,
+                                             LoadPipelineOptions(config), config,
+                                             (data_->root / "run").string()));
   }
   static void TearDownTestSuite() {
-    fs::remove_all(*root_);
-    delete root_;
+    delete data_;
     delete result_;
   }
-  static fs::path* root_;
+  static testing_util::SequenceFixture* data_;
   static PipelineResult* result_;
 };
 
-fs::path* StreamPipelineTest::root_ = nullptr;
+testing_util::SequenceFixture* StreamPipelineTest::data_ = nullptr;
 PipelineResult* StreamPipelineTest::result_ = nullptr;
 
 TEST_F(StreamPipelineTest, MetricsHaveTextureQualityAndStreamRates) {
-  std::ifstream in(*root_ / "run" / "metrics.json");
+  std::ifstream in(data_->root / "run" / "metrics.json");
   std::stringstream s;
   s << in.rdbuf();
   const nlohmann::json m = nlohmann::json::parse(s.str());
@@ -101,16 +80,16 @@ TEST_F(StreamPipelineTest, PlayedStreamMatchesTheSender) {
   StreamOptions o;
   o.keyframe_interval = 4;
   o.video.bitrate_kbps = 600;
-  const StreamSummary again =
-      EncodeRunStream((*root_ / "run").string(), "", (*root_ / "encoded.artx").string(), o);
+  const StreamSummary again = EncodeRunStream((data_->root / "run").string(), "",
+                                              (data_->root / "encoded.artx").string(), o);
   EXPECT_EQ(again.frames, result_->stream.frames);
   EXPECT_EQ(again.pose_bytes, result_->stream.pose_bytes);
   PlaybackOptions p;
-  p.out_dir = (*root_ / "play").string();
+  p.out_dir = (data_->root / "play").string();
   p.evaluate_every = 1;
-  p.reference_run = (*root_ / "run").string();
-  p.sequence = (*root_ / "sequence").string();
-  const PlaybackReport r = PlayStream((*root_ / "track.artx").string(), p);
+  p.reference_run = (data_->root / "run").string();
+  p.sequence = data_->sequence;
+  const PlaybackReport r = PlayStream((data_->root / "track.artx").string(), p);
   std::printf(
       "receiver: vs sender PSNR %.2f dB SSIM %.3f (atlas %.2f dB, vertices %.3f mm); vs "
       "truth %.2f dB (sender %.2f dB)\n",
@@ -121,12 +100,12 @@ TEST_F(StreamPipelineTest, PlayedStreamMatchesTheSender) {
   EXPECT_GT(r.psnr_vs_sender_db, 25.0);  // 4:2:0 video of a 256^2 atlas (docs/streaming.md)
   EXPECT_LT(r.max_vertex_error_mm, 1.0);
   EXPECT_LT(std::abs(r.receiver_psnr_db - r.sender_psnr_db), 1.0);
-  EXPECT_TRUE(fs::exists(*root_ / "play" / "atlas.png"));
-  EXPECT_TRUE(fs::exists(*root_ / "play" / "report.json"));
+  EXPECT_TRUE(fs::exists(data_->root / "play" / "atlas.png"));
+  EXPECT_TRUE(fs::exists(data_->root / "play" / "report.json"));
   // Joining at frame 2 starts at the keyframe of frame 4.
   p.from_frame = 2;
   p.out_dir.clear();
-  const PlaybackReport joined = PlayStream((*root_ / "track.artx").string(), p);
+  const PlaybackReport joined = PlayStream((data_->root / "track.artx").string(), p);
   EXPECT_EQ(joined.first_frame, 4);
   EXPECT_EQ(joined.frames, 4);
 }

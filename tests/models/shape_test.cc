@@ -7,19 +7,12 @@
 #include "models/error.h"
 #include "models/skinning.h"
 #include "models/so3.h"
-#include "models/template_generator.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
 
-const Template& Coarse() {
-  static const Template t = [] {
-    BodyShapeOptions o;
-    o.resolution = 0;
-    return GenerateTemplate(o);
-  }();
-  return t;
-}
+using testing_util::CoarseTemplate;
 
 Pose RandomPose(int joints, std::mt19937* rng, double spread) {
   std::normal_distribution<double> n(0.0, spread);
@@ -39,7 +32,7 @@ Eigen::VectorXd RandomShape(int q, std::mt19937* rng, double spread) {
 }
 
 TEST(ShapeModelTest, ParameterCountsPerMode) {
-  const Template& t = Coarse();
+  const Template& t = CoarseTemplate();
   EXPECT_EQ(ShapeModel(t, ShapeMode::kFixed, true).num_parameters(), 0);
   EXPECT_EQ(ShapeModel(t, ShapeMode::kScale, true).num_parameters(), 1);
   EXPECT_EQ(ShapeModel(t, ShapeMode::kBones, false).num_parameters(), 16);
@@ -56,7 +49,7 @@ TEST(ShapeModelTest, ParameterCountsPerMode) {
 }
 
 TEST(ShapeModelTest, ZeroParametersGiveTheTemplate) {
-  const Template& t = Coarse();
+  const Template& t = CoarseTemplate();
   const ShapeModel m(t, ShapeMode::kBonesGirth, false);
   const Template same = m.Apply(Eigen::VectorXd::Zero(m.num_parameters()));
   EXPECT_LT((same.vertices - t.vertices).cwiseAbs().maxCoeff(), 1e-12);
@@ -68,7 +61,7 @@ TEST(ShapeModelTest, ZeroParametersGiveTheTemplate) {
 }
 
 TEST(ShapeModelTest, ScaleModeScalesAboutTheRoot) {
-  const Template& t = Coarse();
+  const Template& t = CoarseTemplate();
   const ShapeModel m(t, ShapeMode::kScale, true);
   const Template big = m.Apply(Eigen::VectorXd::Constant(1, 0.1));
   const Eigen::RowVector3d root = t.joints[0].center.transpose();
@@ -77,7 +70,7 @@ TEST(ShapeModelTest, ScaleModeScalesAboutTheRoot) {
 }
 
 TEST(ShapeModelTest, BoneLengthsScaleJointOffsets) {
-  const Template& t = Coarse();
+  const Template& t = CoarseTemplate();
   const ShapeModel m(t, ShapeMode::kBones, true);
   Eigen::VectorXd q = Eigen::VectorXd::Zero(m.num_parameters());
   const auto& names = m.parameter_names();
@@ -101,7 +94,7 @@ TEST(ShapeModelTest, BoneLengthsScaleJointOffsets) {
 // The analytic Jacobian of the posed vertices w.r.t. the shape parameters against central
 // differences of Skinning(Apply(q)).Apply(pose), with and without symmetry, at several poses.
 TEST(ShapeModelTest, PosedJacobianMatchesFiniteDifferences) {
-  const Template& t = Coarse();
+  const Template& t = CoarseTemplate();
   std::mt19937 rng(7);
   for (ShapeMode mode : {ShapeMode::kScale, ShapeMode::kBones, ShapeMode::kBonesGirth}) {
     for (bool symmetric : {false, true}) {
@@ -139,7 +132,7 @@ TEST(ShapeModelTest, PosedJacobianMatchesFiniteDifferences) {
 }
 
 TEST(ShapeModelTest, SetRestGeometryEqualsANewSkinning) {
-  const Template& t = Coarse();
+  const Template& t = CoarseTemplate();
   const ShapeModel m(t, ShapeMode::kBonesGirth, true);
   std::mt19937 rng(3);
   const Template shaped = m.Apply(RandomShape(m.num_parameters(), &rng, 0.15));

@@ -1,43 +1,27 @@
 // Runs the built `artex` binary (ARTEX_BINARY): artex template make | info | pose | animate |
 // import-gltf | import-makehuman, and its error handling (non-zero exit, message names the file).
 #include <gtest/gtest.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
-#include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
 #include <string>
 
 #include "models/error.h"
 #include "models/template_io.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
 
 namespace fs = std::filesystem;
+using testing_util::ReadFileBytes;
 
-struct Result {
-  int status = -1;
-  std::string out;
-  std::string err;
-};
-
-std::string ReadText(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using Result = testing_util::CommandResult;
 
 class TemplateCliTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = new fs::path(fs::temp_directory_path() /
-                        ("artex_template_cli_test_" + std::to_string(::getpid())));
-    fs::remove_all(*dir_);
-    fs::create_directories(*dir_);
+    dir_ = new fs::path(testing_util::FreshTempDir("template_cli_test"));
   }
   static void TearDownTestSuite() {
     fs::remove_all(*dir_);
@@ -52,19 +36,7 @@ class TemplateCliTest : public ::testing::Test {
 
   static std::string Path(const std::string& name) { return (*dir_ / name).string(); }
 
-  static Result Run(const std::string& args) {
-    static int counter = 0;
-    const std::string out = Path("stdout" + std::to_string(counter));
-    const std::string err = Path("stderr" + std::to_string(counter++));
-    const std::string command =
-        "'" + std::string(ARTEX_BINARY) + "' " + args + " > '" + out + "' 2> '" + err + "'";
-    const int raw = std::system(command.c_str());
-    Result r;
-    r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-    r.out = ReadText(out);
-    r.err = ReadText(err);
-    return r;
-  }
+  static Result Run(const std::string& args) { return testing_util::RunArtex(args, *dir_); }
 
   // The coarse template, made on first use (once per test process).
   static std::string Template() {
@@ -109,12 +81,12 @@ TEST_F(TemplateCliTest, PoseWritesPlyObjAndGlb) {
   Result r = Run("template pose '" + tmpl + "' --joint l_elbow=0,0,60 --joint r_knee=45,0,0 "
                  "--color-joints -o '" + Path("posed.ply") + "'");
   ASSERT_EQ(r.status, 0) << r.err;
-  const std::string ply = ReadText(Path("posed.ply"));
+  const std::string ply = ReadFileBytes(Path("posed.ply"));
   EXPECT_EQ(ply.rfind("ply", 0), 0u);
   EXPECT_NE(ply.find("property uchar red"), std::string::npos);
   r = Run("template pose '" + tmpl + "' --joint head=0,30,0 -o '" + Path("posed.obj") + "'");
   ASSERT_EQ(r.status, 0) << r.err;
-  EXPECT_NE(ReadText(Path("posed.obj")).find("\nf "), std::string::npos);
+  EXPECT_NE(ReadFileBytes(Path("posed.obj")).find("\nf "), std::string::npos);
   // A full pose vector: 58 numbers; global translation of 1 m along x moves every vertex.
   std::string vector = "1 1 0 0 0 0 0";
   for (int i = 0; i < 51; ++i) vector += " 0";
@@ -174,7 +146,7 @@ TEST_F(TemplateCliTest, ErrorsExitNonZeroAndNameTheFile) {
   EXPECT_NE(r.err.find(garbage), std::string::npos) << r.err;
 
   const std::string truncated = Path("truncated.glb");
-  const std::string bytes = ReadText(Template());
+  const std::string bytes = ReadFileBytes(Template());
   std::ofstream(truncated, std::ios::binary) << bytes.substr(0, bytes.size() / 3);
   r = Run("template pose '" + truncated + "' -o '" + Path("never.ply") + "'");
   EXPECT_NE(r.status, 0);

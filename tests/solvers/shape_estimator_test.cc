@@ -8,19 +8,12 @@
 #include "models/normals.h"
 #include "models/skinning.h"
 #include "models/so3.h"
-#include "models/template_generator.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
 
-const Template& Coarse() {
-  static const Template t = [] {
-    BodyShapeOptions o;
-    o.resolution = 0;
-    return GenerateTemplate(o);
-  }();
-  return t;
-}
+using testing_util::CoarseTemplate;
 
 Pose RandomPose(int joints, std::mt19937* rng, double spread) {
   std::normal_distribution<double> n(0.0, spread);
@@ -52,7 +45,7 @@ ShapeOptions Options(ShapeMode mode) {
 // Known shape parameters are recovered from noise-free scans of a subject with that shape,
 // jointly with (perturbed) poses, starting from the template.
 TEST(ShapeEstimatorTest, RecoversKnownShapeFromNoiseFreeScans) {
-  const Template& t = Coarse();
+  const Template& t = CoarseTemplate();
   for (ShapeMode mode : {ShapeMode::kBones, ShapeMode::kBonesGirth}) {
     ShapeEstimator estimator(t, Options(mode));
     const ShapeModel& model = estimator.model();
@@ -94,7 +87,7 @@ TEST(ShapeEstimatorTest, RecoversKnownShapeFromNoiseFreeScans) {
 }
 
 TEST(ShapeEstimatorTest, CalibratesAfterTheConfiguredFramesThenFreezes) {
-  const Template& t = Coarse();
+  const Template& t = CoarseTemplate();
   ShapeOptions o = Options(ShapeMode::kScale);
   o.calibration_frames = 3;
   o.calibration_stride = 2;
@@ -122,7 +115,7 @@ TEST(ShapeEstimatorTest, CalibratesAfterTheConfiguredFramesThenFreezes) {
 }
 
 TEST(ShapeEstimatorTest, FixedModeNeverChangesTheTemplate) {
-  const Template& t = Coarse();
+  const Template& t = CoarseTemplate();
   ShapeEstimator estimator(t, ShapeOptions());
   EXPECT_FALSE(estimator.enabled());
   EXPECT_EQ(estimator.parameters().size(), 0);
@@ -135,7 +128,7 @@ TEST(ShapeEstimatorTest, FixedModeNeverChangesTheTemplate) {
 }
 
 TEST(ShapeEstimatorTest, BoundsHoldAndOptionsAreChecked) {
-  const Template& t = Coarse();
+  const Template& t = CoarseTemplate();
   ShapeOptions o = Options(ShapeMode::kScale);
   o.bone_max = 1.02;
   o.girth_max = 1.02;

@@ -1,7 +1,8 @@
-// Virtual Kinect fixtures for the fit-quality and initialisation tests: a short sequence
+// Virtual Kinect fixtures. For the fit-quality and initialisation tests: a short sequence
 // synthesised into a temporary folder (small colour camera and texture: the fits never read
 // colour), read back and preprocessed with a background model trained on its empty-scene
-// frames, giving the scans, the ground-truth poses and the depth camera.
+// frames, giving the scans, the ground-truth poses and the depth camera. For the pipeline
+// tests (tests/experiments/): a small sequence and the coarse tracking template on disk.
 #pragma once
 
 #include <unistd.h>
@@ -11,11 +12,13 @@
 #include <vector>
 
 #include "models/pose.h"
+#include "models/template_io.h"
 #include "render/camera.h"
 #include "sensors/preprocess.h"
 #include "sensors/scan.h"
 #include "sensors/sequence.h"
 #include "sensors/virtual_kinect.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace testing_util {
@@ -40,17 +43,16 @@ inline SynthOptions TestSynthOptions(int frames) {
   return options;
 }
 
-// Synthesises `options` into a temporary folder named after `name`, preprocesses frames
+// Synthesises `options` into FreshTempDir(name)/sequence, preprocesses frames
 // [0, options.motion.frames) and removes the folder.
 inline KinectScans SynthesizeScans(const SynthOptions& options, const std::string& name) {
   namespace fs = std::filesystem;
-  const fs::path dir =
-      fs::temp_directory_path() / ("artex_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  SynthesizeSequence(options, dir.string());
+  const fs::path dir = FreshTempDir(name);
+  const std::string sequence = (dir / "sequence").string();
+  SynthesizeSequence(options, sequence);
   KinectScans out;
   {
-    SequenceReader reader(dir.string());
+    SequenceReader reader(sequence);
     out.depth_camera = reader.calibration().depth;
     Preprocessor preprocessor(reader.calibration());
     preprocessor.Train(reader.ReadBackgroundFrames());
@@ -67,6 +69,45 @@ inline KinectScans SynthesizeScans(const SynthOptions& options, const std::strin
   fs::remove_all(dir);
   return out;
 }
+
+// TestSynthOptions on the small cameras of the pipeline tests: the depth camera at half size
+// (320 x 240, f = 262.5), the coarsest subject, and its textured mesh written (the ground truth
+// of the texture quality).
+inline SynthOptions SmallSequenceOptions(int frames) {
+  SynthOptions options = TestSynthOptions(frames);
+  PinholeCamera& depth = options.kinect.depth_intrinsics;
+  depth.width = 320;
+  depth.height = 240;
+  depth.fx = depth.fy = 262.5;
+  depth.cx = 159.5;
+  depth.cy = 119.5;
+  options.subject_shape.resolution = 0;
+  options.write_subject_glb = SynthOptions().write_subject_glb;
+  return options;
+}
+
+// A sequence synthesised from `options` into root/sequence and the coarse tracking template
+// (CoarseTemplate()) in root/template.glb, root = FreshTempDir(name); removed with the object.
+class SequenceFixture {
+ public:
+  SequenceFixture(const std::string& name, const SynthOptions& options)
+      : root(FreshTempDir(name)),
+        sequence((root / "sequence").string()),
+        template_path((root / "template.glb").string()) {
+    SynthesizeSequence(options, sequence);
+    WriteTemplateGlb(template_path, CoarseTemplate());
+  }
+  ~SequenceFixture() {
+    std::error_code ec;
+    std::filesystem::remove_all(root, ec);
+  }
+  SequenceFixture(const SequenceFixture&) = delete;
+  SequenceFixture& operator=(const SequenceFixture&) = delete;
+
+  const std::filesystem::path root;
+  const std::string sequence;
+  const std::string template_path;
+};
 
 }  // namespace testing_util
 }  // namespace artex
