@@ -105,6 +105,11 @@ void RunOverlay(const OverlayCli& cli) {
   if (template_path.empty()) template_path = JsonField(run_json, "template");
   if (template_path.empty()) template_path = JsonField(summary, "template");
   if (template_path == "default") template_path.clear();
+  // A run's own template (shape.retrack: shape_pass/subject.glb) is named relative to the run.
+  if (cli.template_path.empty() && !template_path.empty() &&
+      fs::path(template_path).is_relative() && fs::exists(fs::path(run) / template_path)) {
+    template_path = (fs::path(run) / template_path).string();
+  }
   const Template tmpl = template_path.empty() ? GenerateTemplate() : ReadTemplateGlb(template_path);
 
   std::map<int, Pose> poses;

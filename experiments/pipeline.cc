@@ -295,7 +295,12 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
   // Absolute, so that `artex overlay RUN` and `artex render RUN` find the recording from any
   // working directory.
   info.sequence = fs::absolute(sequence_dir).lexically_normal().string();
-  info.template_name = template_path.empty() ? "default" : template_path;
+  // A template inside the run (shape.retrack's shape_pass/subject.glb) is named relative to it,
+  // since the run is written into a temporary sibling and renamed at the end.
+  const std::string prefix = out_dir + "/";
+  info.template_name = template_path.empty() ? "default"
+                       : template_path.rfind(prefix, 0) == 0 ? template_path.substr(prefix.size())
+                                                             : template_path;
   info.texture = texturer != nullptr;
   info.world = world.estimate ? &*world.estimate : nullptr;
   WriteFramesCsv(out_dir + "/frames.csv", result);

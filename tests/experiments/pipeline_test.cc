@@ -574,5 +574,40 @@ TEST(PipelineTest, ShapeCalibrationWritesTheSubjectTemplate) {
   EXPECT_NE(msg.find("shape.mode"), std::string::npos) << msg;
 }
 
+// shape.retrack: the first pass (fitting only) calibrates the subject into shape_pass/, the
+// second tracks every frame with that template; a live run cannot be tracked twice.
+TEST(PipelineTest, ShapeRetrackTracksAgainWithTheSubject) {
+  Config config = SmallConfig();
+  config.Set("shape.mode", "bones_girth");
+  config.Set("shape.retrack", "true");
+  config.Set("shape.calibration_frames", "1");
+  config.Set("shape.calibration_rounds", "1");
+  config.Set("shape.iterations_per_stage", "2");
+  config.Set("fitting.scale_estimation_frames", "2");
+  const fs::path out = OutDir("run_retrack");
+  const PipelineResult r = Track(TestData().sequence, out.string(), config);
+  EXPECT_EQ(static_cast<int>(r.frames.size()), kFrames);
+  EXPECT_GE(r.shape_calibrated_frame, 1);
+  ASSERT_TRUE(fs::exists(out / "shape_pass" / "subject.glb"));
+  ASSERT_TRUE(fs::exists(out / "shape_pass" / "frames.csv"));
+  EXPECT_FALSE(fs::exists(out / "shape_pass" / "texture.png"));  // the first pass fits only
+  EXPECT_TRUE(fs::exists(out / "poses.csv"));
+  ASSERT_FALSE(r.warnings.empty());
+  EXPECT_NE(r.warnings[0].find("shape.retrack"), std::string::npos) << r.warnings[0];
+  // The second pass keeps the subject's shape fixed: no second calibration in its summary.
+  std::ifstream in(out / "summary.json");
+  const nlohmann::json summary = nlohmann::json::parse(in);
+  if (summary.contains("shape")) {
+    EXPECT_EQ(summary.at("shape").at("mode").get<std::string>(), "fixed");
+  }
+  // Named relative to the run (it was written into a temporary sibling; artex overlay reads it).
+  EXPECT_EQ(summary.at("template").get<std::string>(), "shape_pass/subject.glb");
+
+  Config live = config;
+  live.Set("pipeline.live", "true");
+  const std::string msg = ErrorOf([&] { LoadPipelineOptions(live); });
+  EXPECT_NE(msg.find("shape.retrack"), std::string::npos) << msg;
+}
+
 }  // namespace
 }  // namespace artex
