@@ -189,7 +189,7 @@ void BindQuality(const Config& c, FitQualityOptions* o) {
   c.CheckKeys({"inlier_distance", "max_scan_points", "raster_width", "support_tolerance",
                "depth_truncation", "good_min_inlier_fraction", "good_min_support_fraction",
                "good_max_depth_residual", "lost_min_inlier_fraction", "lost_min_support_fraction",
-               "lost_max_depth_residual"});
+               "lost_max_depth_residual", "part_min_visible", "part_min_support", "part_ignore"});
   c.Get("inlier_distance", &o->inlier_distance);
   c.Get("max_scan_points", &o->max_scan_points);
   c.Get("raster_width", &o->raster_width);
@@ -201,6 +201,9 @@ void BindQuality(const Config& c, FitQualityOptions* o) {
   c.Get("lost_min_inlier_fraction", &o->lost_min_inlier_fraction);
   c.Get("lost_min_support_fraction", &o->lost_min_support_fraction);
   c.Get("lost_max_depth_residual", &o->lost_max_depth_residual);
+  c.Get("part_min_visible", &o->part_min_visible);
+  c.Get("part_min_support", &o->part_min_support);
+  c.Get("part_ignore", &o->part_ignore);
 }
 
 void BindInitializer(const Config& c, InitializerOptions* o) {

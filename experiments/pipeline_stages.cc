@@ -200,8 +200,11 @@ void TrackStage::Initialise(FrameRecord* r) {
 void TrackStage::Evaluate(FrameRecord* r, Eigen::MatrixX3d* posed) {
   fitter_->skinning().Apply(fitter_->pose(), posed);
   if (r->fit.ok()) {
-    r->quality = EvaluateFitQuality(*posed, fitter_->skinning().model().triangles, scan_,
-                                    calibration_.depth, options_.quality);
+    const Template& model = fitter_->skinning().model();
+    const Eigen::VectorXi parts = FitQualityParts(model.vertex_joint, model.JointNames(),
+                                                  options_.quality);
+    r->quality = EvaluateFitQuality(*posed, model.triangles, scan_, calibration_.depth,
+                                    options_.quality, &parts);
   } else {
     r->quality = FitQuality();  // a failed fit is lost, whatever its kept pose shows
     r->quality.label = FitQualityLabel::kLost;

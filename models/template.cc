@@ -5,6 +5,12 @@
 
 namespace artex {
 
+std::vector<std::string> Template::JointNames() const {
+  std::vector<std::string> names;
+  for (const Joint& j : joints) names.push_back(j.name);
+  return names;
+}
+
 std::vector<int> Template::Chain(int joint) const {
   std::vector<int> chain;
   for (int j = joint; j >= 0; j = joints[j].parent) chain.push_back(j);

@@ -36,6 +36,7 @@ struct Template {
   int num_pose_parameters() const { return 7 + 3 * num_joints(); }
   bool has_uvs() const { return uv_triangles.rows() == triangles.rows() && uvs.rows() > 0; }
 
+  std::vector<std::string> JointNames() const;  // joints[j].name for every j
   // Joint indices from the root down to `joint` (inclusive).
   std::vector<int> Chain(int joint) const;
   int FindJoint(const std::string& name) const;  // -1 when absent

@@ -255,9 +255,7 @@ struct EMFitter::FrameState {
 EMFitter::EMFitter(const Template& tmpl, const EMFitterOptions& options) : options_(options) {
   std::string error;
   if (!options.IsValid(&error)) throw Error("fitting options: " + error);
-  std::vector<std::string> joint_names;
-  for (const Joint& j : tmpl.joints) joint_names.push_back(j.name);
-  options_.joint_limits = ResolveJointLimits(options.joint_limits, joint_names);
+  options_.joint_limits = ResolveJointLimits(options.joint_limits, tmpl.JointNames());
   if (!options_.joint_limits.IsValid(tmpl.num_joints(), &error)) {
     throw Error("fitting options: joint_limits." + error);
   }

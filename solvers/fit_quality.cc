@@ -40,6 +40,10 @@ bool FitQualityOptions::IsValid(std::string* error) const {
   } else if (!fraction(good_min_inlier_fraction) || !fraction(good_min_support_fraction) ||
              !fraction(lost_min_inlier_fraction) || !fraction(lost_min_support_fraction)) {
     msg << "good_min_*/lost_min_* fractions: expected values in [0, 1]";
+  } else if (part_min_visible < 1) {
+    msg << "part_min_visible: expected >= 1 vertices, found " << part_min_visible;
+  } else if (!(part_min_support >= 0.0 && part_min_support <= 1.0)) {
+    msg << "part_min_support: expected a fraction in [0, 1], found " << part_min_support;
   } else if (!(good_max_depth_residual >= 0.0) || !(lost_max_depth_residual >= 0.0)) {
     msg << "good_max_depth_residual/lost_max_depth_residual: expected values >= 0 (m)";
   } else {
@@ -52,8 +56,9 @@ bool FitQualityOptions::IsValid(std::string* error) const {
 std::string FitQuality::BriefReport() const {
   std::ostringstream out;
   out << FitQualityLabelName(label) << ": inliers " << inlier_fraction << ", support "
-      << support_fraction << ", depth residual " << depth_residual_m * 1e3 << " mm, score " << score
-      << " (" << seconds * 1e3 << " ms)";
+      << support_fraction << ", depth residual " << depth_residual_m * 1e3 << " mm, score " << score;
+  if (unsupported_parts > 0) out << ", " << unsupported_parts << " unsupported part(s)";
+  out << " (" << seconds * 1e3 << " ms)";
   return out.str();
 }
 
@@ -75,9 +80,24 @@ PinholeCamera Subsampled(const PinholeCamera& camera, int subsample) {
 
 }  // namespace
 
+Eigen::VectorXi FitQualityParts(const Eigen::VectorXi& vertex_joint,
+                                const std::vector<std::string>& joint_names,
+                                const FitQualityOptions& options) {
+  Eigen::VectorXi parts = vertex_joint;
+  for (Eigen::Index v = 0; v < parts.size(); ++v) {
+    const int j = parts[v];
+    if (j < 0 || j >= static_cast<int>(joint_names.size())) continue;
+    for (const std::string& name : options.part_ignore) {
+      if (joint_names[j] == name) parts[v] = -1;
+    }
+  }
+  return parts;
+}
+
 FitQuality EvaluateFitQuality(const Eigen::MatrixX3d& posed_vertices,
                               const Eigen::MatrixX3i& triangles, const Scan& scan,
-                              const PinholeCamera& depth_camera, const FitQualityOptions& options) {
+                              const PinholeCamera& depth_camera, const FitQualityOptions& options,
+                              const Eigen::VectorXi* vertex_part) {
   const auto start = std::chrono::steady_clock::now();
   std::string error;
   if (!options.IsValid(&error)) throw Error("fit quality options: " + error);
@@ -86,6 +106,14 @@ FitQuality EvaluateFitQuality(const Eigen::MatrixX3d& posed_vertices,
     std::ostringstream msg;
     msg << "fit quality: triangles: expected vertex indices in [0, " << posed_vertices.rows()
         << "), found [" << triangles.minCoeff() << ", " << triangles.maxCoeff() << "]";
+    throw Error(msg.str());
+  }
+  if (vertex_part != nullptr &&
+      (vertex_part->size() != posed_vertices.rows() ||
+       (vertex_part->size() > 0 && vertex_part->minCoeff() < -1))) {
+    std::ostringstream msg;
+    msg << "fit quality: vertex_part: expected " << posed_vertices.rows()
+        << " part indices >= -1, found " << vertex_part->size();
     throw Error(msg.str());
   }
   FitQuality q;
@@ -196,6 +224,32 @@ FitQuality EvaluateFitQuality(const Eigen::MatrixX3d& posed_vertices,
   q.depth_residual_m =
       q.union_pixels > 0 ? residual_sum / q.union_pixels : options.depth_truncation;
 
+  // Per-part support: each posed vertex visible in the raster (not behind the rendered surface)
+  // counts for its part, supported when the observed depth there is within the tolerance.
+  if (vertex_part != nullptr && options.part_min_support > 0.0 && vertex_part->size() > 0 &&
+      vertex_part->maxCoeff() >= 0) {
+    const int parts = vertex_part->maxCoeff() + 1;
+    std::vector<int> visible(parts, 0), supported_part(parts, 0);
+    for (Eigen::Index v = 0; v < posed_vertices.rows(); ++v) {
+      double z = 0.0;
+      const Eigen::Vector2d uv = camera.Project(posed_vertices.row(v).transpose(), &z);
+      if (!(z > 0.0)) continue;
+      const int u = static_cast<int>(std::lround(uv.x())), r = static_cast<int>(std::lround(uv.y()));
+      if (u < 0 || r < 0 || u >= w || r >= h) continue;
+      const size_t i = static_cast<size_t>(r) * w + u;
+      if (!std::isfinite(model[i]) || z > model[i] + options.support_tolerance) continue;
+      const int part = (*vertex_part)[v];
+      if (part < 0) continue;  // not checked
+      ++visible[part];
+      supported_part[part] += std::isfinite(observed[i]) &&
+                              std::abs(z - observed[i]) <= options.support_tolerance;
+    }
+    for (int k = 0; k < parts; ++k) {
+      q.unsupported_parts += visible[k] >= options.part_min_visible &&
+                             supported_part[k] < options.part_min_support * visible[k];
+    }
+  }
+
   q.score = (q.inlier_fraction + q.support_fraction +
              (1.0 - q.depth_residual_m / options.depth_truncation)) /
             3.0;
@@ -205,7 +259,7 @@ FitQuality EvaluateFitQuality(const Eigen::MatrixX3d& posed_vertices,
     q.label = FitQualityLabel::kLost;
   } else if (q.inlier_fraction >= options.good_min_inlier_fraction &&
              q.support_fraction >= options.good_min_support_fraction &&
-             q.depth_residual_m <= options.good_max_depth_residual) {
+             q.depth_residual_m <= options.good_max_depth_residual && q.unsupported_parts == 0) {
     q.label = FitQualityLabel::kGood;
   } else {
     q.label = FitQualityLabel::kDoubtful;

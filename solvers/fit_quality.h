@@ -17,6 +17,7 @@
 
 #include <Eigen/Core>
 #include <string>
+#include <vector>
 
 #include "render/camera.h"
 #include "sensors/scan.h"
@@ -47,6 +48,18 @@ struct FitQualityOptions {
   double lost_min_inlier_fraction = 0.6;
   double lost_min_support_fraction = 0.45;
   double lost_max_depth_residual = 0.065;  // m
+  // Per body part (with `vertex_part`): a part with at least part_min_visible vertices visible
+  // from the depth camera (in the image, in front of or on the rendered surface) of which fewer
+  // than part_min_support have observed depth within support_tolerance is unsupported: a
+  // limb raised into empty space or held in front of the body where the scan is behind it. A
+  // frame with an unsupported part is not good (doubtful at best). part_min_support 0: off,
+  // the default: a correct forearm in the sensor's dropout band along a depth edge has no
+  // observed depth either (docs/real-data.md "Fit quality without ground truth"; 0.25 measured).
+  int part_min_visible = 40;
+  double part_min_support = 0.0;
+  // Joints whose vertices are not checked (FitQualityParts): the feet, whose scan the floor
+  // removal takes with the floor.
+  std::vector<std::string> part_ignore = {"l_ankle", "r_ankle"};
 
   bool IsValid(std::string* error) const;
 };
@@ -62,16 +75,26 @@ struct FitQuality {
   int scan_samples = 0;  // scan points tested for inliers
   int model_pixels = 0;  // rendered template pixels
   int union_pixels = 0;  // pixels of the template's silhouette or the scan's foreground
+  int unsupported_parts = 0;  // visible parts without scan support (with vertex_part)
   double seconds = 0.0;
 
   std::string BriefReport() const;
 };
 
+// The per-part map of EvaluateFitQuality for a template: its vertex_joint, with the vertices of
+// the joints named in options.part_ignore set to -1 (not checked).
+Eigen::VectorXi FitQualityParts(const Eigen::VectorXi& vertex_joint,
+                                const std::vector<std::string>& joint_names,
+                                const FitQualityOptions& options);
+
 // posed_vertices: V x 3 world (m), triangles: F x 3 (counter-clockwise = outwards); the scan
 // and the depth camera (intrinsics and world_to_camera) of the same frame. An empty scan gives
-// inlier_fraction 0. Throws artex::Error on invalid options or a triangle index out of range.
+// inlier_fraction 0. vertex_part: null, or V part indices (>= 0; -1: not checked; FitQualityParts)
+// for the per-part support. Throws artex::Error on invalid options, a triangle index out of
+// range or a vertex_part of the wrong size.
 FitQuality EvaluateFitQuality(const Eigen::MatrixX3d& posed_vertices,
                               const Eigen::MatrixX3i& triangles, const Scan& scan,
-                              const PinholeCamera& depth_camera, const FitQualityOptions& options);
+                              const PinholeCamera& depth_camera, const FitQualityOptions& options,
+                              const Eigen::VectorXi* vertex_part = nullptr);
 
 }  // namespace artex

@@ -151,12 +151,14 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
   InitResult result;
   const Skinning& skinning = fitter->skinning();
   const Template& model = skinning.model();
+  const Eigen::VectorXi parts =
+      FitQualityParts(model.vertex_joint, model.JointNames(), options.quality);
   const auto evaluate = [&](const Pose& pose) {
     const auto t0 = Clock::now();
     Eigen::MatrixX3d posed;
     skinning.Apply(pose, &posed);
     const FitQuality q =
-        EvaluateFitQuality(posed, model.triangles, scan, depth_camera, options.quality);
+        EvaluateFitQuality(posed, model.triangles, scan, depth_camera, options.quality, &parts);
     result.quality_seconds += SecondsSince(t0);
     return q;
   };

@@ -142,6 +142,45 @@ TEST(FitQualityTest, WrongFitsAreLost) {
   }
 }
 
+// Per-part support (fitting.quality.part_min_support, off by default): a leg raised sideways
+// into empty space is an unsupported part, and the frame is not good although the rest of the
+// fit still explains the scan; the tracked fit has no unsupported part.
+TEST(FitQualityTest, ALegRaisedIntoEmptySpaceIsAnUnsupportedPart) {
+  const Fixture& f = GetFixture();
+  FitQualityOptions options;
+  options.part_min_support = 0.25;
+  const Eigen::VectorXi parts =
+      FitQualityParts(f.tmpl.vertex_joint, f.tmpl.JointNames(), options);
+  const int l_hip = f.tmpl.FindJoint("l_hip");
+  const int l_ankle = f.tmpl.FindJoint("l_ankle");
+  for (Eigen::Index v = 0; v < parts.size(); ++v) {
+    if (f.tmpl.vertex_joint[v] == l_ankle) EXPECT_EQ(parts[v], -1);  // part_ignore: the feet
+  }
+  const auto quality = [&](const Pose& pose, int frame) {
+    Eigen::MatrixX3d posed;
+    Skinning(f.tmpl).Apply(pose, &posed);
+    return EvaluateFitQuality(posed, f.tmpl.triangles, f.data.scans[frame], f.data.depth_camera,
+                              options, &parts);
+  };
+  for (int i : {0, kFrames / 2}) {
+    const FitQuality fitted = quality(f.fitted[i], i);
+    EXPECT_EQ(fitted.unsupported_parts, 0) << fitted.BriefReport();
+    Pose raised = f.fitted[i];
+    raised.joint_rotations[l_hip] =
+        Eigen::AngleAxisd(1.4, Eigen::Vector3d::UnitZ()).toRotationMatrix();  // abducted 80 deg
+    const FitQuality q = quality(raised, i);
+    std::printf("frame %d leg raised: %s\n", i, q.BriefReport().c_str());
+    EXPECT_GE(q.unsupported_parts, 1) << q.BriefReport();
+    EXPECT_NE(q.label, FitQualityLabel::kGood) << q.BriefReport();
+  }
+  Eigen::VectorXi wrong_size = parts.head(10);
+  Eigen::MatrixX3d posed;
+  Skinning(f.tmpl).Apply(f.fitted[0], &posed);
+  EXPECT_THROW(EvaluateFitQuality(posed, f.tmpl.triangles, f.data.scans[0], f.data.depth_camera,
+                                  options, &wrong_size),
+               Error);
+}
+
 TEST(FitQualityTest, EmptyScanAndInvisibleModel) {
   const Fixture& f = GetFixture();
   Scan empty;
