@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <new>
 #include <nanoflann.hpp>
 #include <sstream>
 
@@ -119,6 +120,26 @@ namespace {
 
 // Values per point of the packed clouds of the pair loops: x y z nx ny nz count (unused).
 constexpr int kPackedStride = 8;
+
+// Allocator on cache-line boundaries: a packed point (8 doubles) is then one cache line.
+template <typename T>
+struct CacheLineAllocator {
+  using value_type = T;
+  static constexpr std::align_val_t kAlignment{64};
+  CacheLineAllocator() = default;
+  template <typename U>
+  CacheLineAllocator(const CacheLineAllocator<U>&) {}  // NOLINT(runtime/explicit)
+  T* allocate(std::size_t n) { return static_cast<T*>(::operator new(n * sizeof(T), kAlignment)); }
+  void deallocate(T* p, std::size_t) { ::operator delete(p, kAlignment); }
+  template <typename U>
+  bool operator==(const CacheLineAllocator<U>&) const {
+    return true;
+  }
+  template <typename U>
+  bool operator!=(const CacheLineAllocator<U>&) const {
+    return false;
+  }
+};
 
 // Integer grid coordinate of a scaled coordinate, offset to fit 21 bits (clamped).
 int64_t GridCoordinate(double scaled) {
@@ -316,7 +337,7 @@ struct EStep::Cloud {
   // Row-major copies for the pair loops: kPacked values per point (x y z nx ny nz count -)
   // and 4 per point (r g b valid) when the cloud has colours.
   static constexpr int kPacked = kPackedStride;
-  std::vector<double> packed;
+  std::vector<double, CacheLineAllocator<double>> packed;
   std::vector<double> packed_colors;
   // Uniform grid for the candidate gathers (instead of the kd-tree): cubic cells of side
   // grid_cell, the points ordered by cell; cell_keys (ascending Morton codes of the occupied
@@ -324,6 +345,65 @@ struct EStep::Cloud {
   double grid_cell = 0.0;
   std::vector<uint64_t> cell_keys;
   std::vector<int> cell_begin;
+  // Dense lookup over the occupied cells' bounding box (grid coordinates cell_low ..
+  // cell_low + cell_dims - 1): the cell's number in cell_keys, -1 when empty. Empty (and the
+  // binary search over cell_keys used) when the box would hold too many cells.
+  int64_t cell_low[3] = {0, 0, 0};
+  int64_t cell_dims[3] = {0, 0, 0};
+  std::vector<int> cell_lookup;
+
+  // Builds cell_lookup from the cells' grid coordinates (3 per cell, as cell_keys).
+  void BuildCellLookup(const std::vector<int64_t>& coords) {
+    cell_lookup.clear();
+    const size_t cells = cell_keys.size();
+    if (cells == 0) return;
+    int64_t high[3];
+    for (int d = 0; d < 3; ++d) cell_low[d] = high[d] = coords[d];
+    for (size_t c = 0; c < cells; ++c) {
+      for (int d = 0; d < 3; ++d) {
+        cell_low[d] = std::min(cell_low[d], coords[3 * c + d]);
+        high[d] = std::max(high[d], coords[3 * c + d]);
+      }
+    }
+    // A cap against outliers far from the subject: at most 64 lookup entries per cell (and
+    // at least 2^16). The grid coordinates' clamped border stays outside the box, so that the
+    // lookup sees exactly the cells the Morton search finds.
+    const double limit = std::max<double>(65536.0, 64.0 * static_cast<double>(cells));
+    double size = 1.0;
+    for (int d = 0; d < 3; ++d) {
+      cell_dims[d] = high[d] - cell_low[d] + 1;
+      size *= static_cast<double>(cell_dims[d]);
+      if (cell_low[d] <= 0 || high[d] >= (int64_t{1} << 21) - 1) size = limit + 1.0;
+    }
+    if (size > limit) {
+      for (int d = 0; d < 3; ++d) cell_dims[d] = 0;
+      return;
+    }
+    cell_lookup.assign(static_cast<size_t>(size), -1);
+    for (size_t c = 0; c < cells; ++c) {
+      cell_lookup[static_cast<size_t>(
+          ((coords[3 * c] - cell_low[0]) * cell_dims[1] + coords[3 * c + 1] - cell_low[1]) *
+              cell_dims[2] +
+          coords[3 * c + 2] - cell_low[2])] = static_cast<int>(c);
+    }
+  }
+
+  // The number of the cell at grid coordinates (x, y, z) in cell_keys, -1 when empty.
+  int FindCell(int64_t x, int64_t y, int64_t z) const {
+    if (!cell_lookup.empty()) {
+      x -= cell_low[0];
+      y -= cell_low[1];
+      z -= cell_low[2];
+      if (x < 0 || y < 0 || z < 0 || x >= cell_dims[0] || y >= cell_dims[1] || z >= cell_dims[2]) {
+        return -1;
+      }
+      return cell_lookup[static_cast<size_t>((x * cell_dims[1] + y) * cell_dims[2] + z)];
+    }
+    const uint64_t key = MortonCode(x, y, z);
+    const auto it = std::lower_bound(cell_keys.begin(), cell_keys.end(), key);
+    if (it == cell_keys.end() || *it != key) return -1;
+    return static_cast<int>(it - cell_keys.begin());
+  }
 
   // Appends the indices of the points with |p - x| < radius (radius <= grid_cell): those lie
   // in the query's cell and its 26 neighbours; cells farther than the radius are skipped.
@@ -346,10 +426,8 @@ struct EStep::Cloud {
       for (int64_t dy = -1; dy <= 1; ++dy) {
         for (int64_t dz = -1; dz <= 1; ++dz) {
           if (gap2(0, dx) + gap2(1, dy) + gap2(2, dz) >= r2) continue;
-          const uint64_t key = MortonCode(c[0] + dx, c[1] + dy, c[2] + dz);
-          const auto it = std::lower_bound(cell_keys.begin(), cell_keys.end(), key);
-          if (it == cell_keys.end() || *it != key) continue;
-          const size_t cell = static_cast<size_t>(it - cell_keys.begin());
+          const int cell = FindCell(c[0] + dx, c[1] + dy, c[2] + dz);
+          if (cell < 0) continue;
           for (int s = cell_begin[cell]; s < cell_begin[cell + 1]; ++s) {
             const double* p = packed.data() + kPacked * s;
             const double e0 = p[0] - x[0], e1 = p[1] - x[1], e2 = p[2] - x[2];
@@ -486,6 +564,7 @@ const EStep::Cloud& EStep::CloudForRadius(double radius) {
     }
     std::sort(by_cell.begin(), by_cell.end());  // ties by original (Morton) index
     Cloud sorted;
+    std::vector<int64_t> cell_coords;  // 3 per occupied cell
     sorted.points.resize(m, 3);
     sorted.normals.resize(m, 3);
     sorted.count.resize(m);
@@ -505,10 +584,14 @@ const EStep::Cloud& EStep::CloudForRadius(double radius) {
       if (i == 0 || by_cell[i].first != by_cell[i - 1].first) {
         sorted.cell_keys.push_back(by_cell[i].first);
         sorted.cell_begin.push_back(i);
+        for (int d = 0; d < 3; ++d) {
+          cell_coords.push_back(GridCoordinate(sorted.points(i, d) * inv_grid));
+        }
       }
     }
     sorted.cell_begin.push_back(m);
     sorted.grid_cell = grid;
+    sorted.BuildCellLookup(cell_coords);
     *cloud = std::move(sorted);
   } else {
     cloud->index = std::make_unique<PointCloudIndex>(cloud->points, options_.kdtree_leaf_size);
@@ -529,6 +612,44 @@ struct VertexQuery {
   double radius2;
   double epsilon, lambda_color;
 };
+
+// The sums of one template vertex over candidate lists (kTruncate, no known distances, no
+// storing): branch-free, since whether a candidate lies within the radius and faces the vertex
+// is unpredictable. A rejected candidate contributes p = 0, which leaves every sum unchanged
+// (x + 0 * d == x for finite d), so the sums are bit for bit those of the branching loop.
+template <bool kColor>
+void WeighCandidateList(const VertexQuery& q, const double* packed, const double* packed_colors,
+                        const int* index, int count, VertexSums* sums) {
+  constexpr int kP = kPackedStride;
+  double a = 0.0, b0 = 0.0, b1 = 0.0, b2 = 0.0, c = 0.0;
+  long long pairs = 0;
+  for (int i = 0; i < count; ++i) {
+    const int s = index[i];
+    const double* v = packed + kP * s;
+    const double d0 = v[0] - q.x[0], d1 = v[1] - q.x[1], d2c = v[2] - q.x[2];
+    const double d2 = d0 * d0 + d1 * d1 + d2c * d2c;
+    const double dot = v[3] * q.n[0] + v[4] * q.n[1] + v[5] * q.n[2];
+    double denominator = d2 + q.epsilon;
+    if (kColor) {
+      const double* rgb = packed_colors + 4 * s;
+      const double e0 = rgb[0] - q.c[0], e1 = rgb[1] - q.c[1], e2 = rgb[2] - q.c[2];
+      const double color = q.lambda_color * (e0 * e0 + e1 * e1 + e2 * e2);
+      denominator += rgb[3] > 0.0 ? color : 0.0;
+    }
+    const double weight = v[6] * dot / denominator;
+    const double p = d2 < q.radius2 && dot > 0.0 && weight > 0.0 ? weight : 0.0;
+    a += p;
+    b0 += p * d0;
+    b1 += p * d1;
+    b2 += p * d2c;
+    c += p * d2;
+    pairs += p > 0.0;
+  }
+  sums->a += a;
+  sums->b += Eigen::Vector3d(b0, b1, b2);
+  sums->c += c;
+  sums->pairs += pairs;
+}
 
 template <bool kColor, bool kTruncate>
 void WeighCandidates(const VertexQuery& q, const double* packed, const double* packed_colors,
@@ -576,6 +697,14 @@ void WeighCandidates(const VertexQuery& q, const double* packed, const double* p
 void WeighVertex(bool color, bool truncate, const VertexQuery& q, const double* packed,
                  const double* packed_colors, const int* index, int count, const double* known_d2,
                  VertexSums* sums, std::vector<int>* store_s, std::vector<double>* store_p) {
+  if (truncate && known_d2 == nullptr && store_s == nullptr) {
+    if (color) {
+      WeighCandidateList<true>(q, packed, packed_colors, index, count, sums);
+    } else {
+      WeighCandidateList<false>(q, packed, packed_colors, index, count, sums);
+    }
+    return;
+  }
   if (color) {
     if (truncate) {
       WeighCandidates<true, true>(q, packed, packed_colors, index, count, known_d2, sums, store_s,
