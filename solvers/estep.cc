@@ -148,10 +148,47 @@ struct CacheLineAllocator {
 };
 
 // Integer grid coordinate of a scaled coordinate, offset to fit 21 bits (clamped).
-int64_t GridCoordinate(double scaled) {
+inline int64_t GridCoordinate(double scaled) {
   constexpr int64_t kOffset = 1 << 20;
-  const int64_t i = static_cast<int64_t>(std::floor(scaled)) + kOffset;
-  return std::clamp<int64_t>(i, 0, (int64_t{1} << 21) - 1);
+  constexpr double kRange = 1u << 22;  // beyond: clamped whatever the rounding
+  // floor() without the library call (no SSE4.1 rounding in the baseline ISA): truncate, then
+  // step down for negative non-integers; NaN lands on the lower clamp as before.
+  if (!(std::abs(scaled) < kRange)) return scaled > 0.0 ? (int64_t{1} << 21) - 1 : 0;
+  int64_t i = static_cast<int64_t>(scaled);
+  i -= static_cast<double>(i) > scaled;
+  return std::clamp<int64_t>(i + kOffset, 0, (int64_t{1} << 21) - 1);
+}
+
+// Sorts (key, index) pairs whose indices ascend in input order exactly as std::sort would
+// (by key, ties by index): a stable least-significant-digit radix sort over the key bits
+// that differ between the pairs.
+void SortByKey(std::vector<std::pair<uint64_t, int>>* pairs) {
+  const size_t n = pairs->size();
+  if (n < 1024) {
+    std::sort(pairs->begin(), pairs->end());
+    return;
+  }
+  uint64_t differ = 0;
+  const uint64_t first = (*pairs)[0].first;
+  for (const auto& p : *pairs) differ |= p.first ^ first;
+  if (differ == 0) return;  // one key: already in index order
+  const int bits = 64 - __builtin_clzll(differ);
+  constexpr int kDigit = 11;
+  std::vector<std::pair<uint64_t, int>> buffer(n);
+  std::vector<size_t> start(size_t{1} << kDigit);
+  for (int shift = 0; shift < bits; shift += kDigit) {
+    const uint64_t mask = (uint64_t{1} << kDigit) - 1;
+    std::fill(start.begin(), start.end(), 0);
+    for (const auto& p : *pairs) ++start[(p.first >> shift) & mask];
+    size_t sum = 0;
+    for (size_t& s : start) {
+      const size_t count = s;
+      s = sum;
+      sum += count;
+    }
+    for (const auto& p : *pairs) buffer[start[(p.first >> shift) & mask]++] = p;
+    pairs->swap(buffer);
+  }
 }
 
 // Morton (Z-curve) code of three 21-bit grid coordinates (out of range: clamped).
@@ -580,7 +617,7 @@ const EStep::Cloud& EStep::CloudForRadius(double radius) {
                            GridCoordinate(scan_.points(s, 2) * inv)),
                 s};
   }
-  std::sort(keyed.begin(), keyed.end());
+  SortByKey(&keyed);
   int m = 0;
   for (int i = 0; i < n; ++i) m += (i == 0 || keyed[i].first != keyed[i - 1].first);
   auto cloud = std::make_unique<Cloud>();
@@ -624,7 +661,7 @@ const EStep::Cloud& EStep::CloudForRadius(double radius) {
                                GridCoordinate(cloud->points(c, 2) * inv_grid)),
                     c};
     }
-    std::sort(by_cell.begin(), by_cell.end());  // ties by original (Morton) index
+    SortByKey(&by_cell);  // ties by original (Morton) index
     Cloud sorted;
     std::vector<int64_t> cell_coords;  // 3 per occupied cell
     sorted.points.resize(m, 3);
