@@ -1,5 +1,7 @@
 #include "solvers/estep_pairs.h"
 
+#include <stdexcept>
+
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
@@ -290,6 +292,57 @@ void WeighVertex(bool color, bool truncate, const VertexQuery& q, const double* 
   } else {
     WeighCandidates<false, false>(q, packed, packed_colors, index, count, known_d2, sums, store_s,
                                   store_p);
+  }
+}
+
+bool PairKernelAvailable(PairKernel kernel) {
+  switch (kernel) {
+    case PairKernel::kAuto:
+    case PairKernel::kBranching:
+    case PairKernel::kBranchFree:
+      return true;
+    case PairKernel::kSse2:
+#if defined(__SSE2__)
+      return true;
+#else
+      return false;
+#endif
+    case PairKernel::kAvx:
+#if defined(ARTEX_ESTEP_AVX)
+      return CpuHasAvx();
+#else
+      return false;
+#endif
+  }
+  return false;
+}
+
+void WeighCandidateListWith(PairKernel kernel, const VertexQuery& q, const double* packed,
+                            const int* index, int count, VertexSums* sums) {
+  if (!PairKernelAvailable(kernel)) {
+    throw std::invalid_argument("E-step pair kernel not available on this build or CPU");
+  }
+  switch (kernel) {
+    case PairKernel::kAuto:
+      WeighVertex(false, true, q, packed, nullptr, index, count, nullptr, sums, nullptr, nullptr);
+      return;
+    case PairKernel::kBranching:
+      WeighCandidates<false, true>(q, packed, nullptr, index, count, nullptr, sums, nullptr,
+                                   nullptr);
+      return;
+    case PairKernel::kBranchFree:
+      WeighCandidateList<false>(q, packed, nullptr, index, count, sums);
+      return;
+    case PairKernel::kSse2:
+#if defined(__SSE2__)
+      WeighCandidateListSse2(q, packed, index, count, sums);
+#endif
+      return;
+    case PairKernel::kAvx:
+#if defined(ARTEX_ESTEP_AVX)
+      WeighCandidateListAvx(q, packed, index, count, sums);
+#endif
+      return;
   }
 }
 

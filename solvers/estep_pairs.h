@@ -40,13 +40,26 @@ struct VertexQuery {
   double epsilon, lambda_color;
 };
 
-// Adds the pairs of `count` candidates (rows index[i] of `packed`, kPackedStride values each;
+// Adds the pairs of `count` candidates (rows index[i] of `packed`, kPackedStride values each,
+// `packed` aligned to 64 bytes;
 // `packed_colors`: 4 per row, r g b valid, or null without colour) to *sums, truncated to
 // d2 < radius2 when `truncate`, with the squared distances taken from `known_d2` when
 // non-null. With `store_s` non-null the pairs (s, p) are appended instead of summed.
 void WeighVertex(bool color, bool truncate, const VertexQuery& q, const double* packed,
                  const double* packed_colors, const int* index, int count, const double* known_d2,
                  VertexSums* sums, std::vector<int>* store_s, std::vector<double>* store_p);
+
+// The variants of the candidate-list loop (truncated, distances computed, sums, no colour):
+// kAuto is WeighVertex's own choice (AVX if the CPU has it, else SSE2, else branch-free
+// scalar); kBranching is the loop that skips rejected candidates (WeighVertex's for the other
+// cases).
+enum class PairKernel { kAuto, kBranching, kBranchFree, kSse2, kAvx };
+// Whether `kernel` is compiled in and runs on this CPU.
+bool PairKernelAvailable(PairKernel kernel);
+// That loop by the given kernel (for tests: all kernels give bit-identical sums). Throws
+// std::invalid_argument for an unavailable kernel.
+void WeighCandidateListWith(PairKernel kernel, const VertexQuery& q, const double* packed,
+                            const int* index, int count, VertexSums* sums);
 
 }  // namespace estep_internal
 }  // namespace artex
