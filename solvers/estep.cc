@@ -7,8 +7,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
-#include <new>
 #include <nanoflann.hpp>
+#include <new>
 #include <sstream>
 
 #include "models/error.h"

@@ -57,8 +57,8 @@ void WeighCandidateList(const VertexQuery& q, const double* packed, const double
 // order per candidate (sums accumulated candidate after candidate), so bit for bit its sums,
 // with one division per two candidates and no branches, which the compiler re-introduces in
 // the scalar loop to skip the division.
-void WeighCandidateListSse2(const VertexQuery& q, const double* packed, const int* index,
-                            int count, VertexSums* sums) {
+void WeighCandidateListSse2(const VertexQuery& q, const double* packed, const int* index, int count,
+                            VertexSums* sums) {
   constexpr int kP = kPackedStride;
   const __m128d x01 = _mm_loadu_pd(q.x), x2 = _mm_set1_pd(q.x[2]);
   const __m128d n01 = _mm_loadu_pd(q.n), n2 = _mm_set1_pd(q.n[2]);
@@ -161,14 +161,12 @@ __attribute__((target("avx"))) void WeighCandidateListAvx(const VertexQuery& q,
                   dz = _mm256_sub_pd(pz, x2);
     const __m256d d2 = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(d0, d0), _mm256_mul_pd(d1, d1)),
                                      _mm256_mul_pd(dz, dz));
-    const __m256d dot = _mm256_add_pd(
-        _mm256_add_pd(_mm256_mul_pd(nx, n0), _mm256_mul_pd(ny, n1)), _mm256_mul_pd(nz, n2));
-    const __m256d w =
-        _mm256_div_pd(_mm256_mul_pd(multiplicity, dot), _mm256_add_pd(d2, eps));
-    const __m256d keep =
-        _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(d2, r2, _CMP_LT_OQ),
-                                    _mm256_cmp_pd(dot, zero, _CMP_GT_OQ)),
-                      _mm256_cmp_pd(w, zero, _CMP_GT_OQ));
+    const __m256d dot = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(nx, n0), _mm256_mul_pd(ny, n1)),
+                                      _mm256_mul_pd(nz, n2));
+    const __m256d w = _mm256_div_pd(_mm256_mul_pd(multiplicity, dot), _mm256_add_pd(d2, eps));
+    const __m256d keep = _mm256_and_pd(
+        _mm256_and_pd(_mm256_cmp_pd(d2, r2, _CMP_LT_OQ), _mm256_cmp_pd(dot, zero, _CMP_GT_OQ)),
+        _mm256_cmp_pd(w, zero, _CMP_GT_OQ));
     const __m256d p = _mm256_and_pd(keep, w);
     const int kept = _mm256_movemask_pd(keep);  // bit per candidate
     pairs += (kept & 1) + ((kept >> 1) & 1) + ((kept >> 2) & 1) + (kept >> 3);
@@ -179,7 +177,8 @@ __attribute__((target("avx"))) void WeighCandidateListAvx(const VertexQuery& q,
     const __m256d e1 = _mm256_permute2f128_pd(b01, b23, 0x20);
     const __m256d e2 = _mm256_permute2f128_pd(a01, a23, 0x31);
     const __m256d e3 = _mm256_permute2f128_pd(b01, b23, 0x31);
-    const __m256d p01 = _mm256_permute2f128_pd(p, p, 0x00), p23 = _mm256_permute2f128_pd(p, p, 0x11);
+    const __m256d p01 = _mm256_permute2f128_pd(p, p, 0x00),
+                  p23 = _mm256_permute2f128_pd(p, p, 0x11);
     const __m256d q0 = _mm256_permute_pd(p01, 0x0), q1 = _mm256_permute_pd(p01, 0xf);
     const __m256d q2 = _mm256_permute_pd(p23, 0x0), q3 = _mm256_permute_pd(p23, 0xf);
     acc_a = _mm_add_sd(acc_a, _mm256_castpd256_pd128(q0));

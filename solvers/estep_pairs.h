@@ -30,7 +30,6 @@ struct VertexSums {
   }
 };
 
-
 // The pairs of one template vertex: p_st of eq. 4 for candidates s (packed cloud rows,
 // multiplicity-weighted), truncated to d2 <= radius2 when kTruncate. Either accumulates the
 // sums or, when `store_s` is non-null, appends (s, p) (per-scan-point normalisation).
