@@ -22,8 +22,10 @@ template <bool kColor>
 void WeighCandidateList(const VertexQuery& q, const double* packed, const double* packed_colors,
                         const int* index, int count, VertexSums* sums) {
   constexpr int kP = kPackedStride;
-  double a = 0.0, b0 = 0.0, b1 = 0.0, b2 = 0.0, c = 0.0;
-  long long pairs = 0;
+  // Continues *sums candidate after candidate (the SIMD loops hand over their remainder;
+  // a vertex starts from zero sums, where this is the branching loop's order).
+  double a = sums->a, b0 = sums->b[0], b1 = sums->b[1], b2 = sums->b[2], c = sums->c;
+  long long pairs = sums->pairs;
   for (int i = 0; i < count; ++i) {
     const int s = index[i];
     const double* v = packed + kP * s;
@@ -46,10 +48,10 @@ void WeighCandidateList(const VertexQuery& q, const double* packed, const double
     c += p * d2;
     pairs += p > 0.0;
   }
-  sums->a += a;
-  sums->b += Eigen::Vector3d(b0, b1, b2);
-  sums->c += c;
-  sums->pairs += pairs;
+  sums->a = a;
+  sums->b = Eigen::Vector3d(b0, b1, b2);
+  sums->c = c;
+  sums->pairs = pairs;
 }
 
 #if defined(__SSE2__)
