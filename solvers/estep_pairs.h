@@ -30,20 +30,19 @@ struct VertexSums {
   }
 };
 
-// The pairs of one template vertex: p_st of eq. 4 for candidates s (packed cloud rows,
-// multiplicity-weighted), truncated to d2 <= radius2 when kTruncate. Either accumulates the
-// sums or, when `store_s` is non-null, appends (s, p) (per-scan-point normalisation).
+// One template vertex as the pair loops see it: posed position x, normal n, colour c, the
+// squared search radius, eps and lambda_c of eq. 4.
 struct VertexQuery {
   double x[3], n[3], c[3];
   double radius2;
   double epsilon, lambda_color;
 };
 
-// Adds the pairs of `count` candidates (rows index[i] of `packed`, kPackedStride values each,
-// `packed` aligned to 64 bytes;
-// `packed_colors`: 4 per row, r g b valid, or null without colour) to *sums, truncated to
-// d2 < radius2 when `truncate`, with the squared distances taken from `known_d2` when
-// non-null. With `store_s` non-null the pairs (s, p) are appended instead of summed.
+// Adds p_st (multiplicity-weighted) of `count` candidates s = index[i] to *sums: rows of
+// `packed` (kPackedStride values each, the array aligned to 64 bytes) and of `packed_colors`
+// (4 per row: r g b valid; null without colour), truncated to d2 < radius2 when `truncate`,
+// with the squared distances taken from `known_d2` when non-null. With `store_s` non-null the
+// pairs (s, p) are appended instead of summed (per-scan-point normalisation).
 void WeighVertex(bool color, bool truncate, const VertexQuery& q, const double* packed,
                  const double* packed_colors, const int* index, int count, const double* known_d2,
                  VertexSums* sums, std::vector<int>* store_s, std::vector<double>* store_p);
