@@ -9,8 +9,10 @@
 //                 12 hypotheses, 4 EM fits) on a virtual Kinect frame (640 x 480, default
 //                 noise, the subject facing away); counters: chosen yaw, ICP / EM / quality ms.
 //   BM_FitQuality: EvaluateFitQuality of the fitted (posed) template on that frame.
-// Variants side by side: truncated-radius E-step + Gauss-Newton (default options), Ceres LM
-// backend, dense exact E-step (single frame only: it takes seconds per EM iteration).
+// Variants side by side: truncated-radius E-step + Gauss-Newton (default options), the same
+// with other E-step candidate margins (BM_TrackCandidateMargin/<mm>), Ceres LM backend, dense
+// exact E-step (single frame only: it takes seconds per EM iteration). For one core run under
+// `taskset -c 0` (oneTBB follows the affinity mask).
 // Counters: cpu_ms (process CPU per frame, all threads; wall times are unreliable on a shared
 // machine), wall_ratio / cpu_ratio to the default of the same kind, EM iterations, E-/M-step
 // ms, kd-tree queries and scan candidates visited per frame, error_mm (mean per-vertex error
@@ -247,6 +249,22 @@ void BM_TrackTruncatedGaussNewton(benchmark::State& state) {
   RunSequence(state, EMFitterOptions(), true);
 }
 BENCHMARK(BM_TrackTruncatedGaussNewton)->Unit(benchmark::kMillisecond)->UseManualTime();
+
+// The default with another E-step candidate margin (state.range(0), mm): exact whatever the
+// margin (only the work changes: a larger margin gathers less often but weighs more candidates).
+void BM_TrackCandidateMargin(benchmark::State& state) {
+  EMFitterOptions options;
+  options.estep.candidate_margin = 1e-3 * static_cast<double>(state.range(0));
+  RunSequence(state, options, false);
+}
+BENCHMARK(BM_TrackCandidateMargin)
+    ->Unit(benchmark::kMillisecond)
+    ->UseManualTime()
+    ->Arg(3)
+    ->Arg(5)
+    ->Arg(7)
+    ->Arg(10)
+    ->Arg(15);
 
 void BM_TrackCeresLm(benchmark::State& state) { RunSequence(state, CeresOptions(), false); }
 BENCHMARK(BM_TrackCeresLm)->Unit(benchmark::kMillisecond)->UseManualTime();

@@ -8,11 +8,18 @@
 #include <cmath>
 #include <cstdint>
 #include <nanoflann.hpp>
+#include <new>
 #include <sstream>
 
 #include "models/error.h"
+#include "solvers/estep_pairs.h"
 
 namespace artex {
+
+using estep_internal::kPackedStride;
+using estep_internal::VertexQuery;
+using estep_internal::VertexSums;
+using estep_internal::WeighVertex;
 
 const char* EStepModeName(EStepMode mode) {
   switch (mode) {
@@ -117,14 +124,68 @@ void PointCloudIndex::Radius(const Eigen::Vector3d& query, double radius,
 
 namespace {
 
-// Values per point of the packed clouds of the pair loops: x y z nx ny nz count (unused).
-constexpr int kPackedStride = 8;
+// Allocator on cache-line boundaries: a packed point (8 doubles) is then one cache line.
+template <typename T>
+struct CacheLineAllocator {
+  using value_type = T;
+  static constexpr std::align_val_t kAlignment{64};
+  CacheLineAllocator() = default;
+  template <typename U>
+  CacheLineAllocator(const CacheLineAllocator<U>&) {}  // NOLINT(runtime/explicit)
+  T* allocate(std::size_t n) { return static_cast<T*>(::operator new(n * sizeof(T), kAlignment)); }
+  void deallocate(T* p, std::size_t) { ::operator delete(p, kAlignment); }
+  template <typename U>
+  bool operator==(const CacheLineAllocator<U>&) const {
+    return true;
+  }
+  template <typename U>
+  bool operator!=(const CacheLineAllocator<U>&) const {
+    return false;
+  }
+};
 
 // Integer grid coordinate of a scaled coordinate, offset to fit 21 bits (clamped).
-int64_t GridCoordinate(double scaled) {
+inline int64_t GridCoordinate(double scaled) {
   constexpr int64_t kOffset = 1 << 20;
-  const int64_t i = static_cast<int64_t>(std::floor(scaled)) + kOffset;
-  return std::clamp<int64_t>(i, 0, (int64_t{1} << 21) - 1);
+  constexpr double kRange = 1u << 22;  // beyond: clamped whatever the rounding
+  // floor() without the library call (no SSE4.1 rounding in the baseline ISA): truncate, then
+  // step down for negative non-integers; NaN lands on the lower clamp as before.
+  if (!(std::abs(scaled) < kRange)) return scaled > 0.0 ? (int64_t{1} << 21) - 1 : 0;
+  int64_t i = static_cast<int64_t>(scaled);
+  i -= static_cast<double>(i) > scaled;
+  return std::clamp<int64_t>(i + kOffset, 0, (int64_t{1} << 21) - 1);
+}
+
+// Sorts (key, index) pairs whose indices ascend in input order exactly as std::sort would
+// (by key, ties by index): a stable least-significant-digit radix sort over the key bits
+// that differ between the pairs.
+void SortByKey(std::vector<std::pair<uint64_t, int>>* pairs) {
+  const size_t n = pairs->size();
+  if (n < 1024) {
+    std::sort(pairs->begin(), pairs->end());
+    return;
+  }
+  uint64_t differ = 0;
+  const uint64_t first = (*pairs)[0].first;
+  for (const auto& p : *pairs) differ |= p.first ^ first;
+  if (differ == 0) return;  // one key: already in index order
+  const int bits = 64 - __builtin_clzll(differ);
+  constexpr int kDigit = 11;
+  std::vector<std::pair<uint64_t, int>> buffer(n);
+  std::vector<size_t> start(size_t{1} << kDigit);
+  for (int shift = 0; shift < bits; shift += kDigit) {
+    const uint64_t mask = (uint64_t{1} << kDigit) - 1;
+    std::fill(start.begin(), start.end(), 0);
+    for (const auto& p : *pairs) ++start[(p.first >> shift) & mask];
+    size_t sum = 0;
+    for (size_t& s : start) {
+      const size_t count = s;
+      s = sum;
+      sum += count;
+    }
+    for (const auto& p : *pairs) buffer[start[(p.first >> shift) & mask]++] = p;
+    pairs->swap(buffer);
+  }
 }
 
 // Morton (Z-curve) code of three 21-bit grid coordinates (out of range: clamped).
@@ -140,23 +201,6 @@ inline uint64_t MortonCode(int64_t x, int64_t y, int64_t z) {
   };
   return spread(x) << 2 | spread(y) << 1 | spread(z);
 }
-
-// Sums relative to the template vertex x_t (numerically stable):
-//   a = sum p, b = sum p (v_s - x_t), c = sum p |v_s - x_t|^2
-// so that P_t = a, mu_t = x_t + b / a and c_t = c - |b|^2 / a.
-struct VertexSums {
-  double a = 0.0;
-  Eigen::Vector3d b = Eigen::Vector3d::Zero();
-  double c = 0.0;
-  long long pairs = 0;
-
-  void Add(double p, const Eigen::Vector3d& d, double d2) {
-    a += p;
-    b += p * d;
-    c += p * d2;
-    ++pairs;
-  }
-};
 
 // Writes vertex t of the targets; returns c_t.
 double Finish(const VertexSums& sums, const Eigen::Vector3d& x, int t,
@@ -316,7 +360,7 @@ struct EStep::Cloud {
   // Row-major copies for the pair loops: kPacked values per point (x y z nx ny nz count -)
   // and 4 per point (r g b valid) when the cloud has colours.
   static constexpr int kPacked = kPackedStride;
-  std::vector<double> packed;
+  std::vector<double, CacheLineAllocator<double>> packed;
   std::vector<double> packed_colors;
   // Uniform grid for the candidate gathers (instead of the kd-tree): cubic cells of side
   // grid_cell, the points ordered by cell; cell_keys (ascending Morton codes of the occupied
@@ -324,6 +368,93 @@ struct EStep::Cloud {
   double grid_cell = 0.0;
   std::vector<uint64_t> cell_keys;
   std::vector<int> cell_begin;
+  // Dense lookup over the occupied cells' bounding box (grid coordinates cell_low ..
+  // cell_low + cell_dims - 1): the cell's number in cell_keys, -1 when empty. Empty (and the
+  // binary search over cell_keys used) when the box would hold too many cells.
+  int64_t cell_low[3] = {0, 0, 0};
+  int64_t cell_dims[3] = {0, 0, 0};
+  std::vector<int> cell_lookup;
+
+  // Builds cell_lookup from the cells' grid coordinates (3 per cell, as cell_keys).
+  void BuildCellLookup(const std::vector<int64_t>& coords) {
+    cell_lookup.clear();
+    const size_t cells = cell_keys.size();
+    if (cells == 0) return;
+    int64_t high[3];
+    for (int d = 0; d < 3; ++d) cell_low[d] = high[d] = coords[d];
+    for (size_t c = 0; c < cells; ++c) {
+      for (int d = 0; d < 3; ++d) {
+        cell_low[d] = std::min(cell_low[d], coords[3 * c + d]);
+        high[d] = std::max(high[d], coords[3 * c + d]);
+      }
+    }
+    // A cap against outliers far from the subject: at most 64 lookup entries per cell (and
+    // at least 2^16). The grid coordinates' clamped border stays outside the box, so that the
+    // lookup sees exactly the cells the Morton search finds.
+    const double limit = std::max<double>(65536.0, 64.0 * static_cast<double>(cells));
+    double size = 1.0;
+    for (int d = 0; d < 3; ++d) {
+      cell_dims[d] = high[d] - cell_low[d] + 1;
+      size *= static_cast<double>(cell_dims[d]);
+      if (cell_low[d] <= 0 || high[d] >= (int64_t{1} << 21) - 1) size = limit + 1.0;
+    }
+    if (size > limit) {
+      for (int d = 0; d < 3; ++d) cell_dims[d] = 0;
+      return;
+    }
+    cell_lookup.assign(static_cast<size_t>(size), -1);
+    for (size_t c = 0; c < cells; ++c) {
+      cell_lookup[static_cast<size_t>(
+          ((coords[3 * c] - cell_low[0]) * cell_dims[1] + coords[3 * c + 1] - cell_low[1]) *
+              cell_dims[2] +
+          coords[3 * c + 2] - cell_low[2])] = static_cast<int>(c);
+    }
+  }
+
+  // The number of the cell at grid coordinates (x, y, z) in cell_keys, -1 when empty.
+  int FindCell(int64_t x, int64_t y, int64_t z) const {
+    if (!cell_lookup.empty()) {
+      x -= cell_low[0];
+      y -= cell_low[1];
+      z -= cell_low[2];
+      if (x < 0 || y < 0 || z < 0 || x >= cell_dims[0] || y >= cell_dims[1] || z >= cell_dims[2]) {
+        return -1;
+      }
+      return cell_lookup[static_cast<size_t>((x * cell_dims[1] + y) * cell_dims[2] + z)];
+    }
+    const uint64_t key = MortonCode(x, y, z);
+    const auto it = std::lower_bound(cell_keys.begin(), cell_keys.end(), key);
+    if (it == cell_keys.end() || *it != key) return -1;
+    return static_cast<int>(it - cell_keys.begin());
+  }
+
+  // Blocks of kBlock consecutive points of a cell (its last block may be shorter) with their
+  // bounding boxes, so that a gather tests whole blocks against its sphere.
+  static constexpr int kBlock = 8;
+  static constexpr double kBoxSlack = 1e-9;
+  std::vector<int> cell_block;    // per cell + 1: its first block
+  std::vector<double> block_box;  // 6 per block: low x y z, high x y z
+
+  void BuildBlocks() {
+    const int cells = static_cast<int>(cell_keys.size());
+    cell_block.assign(1, 0);
+    block_box.clear();
+    for (int cell = 0; cell < cells; ++cell) {
+      for (int s0 = cell_begin[cell]; s0 < cell_begin[cell + 1]; s0 += kBlock) {
+        const int s1 = std::min(s0 + kBlock, cell_begin[cell + 1]);
+        double box[6];
+        for (int d = 0; d < 3; ++d) box[d] = box[3 + d] = packed[kPacked * s0 + d];
+        for (int s = s0 + 1; s < s1; ++s) {
+          for (int d = 0; d < 3; ++d) {
+            box[d] = std::min(box[d], packed[kPacked * s + d]);
+            box[3 + d] = std::max(box[3 + d], packed[kPacked * s + d]);
+          }
+        }
+        block_box.insert(block_box.end(), box, box + 6);
+      }
+      cell_block.push_back(static_cast<int>(block_box.size() / 6));
+    }
+  }
 
   // Appends the indices of the points with |p - x| < radius (radius <= grid_cell): those lie
   // in the query's cell and its 26 neighbours; cells farther than the radius are skipped.
@@ -346,14 +477,39 @@ struct EStep::Cloud {
       for (int64_t dy = -1; dy <= 1; ++dy) {
         for (int64_t dz = -1; dz <= 1; ++dz) {
           if (gap2(0, dx) + gap2(1, dy) + gap2(2, dz) >= r2) continue;
-          const uint64_t key = MortonCode(c[0] + dx, c[1] + dy, c[2] + dz);
-          const auto it = std::lower_bound(cell_keys.begin(), cell_keys.end(), key);
-          if (it == cell_keys.end() || *it != key) continue;
-          const size_t cell = static_cast<size_t>(it - cell_keys.begin());
-          for (int s = cell_begin[cell]; s < cell_begin[cell + 1]; ++s) {
-            const double* p = packed.data() + kPacked * s;
-            const double e0 = p[0] - x[0], e1 = p[1] - x[1], e2 = p[2] - x[2];
-            if (e0 * e0 + e1 * e1 + e2 * e2 < r2) out->push_back(s);
+          const int cell = FindCell(c[0] + dx, c[1] + dy, c[2] + dz);
+          if (cell < 0) continue;
+          const int first = cell_begin[cell], last = cell_begin[cell + 1];
+          for (int b = cell_block[cell]; b < cell_block[cell + 1]; ++b) {
+            const int s0 = first + kBlock * (b - cell_block[cell]);
+            const int s1 = std::min(s0 + kBlock, last);
+            // The block's box against the sphere, with a relative slack far above the
+            // rounding of the distances, so that every point of a block skipped (taken whole)
+            // would fail (pass) the test below.
+            const double* box = block_box.data() + 6 * b;
+            double near2 = 0.0, far2 = 0.0;
+            for (int d = 0; d < 3; ++d) {
+              const double to_low = x[d] - box[d], to_high = box[3 + d] - x[d];
+              const double g = std::max(0.0, std::max(-to_low, -to_high));
+              const double f = std::max(to_low, to_high);
+              near2 += g * g;
+              far2 += f * f;
+            }
+            if (near2 > r2 * (1.0 + kBoxSlack)) continue;
+            const size_t n = out->size();
+            out->resize(n + static_cast<size_t>(s1 - s0));
+            int* o = out->data() + n;
+            if (far2 < r2 * (1.0 - kBoxSlack)) {
+              for (int s = s0; s < s1; ++s) *o++ = s;
+              continue;
+            }
+            for (int s = s0; s < s1; ++s) {
+              const double* p = packed.data() + kPacked * s;
+              const double e0 = p[0] - x[0], e1 = p[1] - x[1], e2 = p[2] - x[2];
+              *o = s;
+              o += e0 * e0 + e1 * e1 + e2 * e2 < r2;
+            }
+            out->resize(static_cast<size_t>(o - out->data()));
           }
         }
       }
@@ -371,6 +527,7 @@ struct EStep::Cloud {
       }
       q[6] = count[i];
     }
+    if (grid_cell > 0.0) BuildBlocks();
     packed_colors.clear();
     if (colors.rows() == m) {
       packed_colors.resize(static_cast<size_t>(4 * m));
@@ -440,7 +597,7 @@ const EStep::Cloud& EStep::CloudForRadius(double radius) {
                            GridCoordinate(scan_.points(s, 2) * inv)),
                 s};
   }
-  std::sort(keyed.begin(), keyed.end());
+  SortByKey(&keyed);
   int m = 0;
   for (int i = 0; i < n; ++i) m += (i == 0 || keyed[i].first != keyed[i - 1].first);
   auto cloud = std::make_unique<Cloud>();
@@ -484,8 +641,9 @@ const EStep::Cloud& EStep::CloudForRadius(double radius) {
                                GridCoordinate(cloud->points(c, 2) * inv_grid)),
                     c};
     }
-    std::sort(by_cell.begin(), by_cell.end());  // ties by original (Morton) index
+    SortByKey(&by_cell);  // ties by original (Morton) index
     Cloud sorted;
+    std::vector<int64_t> cell_coords;  // 3 per occupied cell
     sorted.points.resize(m, 3);
     sorted.normals.resize(m, 3);
     sorted.count.resize(m);
@@ -505,10 +663,14 @@ const EStep::Cloud& EStep::CloudForRadius(double radius) {
       if (i == 0 || by_cell[i].first != by_cell[i - 1].first) {
         sorted.cell_keys.push_back(by_cell[i].first);
         sorted.cell_begin.push_back(i);
+        for (int d = 0; d < 3; ++d) {
+          cell_coords.push_back(GridCoordinate(sorted.points(i, d) * inv_grid));
+        }
       }
     }
     sorted.cell_begin.push_back(m);
     sorted.grid_cell = grid;
+    sorted.BuildCellLookup(cell_coords);
     *cloud = std::move(sorted);
   } else {
     cloud->index = std::make_unique<PointCloudIndex>(cloud->points, options_.kdtree_leaf_size);
@@ -518,82 +680,6 @@ const EStep::Cloud& EStep::CloudForRadius(double radius) {
   subsampled_.emplace(cell, std::move(cloud));
   return result;
 }
-
-namespace {
-
-// The pairs of one template vertex: p_st of eq. 4 for candidates s (packed cloud rows,
-// multiplicity-weighted), truncated to d2 <= radius2 when kTruncate. Either accumulates the
-// sums or, when `store_s` is non-null, appends (s, p) (per-scan-point normalisation).
-struct VertexQuery {
-  double x[3], n[3], c[3];
-  double radius2;
-  double epsilon, lambda_color;
-};
-
-template <bool kColor, bool kTruncate>
-void WeighCandidates(const VertexQuery& q, const double* packed, const double* packed_colors,
-                     const int* index, int count, const double* known_d2, VertexSums* sums,
-                     std::vector<int>* store_s, std::vector<double>* store_p) {
-  constexpr int kP = kPackedStride;
-  double a = 0.0, b0 = 0.0, b1 = 0.0, b2 = 0.0, c = 0.0;
-  long long pairs = 0;
-  for (int i = 0; i < count; ++i) {
-    const int s = index[i];
-    const double* v = packed + kP * s;
-    const double d0 = v[0] - q.x[0], d1 = v[1] - q.x[1], d2c = v[2] - q.x[2];
-    const double d2 = known_d2 ? known_d2[i] : d0 * d0 + d1 * d1 + d2c * d2c;
-    if (kTruncate && !(d2 < q.radius2)) continue;  // as the kd-tree radius search
-    const double dot = v[3] * q.n[0] + v[4] * q.n[1] + v[5] * q.n[2];
-    if (!(dot > 0.0)) continue;
-    double denominator = d2 + q.epsilon;
-    if (kColor) {
-      const double* rgb = packed_colors + 4 * s;
-      if (rgb[3] > 0.0) {
-        const double e0 = rgb[0] - q.c[0], e1 = rgb[1] - q.c[1], e2 = rgb[2] - q.c[2];
-        denominator += q.lambda_color * (e0 * e0 + e1 * e1 + e2 * e2);
-      }
-    }
-    const double p = v[6] * dot / denominator;
-    if (!(p > 0.0)) continue;
-    if (store_s != nullptr) {
-      store_s->push_back(s);
-      store_p->push_back(p);
-      continue;
-    }
-    a += p;
-    b0 += p * d0;
-    b1 += p * d1;
-    b2 += p * d2c;
-    c += p * d2;
-    ++pairs;
-  }
-  sums->a += a;
-  sums->b += Eigen::Vector3d(b0, b1, b2);
-  sums->c += c;
-  sums->pairs += pairs;
-}
-
-void WeighVertex(bool color, bool truncate, const VertexQuery& q, const double* packed,
-                 const double* packed_colors, const int* index, int count, const double* known_d2,
-                 VertexSums* sums, std::vector<int>* store_s, std::vector<double>* store_p) {
-  if (color) {
-    if (truncate) {
-      WeighCandidates<true, true>(q, packed, packed_colors, index, count, known_d2, sums, store_s,
-                                  store_p);
-    } else {
-      WeighCandidates<true, false>(q, packed, packed_colors, index, count, known_d2, sums, store_s,
-                                   store_p);
-    }
-  } else if (truncate) {
-    WeighCandidates<false, true>(q, packed, packed_colors, index, count, known_d2, sums, store_s,
-                                 store_p);
-  } else {
-    WeighCandidates<false, false>(q, packed, packed_colors, index, count, known_d2, sums, store_s,
-                                  store_p);
-  }
-}
-
-}  // namespace
 
 void EStep::Compute(const PosedTemplateView& posed, double radius, CorrespondenceTargets* targets) {
   CheckPosed(posed, "E-step");

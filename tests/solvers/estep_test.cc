@@ -9,6 +9,7 @@
 #include <random>
 
 #include "models/error.h"
+#include "solvers/estep_pairs.h"
 
 namespace artex {
 namespace {
@@ -334,6 +335,73 @@ TEST(EStepTest, RejectsBadInput) {
   PosedTemplateView view = View(sets, false);
   view.normals = &wrong;
   EXPECT_THROW(estep.Compute(view, 0.1, &targets), Error);
+}
+
+TEST(EStepTest, PairKernelsGiveBitIdenticalSums) {
+  // The branch-free and SIMD candidate-list loops compute each candidate as the branching
+  // loop does and add the candidates in list order: their sums must equal its sums exactly,
+  // for every list length (the 2- and 4-wide loops leave a remainder) and mix of rejected
+  // candidates.
+  using estep_internal::PairKernel;
+  using estep_internal::PairKernelAvailable;
+  using estep_internal::VertexQuery;
+  using estep_internal::VertexSums;
+  using estep_internal::WeighCandidateListWith;
+  struct alignas(64) Row {
+    double v[estep_internal::kPackedStride];
+  };
+  std::mt19937_64 rng(23);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  constexpr int kPoints = 200;
+  std::vector<Row> rows(kPoints);
+  for (Row& row : rows) {
+    // Within ~4.5 cm of the origin, normals mostly along +z (a quarter face away),
+    // multiplicity 1..4 (voxel cells): runs of kept and of rejected candidates.
+    for (int d = 0; d < 3; ++d) row.v[d] = 0.045 * u(rng);
+    Eigen::Vector3d n(u(rng), u(rng), u(rng) + 0.6);
+    n.normalize();
+    for (int d = 0; d < 3; ++d) row.v[3 + d] = n[d];
+    row.v[6] = 1.0 + std::floor(4.0 * (0.5 + 0.5 * u(rng)));
+    row.v[7] = 0.0;
+  }
+  const std::vector<PairKernel> kernels = {PairKernel::kAuto, PairKernel::kBranchFree,
+                                           PairKernel::kSse2, PairKernel::kAvx};
+  int compared = 0;
+  long long kept = 0, candidates = 0;
+  for (int trial = 0; trial < 80; ++trial) {
+    VertexQuery q;
+    Eigen::Vector3d n(0.3 * u(rng), 0.3 * u(rng), 1.0);
+    n.normalize();
+    for (int d = 0; d < 3; ++d) {
+      q.x[d] = 0.02 * u(rng);
+      q.n[d] = n[d];
+      q.c[d] = 0.0;
+    }
+    q.radius2 = 0.04 * 0.04;
+    q.epsilon = 1e-4;
+    q.lambda_color = 1.0;
+    const int count = trial % 40;  // 0 .. 39 candidates
+    std::vector<int> index(count);
+    for (int& i : index) i = static_cast<int>(rng() % kPoints);
+    VertexSums scalar;  // the branching loop (the E-step's before the SIMD kernels)
+    WeighCandidateListWith(PairKernel::kBranching, q, rows[0].v, index.data(), count, &scalar);
+    kept += scalar.pairs;
+    candidates += count;
+    for (PairKernel kernel : kernels) {
+      if (!PairKernelAvailable(kernel)) continue;
+      VertexSums sums;
+      WeighCandidateListWith(kernel, q, rows[0].v, index.data(), count, &sums);
+      EXPECT_EQ(sums.a, scalar.a) << "trial " << trial << " kernel " << static_cast<int>(kernel);
+      for (int d = 0; d < 3; ++d) EXPECT_EQ(sums.b[d], scalar.b[d]) << "trial " << trial;
+      EXPECT_EQ(sums.c, scalar.c) << "trial " << trial;
+      EXPECT_EQ(sums.pairs, scalar.pairs) << "trial " << trial;
+      ++compared;
+    }
+  }
+  EXPECT_GE(compared, 160);  // at least the automatic and the branch-free loop every trial
+  // The fixture mixes kept and rejected candidates.
+  EXPECT_GT(kept, candidates / 4);
+  EXPECT_LT(kept, candidates - candidates / 10);
 }
 
 }  // namespace

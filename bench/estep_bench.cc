@@ -1,0 +1,220 @@
+// The parts of one EM iteration of the tracking fit, separately (bench/fitting_bench.cc times
+// whole frames). Fixture as fitting_bench's: the default template (resolution 1) with its
+// 3000 fitted vertices (EMFitterOptions().max_fit_vertices), posed by a random pose (joints
+// ~0.25 rad), and a front scan of that surface of ~20k points with 4 mm noise along the ray;
+// the E-step sees the template posed ~1 cm off (another random pose about the first).
+//   BM_EStepVoxelCloud:  EStep construction + the voxel-subsampled cloud of the first tracking
+//                        radius (a Compute with no template vertices builds only the cloud)
+//   BM_EStepFirst:       EStep construction + the first E-step at that radius: cloud, candidate
+//                        gathers of every vertex, weighing
+//   BM_EStepReweigh:     a later E-step of the same frame (candidate lists kept): weighing only
+//   BM_MStepJacobian:    posing the fitted vertices with their skinning Jacobian (one
+//                        Gauss-Newton evaluation, PrepareFitEvaluation)
+//   BM_MStepNormalEquations: the data term's J^T J and J^T r on that evaluation
+// Counters: cpu_ms (process CPU per iteration, all threads), candidates (visited per E-step)
+// and pairs (with p_st > 0). For one core run under `taskset -c 0` (oneTBB follows the
+// affinity mask).
+#include <benchmark/benchmark.h>
+#include <sys/resource.h>
+
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "energies/one_to_many_correspondence.h"
+#include "models/normals.h"
+#include "models/template_generator.h"
+#include "solvers/em_fitter.h"
+#include "solvers/estep.h"
+#include "tests/solvers/fitting_test_util.h"
+
+namespace artex {
+namespace {
+
+constexpr double kScanPoints = 20000.0;
+constexpr double kNoise = 0.004;  // m, along the viewing ray
+constexpr uint64_t kSeed = 2014;
+
+double ProcessCpuSeconds() {
+  rusage usage;
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_utime.tv_sec + usage.ru_stime.tv_sec +
+         1e-6 * (usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
+}
+
+struct Fixture {
+  Template model;
+  Template subset;  // the fitted vertices (skinning constants per vertex, as EMFitter's)
+  std::unique_ptr<Skinning> subset_skinning;
+  Scan scan;
+  Pose truth, guess;
+  Eigen::MatrixX3d posed, normals;  // fitted vertices at `guess`
+  EStepOptions estep;
+  double radius = 0.0;
+};
+
+Fixture& GetFixture() {
+  static Fixture* fixture = [] {
+    auto* f = new Fixture;
+    f->model = GenerateTemplate(BodyShapeOptions());
+    const EMFitterOptions options;
+    f->estep = options.estep;
+    f->radius = options.tracking_radii.front();
+    const EMFitter fitter(f->model, options);
+    const std::vector<int>& fit = fitter.fit_vertices();
+    const int n = static_cast<int>(fit.size());
+    f->subset.vertices.resize(n, 3);
+    f->subset.vertex_joint.resize(n);
+    f->subset.lbs_weight.resize(n);
+    f->subset.slerp_tau.resize(n);
+    for (int i = 0; i < n; ++i) {
+      f->subset.vertices.row(i) = f->model.vertices.row(fit[i]);
+      f->subset.vertex_joint[i] = f->model.vertex_joint[fit[i]];
+      f->subset.lbs_weight[i] = f->model.lbs_weight[fit[i]];
+      f->subset.slerp_tau[i] = f->model.slerp_tau[fit[i]];
+    }
+    f->subset.triangles.resize(1, 3);
+    f->subset.triangles << 0, 1, 2;  // unused
+    f->subset.joints = f->model.joints;
+    f->subset_skinning = std::make_unique<Skinning>(f->subset);
+
+    std::mt19937_64 rng(kSeed);
+    const Skinning skinning(f->model);
+    f->truth = testing_util::RandomPose(f->model.num_joints(), 0.25, 0.15, 0.05, &rng);
+    Eigen::MatrixX3d posed;
+    skinning.Apply(f->truth, &posed);
+    const Eigen::Vector3d camera(0.0, 1.0, 2.5);
+    const Scan probe =
+        testing_util::SampleScan(posed, f->model.triangles, camera, 1000.0, 0.0, &rng);
+    const double density = 1000.0 * kScanPoints / std::max(1, probe.size());
+    f->scan = testing_util::SampleScan(posed, f->model.triangles, camera, density, kNoise, &rng);
+
+    Eigen::VectorXd d = Eigen::VectorXd::Zero(f->truth.num_parameters());
+    std::normal_distribution<double> g(0.0, 1.0);
+    for (int i = 0; i < 3; ++i) d[kTranslationIndex + i] = 0.005 * g(rng);
+    for (int i = 0; i < 3; ++i) d[kGlobalRotationIndex + i] = 0.005 * g(rng);
+    for (int i = kNumGlobalParameters; i < d.size(); ++i) d[i] = 0.01 * g(rng);
+    f->guess = f->truth.Retracted(d);
+    Eigen::MatrixX3d full_posed, full_normals;
+    skinning.Apply(f->guess, &full_posed);
+    ComputeVertexNormals(full_posed, f->model.triangles, &full_normals);
+    f->posed.resize(n, 3);
+    f->normals.resize(n, 3);
+    for (int i = 0; i < n; ++i) {
+      f->posed.row(i) = full_posed.row(fit[i]);
+      f->normals.row(i) = full_normals.row(fit[i]);
+    }
+    return f;
+  }();
+  return *fixture;
+}
+
+PosedTemplateView View(const Fixture& f) {
+  PosedTemplateView view;
+  view.vertices = &f.posed;
+  view.normals = &f.normals;
+  return view;
+}
+
+void ReportCpu(benchmark::State& state, double cpu_start) {
+  const double runs = std::max<double>(1.0, static_cast<double>(state.iterations()));
+  state.counters["cpu_ms"] = 1e3 * (ProcessCpuSeconds() - cpu_start) / runs;
+  state.counters["scan_points"] = GetFixture().scan.size();
+  state.counters["fitted_vertices"] = static_cast<double>(GetFixture().posed.rows());
+}
+
+void BM_EStepVoxelCloud(benchmark::State& state) {
+  Fixture& f = GetFixture();
+  const Eigen::MatrixX3d none(0, 3);
+  PosedTemplateView view;
+  view.vertices = &none;
+  view.normals = &none;
+  CorrespondenceTargets targets;
+  const double cpu_start = ProcessCpuSeconds();
+  for (auto _ : state) {
+    EStep estep(f.scan, f.estep);
+    estep.Compute(view, f.radius, &targets);
+    benchmark::DoNotOptimize(targets.weight.data());
+  }
+  ReportCpu(state, cpu_start);
+}
+BENCHMARK(BM_EStepVoxelCloud)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+void BM_EStepFirst(benchmark::State& state) {
+  Fixture& f = GetFixture();
+  CorrespondenceTargets targets;
+  long long visited = 0;
+  const double cpu_start = ProcessCpuSeconds();
+  for (auto _ : state) {
+    EStep estep(f.scan, f.estep);
+    estep.Compute(View(f), f.radius, &targets);
+    visited = estep.candidates_visited();
+    benchmark::DoNotOptimize(targets.weight.data());
+  }
+  ReportCpu(state, cpu_start);
+  state.counters["candidates"] = static_cast<double>(visited);
+  state.counters["pairs"] = static_cast<double>(targets.num_pairs);
+  state.counters["total_weight"] = targets.total_weight();
+}
+BENCHMARK(BM_EStepFirst)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+void BM_EStepReweigh(benchmark::State& state) {
+  Fixture& f = GetFixture();
+  CorrespondenceTargets targets;
+  EStep estep(f.scan, f.estep);
+  estep.Compute(View(f), f.radius, &targets);
+  const long long visited_start = estep.candidates_visited();
+  const double cpu_start = ProcessCpuSeconds();
+  for (auto _ : state) {
+    estep.Compute(View(f), f.radius, &targets);
+    benchmark::DoNotOptimize(targets.weight.data());
+  }
+  ReportCpu(state, cpu_start);
+  const double runs = std::max<double>(1.0, static_cast<double>(state.iterations()));
+  state.counters["candidates"] = (estep.candidates_visited() - visited_start) / runs;
+  state.counters["pairs"] = static_cast<double>(targets.num_pairs);
+  state.counters["total_weight"] = targets.total_weight();
+}
+BENCHMARK(BM_EStepReweigh)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+void BM_MStepJacobian(benchmark::State& state) {
+  Fixture& f = GetFixture();
+  const Eigen::VectorXd delta = Eigen::VectorXd::Zero(f.guess.num_parameters());
+  FitEvaluation eval;
+  const double cpu_start = ProcessCpuSeconds();
+  for (auto _ : state) {
+    PrepareFitEvaluation(f.subset_skinning.get(), f.guess, delta, true, true, &eval);
+    benchmark::DoNotOptimize(eval.posed.data());
+  }
+  ReportCpu(state, cpu_start);
+}
+BENCHMARK(BM_MStepJacobian)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+void BM_MStepNormalEquations(benchmark::State& state) {
+  Fixture& f = GetFixture();
+  CorrespondenceTargets targets;
+  EStep estep(f.scan, f.estep);
+  estep.Compute(View(f), f.radius, &targets);
+  const Eigen::VectorXd delta = Eigen::VectorXd::Zero(f.guess.num_parameters());
+  FitEvaluation eval;
+  PrepareFitEvaluation(f.subset_skinning.get(), f.guess, delta, true, true, &eval);
+  const OneToManyCorrespondenceTerm term(&targets, 1.0 / targets.total_weight());
+  const int p = f.guess.num_parameters();
+  Eigen::MatrixXd jtj(p, p);
+  Eigen::VectorXd jtr(p);
+  double cost = 0.0;
+  const double cpu_start = ProcessCpuSeconds();
+  for (auto _ : state) {
+    jtj.setZero();
+    jtr.setZero();
+    cost = term.AccumulateNormalEquations(eval, &jtj, &jtr);
+    benchmark::DoNotOptimize(jtj.data());
+  }
+  ReportCpu(state, cpu_start);
+  state.counters["cost"] = cost;
+  state.counters["jtj_trace"] = jtj.trace();
+}
+BENCHMARK(BM_MStepNormalEquations)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+}  // namespace
+}  // namespace artex
