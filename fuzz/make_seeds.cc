@@ -68,14 +68,26 @@ Frame Time: 0.0333333
 2 90 0 0 10 0 14 0 0 -30 0 0 5 4 0
 )";
 
-// A few triangles of `tmpl` per joint (the first ones whose corners all belong to the joint),
-// with their vertices, UVs, charts and every joint: a template that takes every branch of the
+// A few triangles of `tmpl` per joint (the first ones whose corners all belong to the joint)
+// and one with a skin weight the importer drops, with their vertices, UVs, charts and every joint: a template that takes every branch of the
 // .glb reader that the whole template does, in about 1/30 of its bytes (a fuzz input costs
 // time in proportion to its size).
 artex::Template SmallTemplate(const artex::Template& tmpl, int triangles_per_joint) {
   std::vector<int> kept;
+  // First, one triangle with a skin weight that the glTF importer drops (below its default
+  // min_joint_weight, 1e-4).
+  for (int t = 0; t < tmpl.num_triangles() && kept.empty(); ++t) {
+    for (int c = 0; c < 3; ++c) {
+      const double w = tmpl.lbs_weight(tmpl.triangles(t, c));
+      if ((w > 0.0 && w < 1e-4) || (w < 1.0 && w > 1.0 - 1e-4)) {
+        kept.push_back(t);
+        break;
+      }
+    }
+  }
   std::vector<int> count(tmpl.num_joints(), 0);
   for (int t = 0; t < tmpl.num_triangles(); ++t) {
+    if (!kept.empty() && t == kept[0]) continue;
     const int j = tmpl.vertex_joint(tmpl.triangles(t, 0));
     if (tmpl.vertex_joint(tmpl.triangles(t, 1)) != j ||
         tmpl.vertex_joint(tmpl.triangles(t, 2)) != j || count[j] >= triangles_per_joint) {
