@@ -44,7 +44,7 @@ Config Config::Load(const std::string& path) {
   Config c;
   c.impl_->source = path;
   try {
-    c.impl_->node = YAML::LoadFile(path);
+    c.impl_->node.reset(YAML::LoadFile(path));
   } catch (const YAML::BadFile&) {
     throw Error(path + ": cannot open the configuration file");
   } catch (const YAML::Exception& e) {
@@ -60,7 +60,7 @@ Config Config::FromString(const std::string& yaml, const std::string& source_nam
   Config c;
   c.impl_->source = source_name;
   try {
-    c.impl_->node = YAML::Load(yaml);
+    c.impl_->node.reset(YAML::Load(yaml));
   } catch (const YAML::Exception& e) {
     throw Error(source_name + ": not valid YAML: " + e.what());
   }
@@ -99,7 +99,7 @@ Config Config::Section(const std::string& key) const {
   if (!Has(key)) return c;
   YAML::Node n = Lookup(impl_->node, key);
   if (!n.IsMap()) throw Error(Path(key) + ": expected a mapping of options");
-  c.impl_->node = n;
+  c.impl_->node.reset(n);
   return c;
 }
 

@@ -1,5 +1,11 @@
 // Helpers of the fuzz targets: the readers take paths, so an input is written to a file in a
 // per-process scratch folder; multi-file inputs are split on kPartSeparator.
+//
+// The scratch folder is on /dev/shm (a RAM file system) when the machine has one: on a disk
+// file system such as ext4, rewriting a file with O_TRUNC makes close() start its write-back
+// (ext4's auto_da_alloc), and a fuzzer that writes its input to a file then spends most of its
+// time waiting for the disk (measured: 5,000 calibration inputs in 19.8 s of wall time for 3.0 s
+// of CPU time in /tmp on ext4, 3.8 s in /dev/shm).
 #pragma once
 
 #include <unistd.h>
@@ -16,14 +22,32 @@ namespace artex::fuzz {
 // Separates the files of one input (e.g. rgb.txt, depth.txt and camera.yaml).
 constexpr char kPartSeparator[] = "\n#----\n";
 
+// The folder, removed at exit (a crash leaves it behind).
+class ScratchFolder {
+ public:
+  ScratchFolder() {
+    std::error_code error;
+    const std::filesystem::path shm = "/dev/shm";
+    const std::filesystem::path base =
+        std::filesystem::is_directory(shm, error) && ::access(shm.c_str(), W_OK) == 0
+            ? shm
+            : std::filesystem::temp_directory_path();
+    path_ = (base / ("artex_fuzz_" + std::to_string(::getpid()))).string();
+    std::filesystem::create_directories(path_);
+  }
+  ~ScratchFolder() {
+    std::error_code error;
+    std::filesystem::remove_all(path_, error);
+  }
+  const std::string& path() const { return path_; }
+
+ private:
+  std::string path_;
+};
+
 inline std::string Scratch() {
-  static const std::string dir = [] {
-    const auto d =
-        std::filesystem::temp_directory_path() / ("artex_fuzz_" + std::to_string(::getpid()));
-    std::filesystem::create_directories(d);
-    return d.string();
-  }();
-  return dir;
+  static const ScratchFolder folder;
+  return folder.path();
 }
 
 inline std::string WriteFile(const std::string& relative, const std::string& bytes) {
