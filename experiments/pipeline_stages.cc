@@ -201,10 +201,13 @@ void TrackStage::Evaluate(FrameRecord* r, Eigen::MatrixX3d* posed) {
   fitter_->skinning().Apply(fitter_->pose(), posed);
   if (r->fit.ok()) {
     const Template& model = fitter_->skinning().model();
-    const Eigen::VectorXi parts = FitQualityParts(model.vertex_joint, model.JointNames(),
-                                                  options_.quality);
+    // The per-part map only when the per-part check is on (off by default: no work per frame).
+    const bool by_part = options_.quality.part_min_support > 0.0;
+    const Eigen::VectorXi parts =
+        by_part ? FitQualityParts(model.vertex_joint, model.JointNames(), options_.quality)
+                : Eigen::VectorXi();
     r->quality = EvaluateFitQuality(*posed, model.triangles, scan_, calibration_.depth,
-                                    options_.quality, &parts);
+                                    options_.quality, by_part ? &parts : nullptr);
   } else {
     r->quality = FitQuality();  // a failed fit is lost, whatever its kept pose shows
     r->quality.label = FitQualityLabel::kLost;

@@ -54,6 +54,20 @@ void WeighCandidateList(const VertexQuery& q, const double* packed, const double
   sums->pairs = pairs;
 }
 
+// The vector loops' ending: the candidates from `done` on by the scalar loop, continuing the
+// candidate-ordered sums in *total, then *total added to *sums.
+[[maybe_unused]] void FinishCandidateList(const VertexQuery& q, const double* packed,
+                                          const int* index, int done, int count, VertexSums* total,
+                                          VertexSums* sums) {
+  if (done < count) {
+    WeighCandidateList<false>(q, packed, nullptr, index + done, count - done, total);
+  }
+  sums->a += total->a;
+  sums->b += total->b;
+  sums->c += total->c;
+  sums->pairs += total->pairs;
+}
+
 #if defined(__SSE2__)
 // WeighCandidateList<false> two candidates at a time (SSE2): the same operations in the same
 // order per candidate (sums accumulated candidate after candidate), so bit for bit its sums,
@@ -110,11 +124,7 @@ void WeighCandidateListSse2(const VertexQuery& q, const double* packed, const in
   total.b = Eigen::Vector3d(b01[0], b01[1], b2c[0]);
   total.c = b2c[1];
   total.pairs = pairs;
-  if (i < count) WeighCandidateList<false>(q, packed, nullptr, index + i, count - i, &total);
-  sums->a += total.a;
-  sums->b += total.b;
-  sums->c += total.c;
-  sums->pairs += total.pairs;
+  FinishCandidateList(q, packed, index, i, count, &total, sums);
 }
 #endif
 
@@ -200,11 +210,7 @@ __attribute__((target("avx"))) void WeighCandidateListAvx(const VertexQuery& q,
   total.b = Eigen::Vector3d(bc[0], bc[1], bc[2]);
   total.c = bc[3];
   total.pairs = pairs;
-  if (i < count) WeighCandidateList<false>(q, packed, nullptr, index + i, count - i, &total);
-  sums->a += total.a;
-  sums->b += total.b;
-  sums->c += total.c;
-  sums->pairs += total.pairs;
+  FinishCandidateList(q, packed, index, i, count, &total, sums);
 }
 
 bool CpuHasAvx() {

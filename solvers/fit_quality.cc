@@ -56,7 +56,8 @@ bool FitQualityOptions::IsValid(std::string* error) const {
 std::string FitQuality::BriefReport() const {
   std::ostringstream out;
   out << FitQualityLabelName(label) << ": inliers " << inlier_fraction << ", support "
-      << support_fraction << ", depth residual " << depth_residual_m * 1e3 << " mm, score " << score;
+      << support_fraction << ", depth residual " << depth_residual_m * 1e3 << " mm, score "
+      << score;
   if (unsupported_parts > 0) out << ", " << unsupported_parts << " unsupported part(s)";
   out << " (" << seconds * 1e3 << " ms)";
   return out.str();
@@ -83,13 +84,17 @@ PinholeCamera Subsampled(const PinholeCamera& camera, int subsample) {
 Eigen::VectorXi FitQualityParts(const Eigen::VectorXi& vertex_joint,
                                 const std::vector<std::string>& joint_names,
                                 const FitQualityOptions& options) {
+  // Which joints are ignored, by name once per joint; then the vertices by their joint.
+  std::vector<bool> ignored(joint_names.size(), false);
+  for (size_t j = 0; j < joint_names.size(); ++j) {
+    for (const std::string& name : options.part_ignore) {
+      ignored[j] = ignored[j] || joint_names[j] == name;
+    }
+  }
   Eigen::VectorXi parts = vertex_joint;
   for (Eigen::Index v = 0; v < parts.size(); ++v) {
     const int j = parts[v];
-    if (j < 0 || j >= static_cast<int>(joint_names.size())) continue;
-    for (const std::string& name : options.part_ignore) {
-      if (joint_names[j] == name) parts[v] = -1;
-    }
+    if (j >= 0 && j < static_cast<int>(ignored.size()) && ignored[j]) parts[v] = -1;
   }
   return parts;
 }
@@ -108,9 +113,8 @@ FitQuality EvaluateFitQuality(const Eigen::MatrixX3d& posed_vertices,
         << "), found [" << triangles.minCoeff() << ", " << triangles.maxCoeff() << "]";
     throw Error(msg.str());
   }
-  if (vertex_part != nullptr &&
-      (vertex_part->size() != posed_vertices.rows() ||
-       (vertex_part->size() > 0 && vertex_part->minCoeff() < -1))) {
+  if (vertex_part != nullptr && (vertex_part->size() != posed_vertices.rows() ||
+                                 (vertex_part->size() > 0 && vertex_part->minCoeff() < -1))) {
     std::ostringstream msg;
     msg << "fit quality: vertex_part: expected " << posed_vertices.rows()
         << " part indices >= -1, found " << vertex_part->size();
@@ -188,8 +192,9 @@ FitQuality EvaluateFitQuality(const Eigen::MatrixX3d& posed_vertices,
   }
 
   // Rendered template and observed depth on the subsampled raster.
-  const int subsample = std::max(
-      1, static_cast<int>(std::lround(static_cast<double>(depth_camera.width) / options.raster_width)));
+  const int subsample =
+      std::max(1, static_cast<int>(
+                      std::lround(static_cast<double>(depth_camera.width) / options.raster_width)));
   const PinholeCamera camera = Subsampled(depth_camera, subsample);
   std::vector<float> model;
   RasterizeDepth(posed_vertices, triangles, camera, RasterOptions(), &model);
@@ -234,15 +239,16 @@ FitQuality EvaluateFitQuality(const Eigen::MatrixX3d& posed_vertices,
       double z = 0.0;
       const Eigen::Vector2d uv = camera.Project(posed_vertices.row(v).transpose(), &z);
       if (!(z > 0.0)) continue;
-      const int u = static_cast<int>(std::lround(uv.x())), r = static_cast<int>(std::lround(uv.y()));
+      const int u = static_cast<int>(std::lround(uv.x())),
+                r = static_cast<int>(std::lround(uv.y()));
       if (u < 0 || r < 0 || u >= w || r >= h) continue;
       const size_t i = static_cast<size_t>(r) * w + u;
       if (!std::isfinite(model[i]) || z > model[i] + options.support_tolerance) continue;
       const int part = (*vertex_part)[v];
       if (part < 0) continue;  // not checked
       ++visible[part];
-      supported_part[part] += std::isfinite(observed[i]) &&
-                              std::abs(z - observed[i]) <= options.support_tolerance;
+      supported_part[part] +=
+          std::isfinite(observed[i]) && std::abs(z - observed[i]) <= options.support_tolerance;
     }
     for (int k = 0; k < parts; ++k) {
       q.unsupported_parts += visible[k] >= options.part_min_visible &&

@@ -151,14 +151,17 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
   InitResult result;
   const Skinning& skinning = fitter->skinning();
   const Template& model = skinning.model();
+  const bool by_part = options.quality.part_min_support > 0.0;  // the per-part check is on
   const Eigen::VectorXi parts =
-      FitQualityParts(model.vertex_joint, model.JointNames(), options.quality);
+      by_part ? FitQualityParts(model.vertex_joint, model.JointNames(), options.quality)
+              : Eigen::VectorXi();
   const auto evaluate = [&](const Pose& pose) {
     const auto t0 = Clock::now();
     Eigen::MatrixX3d posed;
     skinning.Apply(pose, &posed);
     const FitQuality q =
-        EvaluateFitQuality(posed, model.triangles, scan, depth_camera, options.quality, &parts);
+        EvaluateFitQuality(posed, model.triangles, scan, depth_camera, options.quality,
+                           by_part ? &parts : nullptr);
     result.quality_seconds += SecondsSince(t0);
     return q;
   };

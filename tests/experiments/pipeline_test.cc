@@ -541,13 +541,19 @@ TEST(PipelineTest, TrackCommandExitStatus) {
 // Section shape: a bones_girth calibration swaps the subject's template in, which is written as
 // subject.glb (same rig, vertex count and UVs) with its parameters in summary.json; a bad mode
 // is an error naming the key.
-TEST(PipelineTest, ShapeCalibrationWritesTheSubjectTemplate) {
+// A bones_girth calibration after one frame of one round, with few iterations.
+Config SmallShapeConfig() {
   Config config = SmallConfig();
   config.Set("shape.mode", "bones_girth");
   config.Set("shape.calibration_frames", "1");
   config.Set("shape.calibration_rounds", "1");
   config.Set("shape.iterations_per_stage", "2");
   config.Set("fitting.scale_estimation_frames", "2");
+  return config;
+}
+
+TEST(PipelineTest, ShapeCalibrationWritesTheSubjectTemplate) {
+  Config config = SmallShapeConfig();
   const fs::path out = OutDir("run_shape");
   const PipelineResult r = Track(TestData().sequence, out.string(), config);
   EXPECT_EQ(static_cast<int>(r.frames.size()), kFrames);
@@ -577,13 +583,8 @@ TEST(PipelineTest, ShapeCalibrationWritesTheSubjectTemplate) {
 // shape.retrack: the first pass (fitting only) calibrates the subject into shape_pass/, the
 // second tracks every frame with that template; a live run cannot be tracked twice.
 TEST(PipelineTest, ShapeRetrackTracksAgainWithTheSubject) {
-  Config config = SmallConfig();
-  config.Set("shape.mode", "bones_girth");
+  Config config = SmallShapeConfig();
   config.Set("shape.retrack", "true");
-  config.Set("shape.calibration_frames", "1");
-  config.Set("shape.calibration_rounds", "1");
-  config.Set("shape.iterations_per_stage", "2");
-  config.Set("fitting.scale_estimation_frames", "2");
   const fs::path out = OutDir("run_retrack");
   const PipelineResult r = Track(TestData().sequence, out.string(), config);
   EXPECT_EQ(static_cast<int>(r.frames.size()), kFrames);
