@@ -12,8 +12,14 @@
 namespace artex {
 
 struct UprightOptions {
-  double weight = 0.0;       // per rad^2 of tilt beyond max_tilt (data-term cost units); 0: off
-  double max_tilt_deg = 30;  // degrees of free tilt of the pelvis from world up, in [0, 180)
+  // Per rad^2 of tilt beyond max_tilt (data-term cost units); 0: off. The default acts only in
+  // frames where joints are out of the depth camera's view (below): when the legs are below the
+  // image, nothing in the scan holds the pelvis, and the held legs swing out with it.
+  double weight = 0.01;
+  double max_tilt_deg = 10;  // degrees of free tilt of the pelvis from world up, in [0, 180)
+  // true: only in frames in which the fitter holds joints out of view (solvers/out_of_view.h);
+  // false: in every frame.
+  bool only_out_of_view = true;
 
   bool IsValid(std::string* error) const;
 };

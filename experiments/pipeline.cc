@@ -139,6 +139,7 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
     preprocessor.Train(background);
   }
   EMFitter fitter(tmpl, options.fitting);
+  fitter.SetDepthCamera(calibration.depth);  // joints out of its view are held (out_of_view)
   std::unique_ptr<Texturer> texturer;
   if (options.texture) texturer = std::make_unique<Texturer>(tmpl, options.texturing);
 

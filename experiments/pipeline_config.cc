@@ -270,7 +270,8 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
                "candidate_margin", "normal_refresh_iterations", "tracking_tikhonov",
                "fit_vertex_selection", "scale_estimator", "scale_sample_max_distance",
                "scale_sample_min_pair_fraction", "icp_init", "init", "quality", "prediction",
-               "kalman", "particle", "temporal_prior_on_prediction", "silhouette", "unobserved_joints", "upright"});
+               "kalman", "particle", "temporal_prior_on_prediction", "silhouette",
+               "unobserved_joints", "upright", "out_of_view"});
   c.GetEnum("correspondence", CorrespondenceModelNames(), &o->correspondence);
   c.GetEnum("solver", FitSolverTypeNames(), &o->solver.type);
   c.GetEnum("estep",
@@ -311,13 +312,20 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   sil.Get("weight", &o->silhouette.weight);
   sil.Get("depth_margin", &o->silhouette.depth_margin);
   const Config upright = c.Section("upright");
-  upright.CheckKeys({"weight", "max_tilt_deg"});
+  upright.CheckKeys({"weight", "max_tilt_deg", "only_out_of_view"});
   upright.Get("weight", &o->upright.weight);
   upright.Get("max_tilt_deg", &o->upright.max_tilt_deg);
+  upright.Get("only_out_of_view", &o->upright.only_out_of_view);
   const Config unobserved = c.Section("unobserved_joints");
   unobserved.CheckKeys({"weight", "min_observed_fraction"});
   unobserved.Get("weight", &o->unobserved_joints.weight);
   unobserved.Get("min_observed_fraction", &o->unobserved_joints.min_observed_fraction);
+  const Config out_of_view = c.Section("out_of_view");
+  out_of_view.CheckKeys({"min_in_view_fraction", "hold_cut_bones", "border_px", "min_vertices"});
+  out_of_view.Get("min_in_view_fraction", &o->out_of_view.min_in_view_fraction);
+  out_of_view.Get("hold_cut_bones", &o->out_of_view.hold_cut_bones);
+  out_of_view.Get("border_px", &o->out_of_view.border_px);
+  out_of_view.Get("min_vertices", &o->out_of_view.min_vertices);
   c.GetEnum("scale_mode", ScaleModeNames(), &o->scale_mode);
   c.Get("scale_estimation_frames", &o->scale_estimation_frames);
   c.Get("scale_max_radius", &o->scale_max_radius);

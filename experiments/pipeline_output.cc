@@ -60,7 +60,8 @@ void WriteFramesCsv(const std::string& path, const PipelineResult& result) {
                 "texture_ms,texture_mrf_ms,texture_energy,texture_lower_bound,pool_size,"
                 "seam_edges,changed_triangles,seam_rms_before,seam_rms_after,"
                 "mean_vertex_error_mm,max_vertex_error_mm,mean_joint_error_mm,novel_view_psnr_db,"
-                "novel_view_ssim,texture_coverage,silhouette_violations,unobserved_joints,unsupported_parts\n";
+                "novel_view_ssim,texture_coverage,silhouette_violations,unobserved_joints,unsupported_parts,"
+                "out_of_view_joints\n";
   for (const FrameRecord& r : result.frames) {
     frames_csv << r.frame << "," << r.skipped << "," << r.scan_points << ","
                << r.segmentation.subject_pixels << "," << r.segmentation.tracked << ","
@@ -85,7 +86,7 @@ void WriteFramesCsv(const std::string& path, const PipelineResult& result) {
                << (r.texture_quality.views ? Fixed(r.texture_quality.coverage) : "nan") << ","
                << (r.fit.trace.empty() ? 0 : r.fit.trace.back().silhouette_violations) << ","
                << (r.fit.trace.empty() ? 0 : r.fit.trace.back().unobserved_joints) << ","
-               << r.quality.unsupported_parts << "\n";
+               << r.quality.unsupported_parts << "," << r.fit.out_of_view_joints << "\n";
   }
   WriteFileAtomically(path, frames_csv.str());
 }

@@ -241,12 +241,15 @@ void TrackStage::Process(FrameWork* work) {
   Pose tracked_pose;
   bool keep_tracked = false;
   // Tracking that loses the frame (or doubts it, by option) is followed by a
-  // re-initialisation in the same frame; the better of the two by quality score is kept.
+  // re-initialisation in the same frame; the better of the two by quality score is kept. A
+  // tracking fit that failed with enough scan points (no correspondence within the E-step's
+  // radius of a prediction far off, or diverged) is lost and re-initialised the same way; a
+  // scan with non-finite values is not fitted again.
   const FitQualityLabel label = record.quality.label;
   doubtful_run_ = label == FitQualityLabel::kDoubtful ? doubtful_run_ + 1 : 0;
   const bool doubted_long = options_.reinitialise_after_doubtful > 0 &&
                             doubtful_run_ >= options_.reinitialise_after_doubtful;
-  if (!record.reinitialised && record.fit.ok() && enough_points &&
+  if (!record.reinitialised && !record.fit.non_finite && enough_points &&
       (label == FitQualityLabel::kLost ||
        (label == FitQualityLabel::kDoubtful &&
         (doubted_long || options_.reinitialise_on == ReinitialiseOn::kDoubtful)))) {

@@ -164,6 +164,8 @@ bool EMFitterOptions::IsValid(std::string* error) const {
     msg << "upright." << inner;
   } else if (!silhouette.IsValid(&inner)) {
     msg << "silhouette." << inner;
+  } else if (!out_of_view.IsValid(&inner)) {
+    msg << "out_of_view." << inner;
   } else if (!prediction.IsValid(&inner)) {
     msg << "prediction." << inner;
   } else if (estep.mode == EStepMode::kRadius &&
@@ -250,6 +252,7 @@ struct EMFitter::FrameState {
   Eigen::MatrixXd information;  // data-term J^T J of the last M-step
   std::shared_ptr<const SilhouetteMap> silhouette;  // the frame's free space (may be null)
   SilhouetteTargets silhouette_targets;
+  std::vector<int> held_parameters;  // tangent indices of the out-of-view joints
 };
 
 EMFitter::EMFitter(const Template& tmpl, const EMFitterOptions& options) : options_(options) {
@@ -306,6 +309,11 @@ void EMFitter::SetInitialPose(const Pose& pose) {
     throw Error(msg.str());
   }
   initial_pose_ = pose;
+}
+
+void EMFitter::SetDepthCamera(const PinholeCamera& camera) {
+  camera_ = camera;
+  has_camera_ = true;
 }
 
 void EMFitter::SetTemplateColors(const Eigen::MatrixX3d& colors) {
@@ -423,6 +431,19 @@ void EMFitter::BeginFrame(const Scan& scan, const Pose& initial_guess) {
   const auto skin_start = Clock::now();
   skinning_->Apply(initial_guess, &st.initial_posed);
   st.summary.skinning_seconds += SecondsSince(skin_start);
+  if (has_camera_ && options_.out_of_view.enabled()) {
+    const Template& model = skinning_->model();
+    Eigen::MatrixX3d centers;
+    skinning_->PosedJointCenters(initial_guess, &centers);
+    std::vector<int> parents(model.num_joints());
+    for (int j = 0; j < model.num_joints(); ++j) parents[j] = model.joints[j].parent;
+    const std::vector<int> held = OutOfViewJoints(st.initial_posed, model.vertex_joint, centers,
+                                                  parents, camera_, options_.out_of_view);
+    st.summary.out_of_view_joints = static_cast<int>(held.size());
+    for (int j : held) {
+      for (int k = 0; k < 3; ++k) st.held_parameters.push_back(JointParameterIndex(j) + k);
+    }
+  }
 
   const bool radius_mode = options_.correspondence == CorrespondenceModel::kOneToMany &&
                            options_.estep.mode == EStepMode::kRadius;
@@ -579,7 +600,10 @@ EMIterationInfo EMFitter::Iterate() {
   if (silhouette_term) problem.terms.push_back(silhouette_term.get());
   if (unobserved_term) problem.terms.push_back(unobserved_term.get());
   if (options_.joint_limits.weight > 0.0) problem.terms.push_back(&joint_limits);
-  if (options_.upright.weight > 0.0) problem.terms.push_back(&upright);
+  if (options_.upright.weight > 0.0 &&
+      (!options_.upright.only_out_of_view || !st.held_parameters.empty())) {
+    problem.terms.push_back(&upright);
+  }
   if (st.smoothness) problem.terms.push_back(st.smoothness.get());
   if (prior_scale) problem.terms.push_back(&scale_prior);
   const bool em_scale = options_.scale_mode == ScaleMode::kFree ||
@@ -587,6 +611,8 @@ EMIterationInfo EMFitter::Iterate() {
   const bool scale_free = st.scale_free && em_scale &&
                           (st.radii.empty() || radius <= options_.scale_max_radius);
   if (!scale_free) problem.constant_parameters.push_back(kScaleIndex);
+  problem.constant_parameters.insert(problem.constant_parameters.end(),
+                                     st.held_parameters.begin(), st.held_parameters.end());
 
   const FitSolverSummary m = solver_->Solve(problem, &pose_);
   if (options_.over_relaxation != 1.0 && m.termination != FitTermination::kFailure) {

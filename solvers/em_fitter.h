@@ -35,7 +35,9 @@
 #include "solvers/estep.h"
 #include "solvers/fit_solver.h"
 #include "solvers/icp_init.h"
+#include "solvers/out_of_view.h"
 #include "solvers/prediction.h"
+#include "render/camera.h"
 
 namespace artex {
 
@@ -109,6 +111,10 @@ struct EMFitterOptions {
   // Joints whose fitted vertices the E-step leaves unmatched are pulled towards the initial
   // guess (first frame) or the previous pose (energies/unobserved_joint_term.h). weight 0: off.
   UnobservedJointOptions unobserved_joints;
+  // Joints out of the depth camera's view at a frame's initial guess hold their rotation in that
+  // frame (solvers/out_of_view.h); needs SetDepthCamera (the pipeline and the initialiser set
+  // it), without a camera every joint is fitted.
+  OutOfViewOptions out_of_view;
   PoseGroupWeights smoothness;     // constant-velocity prior (all 0: off)
 
   ScaleMode scale_mode = ScaleMode::kEstimateThenFix;
@@ -183,6 +189,7 @@ struct FitSummary {
   bool non_finite = false;
   bool diverged = false;
   int num_scan_points = 0;
+  int out_of_view_joints = 0;  // joints held at the initial guess (solvers/out_of_view.h)
   double scale = 1.0;
   double mean_motion = 0.0;  // mean vertex displacement from the initial guess (m)
   // E-step work: neighbour queries and candidate scan points visited (solvers/estep.h).
@@ -228,6 +235,10 @@ class EMFitter {
   const Pose& pose() const { return pose_; }
   int frames_fitted() const { return frame_; }
   void SetInitialPose(const Pose& pose);  // pose for the first frame (before ICP)
+  // The depth camera of the scans (intrinsics, world_to_camera) for the out-of-view joints
+  // (EMFitterOptions::out_of_view); without one every joint is fitted.
+  void SetDepthCamera(const PinholeCamera& camera);
+  const PinholeCamera* depth_camera() const { return has_camera_ ? &camera_ : nullptr; }
   const Pose& initial_pose() const { return initial_pose_; }
   // Per-vertex template colours (T x 3, [0,1]) for the colour term; empty disables it.
   void SetTemplateColors(const Eigen::MatrixX3d& colors);
@@ -292,6 +303,8 @@ class EMFitter {
   Eigen::MatrixX3d template_colors_;
   Pose initial_pose_;
   Pose pose_;
+  PinholeCamera camera_;
+  bool has_camera_ = false;
   std::vector<Pose> history_;  // accepted poses of previous frames (last two kept)
   int frame_ = 0;
   int accepted_frames_ = 0;  // frames that passed the robustness checks

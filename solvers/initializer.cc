@@ -169,6 +169,8 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
     r->pose = fitter->pose();
     r->total_seconds = SecondsSince(start);
   };
+  // The hypotheses' joints out of the camera's view are held (EMFitterOptions::out_of_view).
+  if (fitter->depth_camera() == nullptr) fitter->SetDepthCamera(depth_camera);
   const bool finite = scan.points.allFinite() && scan.normals.allFinite();
   if (scan.size() < std::max(fitter->options().min_scan_points, 3) || !finite ||
       scan.normals.rows() != scan.points.rows()) {

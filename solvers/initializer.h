@@ -114,7 +114,8 @@ struct InitResult {
 // has the chosen pose as its accepted frame. With too few scan points, or when no candidate's
 // fit passes the robustness checks, the frame is fitted by fitter->FitFrame / from the best ICP
 // pose, as a normal frame (ok = false when that frame fails too). Throws artex::Error on
-// invalid options.
+// invalid options. A fitter without a depth camera (EMFitter::SetDepthCamera) is given
+// `depth_camera`, so joints out of its view are held (EMFitterOptions::out_of_view).
 InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera& depth_camera,
                          const InitializerOptions& options);
 

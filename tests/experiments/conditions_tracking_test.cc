@@ -21,6 +21,7 @@
 #include "experiments/config.h"
 #include "experiments/pipeline.h"
 #include "experiments/pose_csv.h"
+#include "models/normals.h"
 #include "models/skinning.h"
 #include "models/template_generator.h"
 #include "models/template_io.h"
@@ -65,6 +66,37 @@ SynthOptions ConditionOptions(const Condition& c) {
   return o;
 }
 
+Eigen::MatrixX3d TransformRows(const Eigen::Isometry3d& t, const Eigen::MatrixX3d& points) {
+  return ((points * t.linear().transpose()).rowwise() + t.translation().transpose()).eval();
+}
+
+// Mean distance (mm) from the true surface the depth camera sees (subject vertices projecting
+// into the image, in front of it; every fourth) to the tracked surface: the distance to the
+// nearest tracked vertex, refined to its tangent plane. The fit is judged on what was observed.
+double SeenSurfaceErrorMm(const Eigen::MatrixX3d& truth, const PinholeCamera& camera,
+                          const Eigen::MatrixX3d& tracked, const Eigen::MatrixX3i& triangles) {
+  Eigen::MatrixX3d normals;
+  ComputeVertexNormals(tracked, triangles, &normals);
+  double sum = 0.0;
+  int n = 0;
+  for (Eigen::Index v = 0; v < truth.rows(); v += 4) {
+    const Eigen::Vector3d p = truth.row(v).transpose();
+    double z = 0.0;
+    const Eigen::Vector2d px = camera.Project(p, &z);
+    if (!(z > 0.0 && px.x() >= 0 && px.y() >= 0 && px.x() < camera.width &&
+          px.y() < camera.height)) {
+      continue;
+    }
+    Eigen::Index nearest = 0;
+    const double d2 = (tracked.rowwise() - p.transpose()).rowwise().squaredNorm().minCoeff(&nearest);
+    const Eigen::Vector3d q = tracked.row(nearest).transpose();
+    const Eigen::Vector3d normal = normals.row(nearest).transpose();
+    sum += std::min(std::sqrt(d2), std::abs(normal.dot(p - q)));
+    ++n;
+  }
+  return n > 0 ? 1000.0 * sum / n : 0.0;
+}
+
 class ConditionsTrackingTest : public ::testing::TestWithParam<Condition> {
  protected:
   static fs::path Root() {
@@ -96,9 +128,13 @@ TEST_P(ConditionsTrackingTest, UprightAccurateAndNeverLost) {
       r.good_frames, r.doubtful_frames, r.lost_frames, r.initialisations, r.fit_ms_per_frame,
       r.init_ms_per_initialisation);
   ASSERT_EQ(static_cast<int>(r.frames.size()), kFrames);
-  EXPECT_LE(r.mean_vertex_error_mm, kMaxMeanErrorMm);
-  EXPECT_EQ(r.lost_fraction, 0.0);  // mean vertex error <= 50 mm in every frame
-  EXPECT_EQ(r.lost_frames, 0);      // and the quality measure agrees
+  // With the whole body in view, the whole template is scored; otherwise the surface the camera
+  // saw (below): the legs below an upper-body view are nobody's measurement.
+  if (c.full_body) {
+    EXPECT_LE(r.mean_vertex_error_mm, kMaxMeanErrorMm);
+    EXPECT_EQ(r.lost_fraction, 0.0);  // mean vertex error <= 50 mm in every frame
+  }
+  EXPECT_EQ(r.lost_frames, 0);  // by the quality measure
   EXPECT_LE(r.initialisations, c.settle_frames > 0 ? 2 : 1);
   // Upright in every frame: the tracked chest -> head direction, taken into the sequence's
   // frame, within 25 degrees of the truth's (the pelvis may be out of view).
@@ -117,10 +153,18 @@ TEST_P(ConditionsTrackingTest, UprightAccurateAndNeverLost) {
   };
   const auto poses = ReadPoseCsv((run / "poses.csv").string(), kDefaultNumJoints);
   ASSERT_EQ(static_cast<int>(poses.size()), kFrames);
+  double seen_sum = 0.0;
   for (const auto& [frame, pose] : poses) {
     Eigen::MatrixX3d ours, theirs;
     tracked_skinning.PosedJointCenters(pose, &ours);
-    subject_skinning.PosedJointCenters(reader.ReadGroundTruth(frame).pose, &theirs);
+    const GroundTruthFrame truth = reader.ReadGroundTruth(frame);
+    subject_skinning.PosedJointCenters(truth.pose, &theirs);
+    if (!c.full_body) {
+      Eigen::MatrixX3d posed;
+      tracked_skinning.Apply(pose, &posed);
+      seen_sum += SeenSurfaceErrorMm(truth.vertices, sequence_calibration.depth,
+                                     TransformRows(to_sequence, posed), tmpl.triangles);
+    }
     const Eigen::Vector3d tracked_up = to_sequence.linear() * axis(tmpl, ours);
     const Eigen::Vector3d true_up = axis(subject, theirs);
     const double angle = std::acos(std::clamp(tracked_up.dot(true_up), -1.0, 1.0)) * 180 / M_PI;
@@ -138,6 +182,10 @@ TEST_P(ConditionsTrackingTest, UprightAccurateAndNeverLost) {
   }
   if (c.full_body) {
     EXPECT_LE(joint_sum / settled, 45.0);
+  } else {
+    const double seen = seen_sum / kFrames;
+    std::printf("[%s] mean error of the surface in view %.2f mm\n", c.name.c_str(), seen);
+    EXPECT_LE(seen, kMaxMeanErrorMm);
   }
   EXPECT_GE(good, settled * 8 / 10);
 }
