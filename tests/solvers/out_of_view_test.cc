@@ -30,12 +30,6 @@ PinholeCamera UpperBodyCamera() {
   return camera;
 }
 
-std::vector<std::string> Names(const Template& t, const std::vector<int>& joints) {
-  std::vector<std::string> names;
-  for (int j : joints) names.push_back(t.joints[j].name);
-  return names;
-}
-
 // The rest-posed template's vertices, joint centres and parents, and the joints to hold.
 struct Posed {
   Eigen::MatrixX3d vertices, centers;
