@@ -28,8 +28,13 @@ namespace artex {
 // (the better of both by quality score is kept): kLost, frames the tracking loses (always at
 // least these); kDoubtful, also frames it doubts (for frame sets that are not a continuous
 // recording, e.g. stills of different poses; costs an initialisation per doubtful frame).
-enum class ReinitialiseOn { kLost, kDoubtful };
-const std::map<std::string, ReinitialiseOn>& ReinitialiseOnNames();  // lost, doubtful
+// Which tracked frames are initialised again in place (the better fit by quality kept): lost
+// ones; doubtful ones too; or auto: lost ones, a doubtful one that follows a good one (the
+// quality dropped), and every doubtful one while in-place re-initialisations keep beating
+// tracking (PipelineOptions::reinitialise_auto_*): a recording whose frames tracking cannot
+// follow from one to the next (stills, cuts, a very low frame rate).
+enum class ReinitialiseOn { kLost, kDoubtful, kAuto };
+const std::map<std::string, ReinitialiseOn>& ReinitialiseOnNames();  // lost, doubtful, auto
 
 struct PipelineOptions {
   FrameSourceOptions input;  // how recordings are read (TUM association, intrinsics)
@@ -62,7 +67,13 @@ struct PipelineOptions {
   double lost_threshold_mm = 50.0;  // a frame is lost when its mean vertex error exceeds this
   // Texture doubtful frames too (lost frames never are).
   bool texture_doubtful_frames = true;
-  ReinitialiseOn reinitialise_on = ReinitialiseOn::kLost;
+  ReinitialiseOn reinitialise_on = ReinitialiseOn::kAuto;
+  // kAuto: every doubtful frame is re-initialised too while a re-initialisation replaced the
+  // tracked fit in at least `wins` of the last `window` tracked frames. In a recording that
+  // tracking follows, re-initialisations seldom replace it (the tracked fit scores higher); in
+  // stills (skeltrack) they replace it in most frames.
+  int reinitialise_auto_wins = 1;
+  int reinitialise_auto_window = 5;
   // After this many consecutive doubtful frames the next doubtful one is initialised again in
   // place too (the better fit kept): a wrong facing chosen at the start, which tracking keeps
   // doubtful but never loses, is corrected. 0: never.

@@ -435,6 +435,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
                "export_foreground", "export_glb", "glb_exact", "glb_exact_max_frames", "export_bvh",
                "export_textured_mesh", "mesh_up_axis", "lost_threshold_mm",
                "texture_doubtful_frames", "reinitialise_on", "reinitialise_after_doubtful",
+               "reinitialise_auto_wins", "reinitialise_auto_window",
                "texture_quality_every", "texture_quality_yaws_deg", "texture_quality_height",
                "export_atlases", "stream", "concurrency", "queue_depth", "live",
                "live_queue_depth", "live_rate_hz", "colour_delay_frames"});
@@ -454,6 +455,8 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("texture_doubtful_frames", &o->texture_doubtful_frames);
   c.GetEnum("reinitialise_on", ReinitialiseOnNames(), &o->reinitialise_on);
   c.Get("reinitialise_after_doubtful", &o->reinitialise_after_doubtful);
+  c.Get("reinitialise_auto_wins", &o->reinitialise_auto_wins);
+  c.Get("reinitialise_auto_window", &o->reinitialise_auto_window);
   c.Get("texture_quality_every", &o->texture_quality_every);
   c.Get("texture_quality_yaws_deg", &o->held_out.yaws_deg);
   c.Get("texture_quality_height", &o->held_out.height);
@@ -506,7 +509,9 @@ void BindStream(const Config& c, StreamOptions* o) {
 
 const std::map<std::string, ReinitialiseOn>& ReinitialiseOnNames() {
   static const std::map<std::string, ReinitialiseOn> names = {
-      {"lost", ReinitialiseOn::kLost}, {"doubtful", ReinitialiseOn::kDoubtful}};
+      {"lost", ReinitialiseOn::kLost},
+      {"doubtful", ReinitialiseOn::kDoubtful},
+      {"auto", ReinitialiseOn::kAuto}};
   return names;
 }
 
@@ -542,6 +547,9 @@ bool PipelineOptions::IsValid(std::string* error) const {
   else if (reinitialise_after_doubtful < 0)
     msg << "pipeline.reinitialise_after_doubtful: expected >= 0 (0: never), found "
         << reinitialise_after_doubtful;
+  else if (reinitialise_auto_wins < 1 || reinitialise_auto_window < reinitialise_auto_wins)
+    msg << "pipeline.reinitialise_auto_wins/window: expected 1 <= wins <= window, found "
+        << reinitialise_auto_wins << " / " << reinitialise_auto_window;
   else if (!(lost_threshold_mm > 0))
     msg << "pipeline.lost_threshold_mm: expected > 0, found " << lost_threshold_mm;
   else if (glb_exact_max_frames < 0)

@@ -249,10 +249,18 @@ void TrackStage::Process(FrameWork* work) {
   doubtful_run_ = label == FitQualityLabel::kDoubtful ? doubtful_run_ + 1 : 0;
   const bool doubted_long = options_.reinitialise_after_doubtful > 0 &&
                             doubtful_run_ >= options_.reinitialise_after_doubtful;
+  const bool tracked = !record.reinitialised;
+  const bool doubtful_too =
+      options_.reinitialise_on == ReinitialiseOn::kDoubtful ||
+      (options_.reinitialise_on == ReinitialiseOn::kAuto &&
+       (previous_label_ == FitQualityLabel::kGood ||
+        std::count(recent_replaced_.begin(), recent_replaced_.end(), true) >=
+            options_.reinitialise_auto_wins));
+  bool replaced = false;
   if (!record.reinitialised && !record.fit.non_finite && enough_points &&
       (label == FitQualityLabel::kLost ||
        (label == FitQualityLabel::kDoubtful &&
-        (doubted_long || options_.reinitialise_on == ReinitialiseOn::kDoubtful)))) {
+        (doubted_long || doubtful_too)))) {
     doubtful_run_ = 0;
     tracked_pose = fitter_->pose();
     const Scan tracked_scan = scan_;
@@ -271,6 +279,7 @@ void TrackStage::Process(FrameWork* work) {
     }
     if (retry.reinitialised && retry.fit.ok() && retry.quality.score > record.quality.score) {
       record = retry;
+      replaced = true;
     } else {
       // The tracked fit stays (its scan too); a lost one is re-initialised next frame.
       scan_ = tracked_scan;
@@ -279,6 +288,13 @@ void TrackStage::Process(FrameWork* work) {
       keep_tracked = true;
       record.init_seconds = retry.init_seconds;
       record.init_report = retry.init_report + " (not better than tracking: kept)";
+    }
+  }
+  previous_label_ = record.quality.label;
+  if (tracked) {
+    recent_replaced_.push_back(replaced);
+    while (static_cast<int>(recent_replaced_.size()) > options_.reinitialise_auto_window) {
+      recent_replaced_.pop_front();
     }
   }
   work->pose = keep_tracked ? tracked_pose : fitter_->pose();

@@ -11,6 +11,7 @@
 // uses the colours of that state (ColourMailbox).
 #pragma once
 
+#include <deque>
 #include <chrono>
 #include <condition_variable>
 #include <cstddef>
@@ -103,6 +104,10 @@ class TrackStage {
   Scan scan_;
   bool need_init_ = true;
   int doubtful_run_ = 0;  // consecutive doubtful frames
+  // Per recent tracked frame (at most reinitialise_auto_window): did an in-place
+  // re-initialisation replace the tracked fit? (ReinitialiseOn::kAuto)
+  std::deque<bool> recent_replaced_;
+  FitQualityLabel previous_label_ = FitQualityLabel::kLost;  // of the last processed frame
 };
 
 // On-the-fly texturing of the fitted frames, the stream sinks, the vertex colours for the
