@@ -27,7 +27,7 @@ struct VideoEncoderOptions {
   // Encoder speed: libvpx / libaom cpu-used (0..8, the range FFmpeg passes on), libx264 preset
   // by 9 - speed (9 ultrafast, 8 superfast, 7 veryfast, ..., 1 and 0 veryslow).
   int speed = 8;
-  int threads = 2;           // encoder threads; >= 1
+  int threads = 1;           // encoder threads; >= 1 (a second one gains nothing next to tracking)
   double min_quantizer = 4;  // libvpx / libaom qmin (0..63); keeps static texture sharp
 
   bool IsValid(std::string* error) const;
