@@ -278,9 +278,8 @@ PlaybackReport PlayStream(const std::string& stream_path, const PlaybackOptions&
         "sender_ms,queue_ms,transmit_ms,latency_ms\n";
     for (std::size_t i = 0; i < rows.size(); ++i) {
       const FrameTiming& t = timing[i];
-      frames_csv += rows[i] + "," + std::to_string(t.sender_ms) + "," +
-                    std::to_string(t.queue_ms) + "," + std::to_string(t.transmit_ms) + "," +
-                    std::to_string(t.latency_ms) + "\n";
+      frames_csv += rows[i] + "," + std::to_string(t.sender_ms) + "," + std::to_string(t.queue_ms) +
+                    "," + std::to_string(t.transmit_ms) + "," + std::to_string(t.latency_ms) + "\n";
     }
     WriteFileAtomically(options.out_dir + "/frames.csv", frames_csv);
     nlohmann::json issues = nlohmann::json::array();

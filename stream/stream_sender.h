@@ -41,8 +41,8 @@ struct StreamFrameStats {
   // CPU time of the calling thread while encoding the picture: the whole encoder's with
   // threads = 1 (wall above it means the thread waited for a core).
   double video_cpu_ms = 0.0;
-  double compose_ms = 0.0;  // composing the atlas picture (by the caller; 0 when given one)
-  double hand_error_mm = 0.0;            // largest hand-vertex displacement by the quantisation
+  double compose_ms = 0.0;     // composing the atlas picture (by the caller; 0 when given one)
+  double hand_error_mm = 0.0;  // largest hand-vertex displacement by the quantisation
 };
 
 struct StreamSummary {
@@ -54,8 +54,8 @@ struct StreamSummary {
   double texture_kbps = 0.0;  // video + coverage payloads
   double total_kbps = 0.0;    // every record byte (framing included), header excluded
   double max_hand_error_mm = 0.0, mean_hand_error_mm = 0.0;
-  double mean_encode_ms = 0.0, max_encode_ms = 0.0;  // pose + picture encoding, wall
-  double mean_encode_cpu_ms = 0.0;                    // picture encoding, calling thread's CPU
+  double mean_encode_ms = 0.0, max_encode_ms = 0.0;    // pose + picture encoding, wall
+  double mean_encode_cpu_ms = 0.0;                     // picture encoding, calling thread's CPU
   double mean_compose_ms = 0.0, max_compose_ms = 0.0;  // atlas composition (caller's, wall)
   std::vector<StreamFrameStats> per_frame;
 };

@@ -305,7 +305,6 @@ inline void SampleSurfaceFootprint(const Footprint& footprint, const FootprintCe
   PutTexel(rgbx, spill, out);
 }
 
-
 // Padding: each pass fills the empty texels next to filled ones with the mean of their filled
 // 8-neighbours (summed in the order dy, dx = -1 .. 1). Only the front is visited: the empty
 // texels next to the ones the last pass filled (the first pass: next to any filled texel), so a
@@ -323,8 +322,7 @@ void PadAtlas(int padding, cv::Mat* out, cv::Mat* mask_image) {
       for (int dy = -1; dy <= 1 && !next_to_filled; ++dy) {
         for (int dx = -1; dx <= 1; ++dx) {
           const int yy = y + dy, xx = x + dx;
-          if (yy < 0 || xx < 0 || yy >= size || xx >= size || mask[yy * size + xx] != 255)
-            continue;
+          if (yy < 0 || xx < 0 || yy >= size || xx >= size || mask[yy * size + xx] != 255) continue;
           next_to_filled = true;
           break;
         }
@@ -336,25 +334,25 @@ void PadAtlas(int padding, cv::Mat* out, cv::Mat* mask_image) {
   std::vector<int> next;
   for (int pass = 0; pass < padding && !front.empty(); ++pass) {
     values.resize(front.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, front.size(), 1024),
-                      [&](const tbb::blocked_range<std::size_t>& range) {
-                        for (std::size_t i = range.begin(); i < range.end(); ++i) {
-                          const int y = front[i] / size, x = front[i] % size;
-                          cv::Vec3f sum(0, 0, 0);
-                          int n = 0;
-                          for (int dy = -1; dy <= 1; ++dy) {
-                            for (int dx = -1; dx <= 1; ++dx) {
-                              const int yy = y + dy, xx = x + dx;
-                              if (yy < 0 || xx < 0 || yy >= size || xx >= size ||
-                                  mask[yy * size + xx] != 255)
-                                continue;
-                              sum += color[yy * size + xx];
-                              ++n;
-                            }
-                          }
-                          values[i] = sum / static_cast<float>(n);  // n >= 1 on the front
-                        }
-                      });
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, front.size(), 1024),
+        [&](const tbb::blocked_range<std::size_t>& range) {
+          for (std::size_t i = range.begin(); i < range.end(); ++i) {
+            const int y = front[i] / size, x = front[i] % size;
+            cv::Vec3f sum(0, 0, 0);
+            int n = 0;
+            for (int dy = -1; dy <= 1; ++dy) {
+              for (int dx = -1; dx <= 1; ++dx) {
+                const int yy = y + dy, xx = x + dx;
+                if (yy < 0 || xx < 0 || yy >= size || xx >= size || mask[yy * size + xx] != 255)
+                  continue;
+                sum += color[yy * size + xx];
+                ++n;
+              }
+            }
+            values[i] = sum / static_cast<float>(n);  // n >= 1 on the front
+          }
+        });
     for (std::size_t i = 0; i < front.size(); ++i) {
       color[front[i]] = values[i];
       mask[front[i]] = 255;
