@@ -70,7 +70,11 @@ std::map<int, double> ReadSenderTimes(const std::string& run_dir) {
     if (static_cast<int>(v.size()) != n)
       throw Error(run_dir + "/stream_frames.csv: expected " + std::to_string(n) +
                   " values per row, found " + std::to_string(v.size()) + " in: " + line);
-    out[std::stoi(v[frame])] = std::stod(v[compose]) + std::stod(v[encode]);
+    try {
+      out[std::stoi(v[frame])] = std::stod(v[compose]) + std::stod(v[encode]);
+    } catch (const std::exception&) {
+      throw Error(run_dir + "/stream_frames.csv: expected numbers, found: " + line);
+    }
   }
   return out;
 }
