@@ -1,14 +1,19 @@
 // The tele-presence stream (stream/, docs/streaming.md) per frame: pose encoding and decoding,
-// and the atlas video (1024^2, the default atlas) encoded and decoded with each codec at its
-// target rate. The atlas is the procedural subject texture of the default template
-// (GenerateSubjectTexture) in which, every frame, 1/8 of the charts' area is redrawn slightly
-// shifted and re-exposed (as incremental texturing resamples changed triangles from a newer image).
+// the sender's atlas picture (ComposeAtlas of the default 1024^2 atlas) and the atlas video
+// encoded and decoded with each codec and encoder setting. The atlas is the procedural subject
+// texture of the default template (GenerateSubjectTexture) in which, every frame, 1/8 of the
+// charts' area is redrawn slightly shifted and re-exposed (as incremental texturing resamples
+// changed triangles from a newer image).
 //
 // BM_PoseEncode / BM_PoseDecode: one frame of the default template's pose (17 joints) on a walk.
-// BM_AtlasEncode/<codec>/<kbit/s>: codec 1 VP9 (libvpx, realtime, cpu-used 8), 2 H.264
-//   (libx264, preset superfast = 9 - speed 8, zerolatency); counters: bytes per delta frame,
-//   PSNR of the decoded atlas (decoding is not timed here).
-// BM_AtlasDecode/<codec>: decoding of the same packets.
+// BM_ComposeAtlas: Texturer::Atlas() of the default atlas (levelling corrections, 4 padding
+//   passes): the picture the sender encodes every frame.
+// BM_AtlasEncode/codec/kbps/speed/threads: codec 1 VP9 (libvpx, realtime, cpu-used = speed, at
+//   most 8 in FFmpeg),
+//   2 H.264 (libx264, preset 9 - speed: 8 superfast, 9 ultrafast, 7 veryfast; zerolatency);
+//   wall time per frame and the CPU time of all the process's threads (the encoder's threads
+//   included); counters: bytes per delta frame, PSNR of the decoded atlas (decoding not timed).
+// BM_AtlasDecode/codec: decoding of the same packets (one thread, as the player).
 #include <benchmark/benchmark.h>
 
 #include <cmath>
@@ -22,6 +27,7 @@
 #include "sensors/subject_texture.h"
 #include "stream/pose_codec.h"
 #include "stream/video_codec.h"
+#include "texture/texel_sampling.h"
 
 namespace artex {
 namespace {
@@ -91,11 +97,42 @@ void BM_PoseDecode(benchmark::State& state) {
 }
 BENCHMARK(BM_PoseDecode);
 
+void BM_ComposeAtlas(benchmark::State& state) {
+  const Template tmpl = GenerateTemplate();
+  const AtlasMap map(tmpl, kAtlasSide);
+  const cv::Mat& source = Atlases()[0];
+  TexelBuffer texels(map);
+  cv::RNG rng(1);
+  for (int f = 0; f < map.num_triangles(); ++f) {
+    const bool textured = f % 9 != 0;  // some triangles untextured: holes to pad
+    for (int p = map.first(f); p < map.last(f); ++p) {
+      const int t = *(map.texels_begin(f) + (p - map.first(f)));
+      const cv::Vec3b c = source.at<cv::Vec3b>(t / kAtlasSide, t % kAtlasSide);
+      texels.valid[p] = textured;
+      if (textured) texels.color[p] = Eigen::Vector3f(c[0], c[1], c[2]) / 255.0f;
+    }
+  }
+  Eigen::MatrixX3f corrections(3 * map.num_triangles(), 3);
+  for (int r = 0; r < corrections.rows(); ++r)
+    for (int c = 0; c < 3; ++c) corrections(r, c) = rng.uniform(-0.02f, 0.02f);
+  for (auto _ : state) {
+    cv::Mat atlas = ComposeAtlas(map, texels, &corrections, 4);
+    benchmark::DoNotOptimize(atlas.data);
+  }
+}
+BENCHMARK(BM_ComposeAtlas)
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime()
+    ->UseRealTime()
+    ->Iterations(kFrames);
+
 void BM_AtlasEncode(benchmark::State& state) {
   const std::vector<cv::Mat>& atlases = Atlases();
   VideoEncoderOptions o;
   o.codec = static_cast<VideoCodec>(state.range(0));
   o.bitrate_kbps = static_cast<int>(state.range(1));
+  o.speed = static_cast<int>(state.range(2));
+  o.threads = static_cast<int>(state.range(3));
   std::unique_ptr<AtlasVideoEncoder> enc;
   AtlasVideoDecoder dec(o.codec, kAtlasSide, kAtlasSide);
   int f = 0;
@@ -126,12 +163,20 @@ void BM_AtlasEncode(benchmark::State& state) {
   state.counters["psnr_db"] = measured ? psnr / measured : 0.0;
 }
 BENCHMARK(BM_AtlasEncode)
-    ->ArgNames({"codec", "kbps"})
-    ->Args({1, 600})
-    ->Args({2, 600})
-    ->Args({1, 1500})
-    ->Args({2, 1500})
+    ->ArgNames({"codec", "kbps", "speed", "threads"})
+    ->Args({1, 600, 8, 2})  // VP9 before: cpu-used 8, 2 threads
+    ->Args({1, 600, 8, 1})  // VP9 default (cpu-used 8 is FFmpeg's fastest)
+    ->Args({1, 600, 7, 1})
+    ->Args({1, 600, 6, 1})
+    ->Args({2, 600, 9, 1})  // H.264 ultrafast
+    ->Args({2, 600, 8, 1})  // H.264 superfast
+    ->Args({2, 600, 8, 2})
+    ->Args({2, 600, 7, 1})  // H.264 veryfast
+    ->Args({1, 1500, 8, 1})
+    ->Args({2, 1500, 8, 1})
     ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime()
+    ->UseRealTime()
     ->Iterations(kFrames);
 
 void BM_AtlasDecode(benchmark::State& state) {

@@ -46,7 +46,10 @@ nlohmann::json StreamJson(const PipelineResult& result) {
           {"max_hand_error_mm", s.max_hand_error_mm},
           {"mean_hand_error_mm", s.mean_hand_error_mm},
           {"encode_ms_per_frame", s.mean_encode_ms},
-          {"max_encode_ms", s.max_encode_ms}};
+          {"max_encode_ms", s.max_encode_ms},
+          {"encode_cpu_ms_per_frame", s.mean_encode_cpu_ms},
+          {"compose_ms_per_frame", s.mean_compose_ms},
+          {"max_compose_ms", s.max_compose_ms}};
 }
 
 }  // namespace
@@ -89,6 +92,19 @@ void WriteFramesCsv(const std::string& path, const PipelineResult& result) {
                << r.quality.unsupported_parts << "," << r.fit.out_of_view_joints << "\n";
   }
   WriteFileAtomically(path, frames_csv.str());
+}
+
+void WriteStreamFramesCsv(const std::string& path, const PipelineResult& result) {
+  std::ostringstream csv;
+  csv << "frame,keyframe,pose_bytes,coverage_bytes,video_bytes,record_bytes,compose_ms,"
+         "encode_ms,encode_cpu_ms,hand_error_mm\n";
+  for (const StreamFrameStats& s : result.stream.per_frame) {
+    csv << s.frame << "," << s.keyframe << "," << s.pose_bytes << "," << s.mask_bytes << ","
+        << s.video_bytes << "," << s.record_bytes << "," << Fixed(s.compose_ms) << ","
+        << Fixed(s.pose_ms + s.video_ms) << "," << Fixed(s.video_cpu_ms) << ","
+        << Fixed(s.hand_error_mm) << "\n";
+  }
+  WriteFileAtomically(path, csv.str());
 }
 
 void WriteSummaryJson(const std::string& path, const PipelineResult& result,

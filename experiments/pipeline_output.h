@@ -19,6 +19,8 @@ struct PipelineOutputInfo {
 };
 
 void WriteFramesCsv(const std::string& path, const PipelineResult& result);
+// The stream's per-frame record sizes and times (result.stream; docs/streaming.md).
+void WriteStreamFramesCsv(const std::string& path, const PipelineResult& result);
 void WriteSummaryJson(const std::string& path, const PipelineResult& result,
                       const PipelineOutputInfo& info);
 void WriteMetricsJson(const std::string& path, const PipelineResult& result);

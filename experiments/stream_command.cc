@@ -26,7 +26,8 @@ void PrintSummary(const StreamSummary& s, const std::string& path) {
       s.pose_kbps, s.texture_kbps, s.total_kbps, s.header_bytes, s.glb_bytes);
   std::printf("pose quantisation error at the hands: max %.3f mm, mean %.3f mm\n",
               s.max_hand_error_mm, s.mean_hand_error_mm);
-  std::printf("encoding: %.1f ms/frame (max %.1f)\n", s.mean_encode_ms, s.max_encode_ms);
+  std::printf("encoding: %.1f ms/frame (max %.1f; video encoder thread CPU %.1f ms/frame)\n",
+              s.mean_encode_ms, s.max_encode_ms, s.mean_encode_cpu_ms);
 }
 
 }  // namespace
@@ -65,7 +66,7 @@ void RegisterStreamCommands(CLI::App* app) {
     std::string stream, out, reference, sequence;
     int from_frame = 0, render_every = 0, evaluate_every = 5;
     std::vector<double> yaws{20.0, -20.0};
-    double height = 0.4;
+    double height = 0.4, link_kbps = 0.0;
   };
   auto p = std::make_shared<PlayArgs>();
   CLI::App* play = stream->add_subcommand(
@@ -80,6 +81,8 @@ void RegisterStreamCommands(CLI::App* app) {
   play->add_option("--views", p->yaws,
                    "viewpoints: yaw (degrees) about the model from the sender's camera");
   play->add_option("--view-height", p->height, "viewpoints raised by this (m)");
+  play->add_option("--link-kbps", p->link_kbps,
+                   "link rate of the latency model (kbit/s; 0: the stream's mean rate)");
   play->add_option("--reference", p->reference,
                    "the sender's run folder (with atlases/): quality vs sender");
   play->add_option("--sequence", p->sequence, "the synthetic recording: quality vs ground truth");
@@ -93,6 +96,7 @@ void RegisterStreamCommands(CLI::App* app) {
     o.sequence = p->sequence;
     o.views.yaws_deg = p->yaws;
     o.views.height = p->height;
+    o.link_kbps = p->link_kbps;
     const PlaybackReport r = PlayStream(p->stream, o);
     for (const StreamIssue& i : r.issues)
       std::fprintf(stderr, "stream play: byte %zu, frame %d: %s\n", i.offset, i.frame,
@@ -104,6 +108,10 @@ void RegisterStreamCommands(CLI::App* app) {
         "bitrate: pose %.2f kbit/s, texture %.1f kbit/s, total %.1f kbit/s; header %zu bytes\n",
         r.pose_kbps, r.texture_kbps, r.total_kbps, r.header_bytes);
     std::printf("decoding: %.1f ms/frame (max %.1f)\n", r.mean_decode_ms, r.max_decode_ms);
+    std::printf(
+        "latency (%s + queue + sending at %.0f kbit/s + decoding): median %.1f ms, max %.1f ms\n",
+        r.sender_times ? "sender's composition and encoding" : "sender's time unknown (0)",
+        r.link_kbps, r.median_latency_ms, r.max_latency_ms);
     if (std::isfinite(r.psnr_vs_sender_db))
       std::printf(
           "vs sender: novel-view PSNR %.2f dB, SSIM %.4f, atlas PSNR %.2f dB, vertices "

@@ -4,12 +4,14 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <sstream>
 
 #include "experiments/pose_csv.h"
 #include "experiments/stream_sinks.h"
@@ -45,7 +47,52 @@ std::vector<int> FramesOf(const std::vector<int>& textured) {
   return frames;
 }
 
+// Sender's compose + encode ms per frame from a run's stream_frames.csv (empty when absent).
+std::map<int, double> ReadSenderTimes(const std::string& run_dir) {
+  std::map<int, double> out;
+  std::ifstream in(run_dir + "/stream_frames.csv");
+  std::string line;
+  if (!in || !std::getline(in, line)) return out;
+  std::vector<std::string> names;
+  std::stringstream header(line);
+  for (std::string name; std::getline(header, name, ',');) names.push_back(name);
+  const auto column = [&](const char* name) {
+    return static_cast<int>(std::find(names.begin(), names.end(), name) - names.begin());
+  };
+  const int frame = column("frame"), compose = column("compose_ms"), encode = column("encode_ms");
+  const int n = static_cast<int>(names.size());
+  if (frame == n || compose == n || encode == n)
+    throw Error(run_dir + "/stream_frames.csv: expected columns frame, compose_ms, encode_ms");
+  while (std::getline(in, line)) {
+    std::vector<std::string> v;
+    std::stringstream row(line);
+    for (std::string cell; std::getline(row, cell, ',');) v.push_back(cell);
+    if (static_cast<int>(v.size()) != n)
+      throw Error(run_dir + "/stream_frames.csv: expected " + std::to_string(n) +
+                  " values per row, found " + std::to_string(v.size()) + " in: " + line);
+    try {
+      out[std::stoi(v[frame])] = std::stod(v[compose]) + std::stod(v[encode]);
+    } catch (const std::exception&) {
+      throw Error(run_dir + "/stream_frames.csv: expected numbers, found: " + line);
+    }
+  }
+  return out;
+}
+
 }  // namespace
+
+void StreamLatency(double frame_rate, double link_kbps, std::vector<FrameTiming>* frames) {
+  double link_free_ms = -std::numeric_limits<double>::infinity();
+  for (FrameTiming& t : *frames) {
+    const double capture_ms = 1000.0 * t.frame / frame_rate;
+    const double ready_ms = capture_ms + t.sender_ms;
+    const double start_ms = std::max(ready_ms, link_free_ms);
+    t.queue_ms = start_ms - ready_ms;
+    t.transmit_ms = 8.0 * static_cast<double>(t.record_bytes) / link_kbps;  // bits / (bit/ms)
+    link_free_ms = start_ms + t.transmit_ms;
+    t.latency_ms = link_free_ms + t.decode_ms - capture_ms;
+  }
+}
 
 StreamSummary EncodeRunStream(const std::string& run_dir, const std::string& template_path,
                               const std::string& stream_path, const StreamOptions& options) {
@@ -69,6 +116,7 @@ StreamSummary EncodeRunStream(const std::string& run_dir, const std::string& tem
 
 PlaybackReport PlayStream(const std::string& stream_path, const PlaybackOptions& options) {
   if (options.evaluate_every < 1) throw Error("stream play: evaluate_every must be >= 1");
+  if (!(options.link_kbps >= 0)) throw Error("stream play: link_kbps must be >= 0");
   StreamPlayer player(stream_path, options.from_frame);
   const StreamHeader& header = player.header();
   const Template& model = player.model();
@@ -80,7 +128,9 @@ PlaybackReport PlayStream(const std::string& stream_path, const PlaybackOptions&
 
   // Reference (sender) run and ground truth.
   std::map<int, Pose> sender_poses;
+  std::map<int, double> sender_ms;
   if (!options.reference_run.empty()) {
+    sender_ms = ReadSenderTimes(options.reference_run);
     for (auto& [f, p] : ReadPoseCsv(options.reference_run + "/poses.csv", model.num_joints()))
       sender_poses[f] = p;
   }
@@ -112,8 +162,8 @@ PlaybackReport PlayStream(const std::string& stream_path, const PlaybackOptions&
   std::size_t pose_bytes = 0, texture_bytes = 0, record_bytes = 0;
   PlayedFrame f;
   Eigen::MatrixX3d posed, sender_posed;
-  std::string frames_csv =
-      "frame,keyframe,offset,pose_bytes,coverage_bytes,video_bytes,record_bytes,decode_ms\n";
+  std::vector<std::string> rows;  // frames.csv without the latency columns
+  std::vector<FrameTiming> timing;
   while (player.Next(&f)) {
     ++report.frames;
     report.keyframes += f.keyframe;
@@ -126,10 +176,17 @@ PlaybackReport PlayStream(const std::string& stream_path, const PlaybackOptions&
     record_bytes += f.record_bytes;
     frames.push_back(f.frame);
     poses.push_back(f.pose);
-    frames_csv += std::to_string(f.frame) + "," + std::to_string(f.keyframe) + "," +
-                  std::to_string(f.offset) + "," + std::to_string(f.pose_bytes) + "," +
-                  std::to_string(f.mask_bytes) + "," + std::to_string(f.video_bytes) + "," +
-                  std::to_string(f.record_bytes) + "," + std::to_string(f.decode_ms) + "\n";
+    rows.push_back(std::to_string(f.frame) + "," + std::to_string(f.keyframe) + "," +
+                   std::to_string(f.offset) + "," + std::to_string(f.pose_bytes) + "," +
+                   std::to_string(f.mask_bytes) + "," + std::to_string(f.video_bytes) + "," +
+                   std::to_string(f.record_bytes) + "," + std::to_string(f.decode_ms));
+    FrameTiming t;
+    t.frame = f.frame;
+    t.record_bytes = f.record_bytes;
+    t.decode_ms = f.decode_ms;
+    const auto s = sender_ms.find(f.frame);
+    if (s != sender_ms.end()) t.sender_ms = s->second;
+    timing.push_back(t);
     skinning.Apply(f.pose, &posed);
     const std::vector<int> triangle_frames = FramesOf(f.textured);
     const bool has_atlas = !f.atlas.empty();
@@ -197,6 +254,14 @@ PlaybackReport PlayStream(const std::string& stream_path, const PlaybackOptions&
     report.pose_kbps = pose_bytes * k;
     report.texture_kbps = texture_bytes * k;
     report.total_kbps = record_bytes * k;
+    report.link_kbps = options.link_kbps > 0 ? options.link_kbps : report.total_kbps;
+    report.sender_times = !sender_ms.empty();
+    StreamLatency(rate, report.link_kbps, &timing);
+    std::vector<double> latency;
+    for (const FrameTiming& t : timing) latency.push_back(t.latency_ms);
+    std::sort(latency.begin(), latency.end());
+    report.median_latency_ms = latency[latency.size() / 2];
+    report.max_latency_ms = latency.back();
   }
   const NovelViewQuality qs = vs_sender.Result(), qr = vs_truth_receiver.Result(),
                          qt = vs_truth_sender.Result();
@@ -212,6 +277,14 @@ PlaybackReport PlayStream(const std::string& stream_path, const PlaybackOptions&
   if (!options.out_dir.empty()) {
     if (!poses.empty()) WritePoseCsv(options.out_dir + "/poses.csv", model, frames, poses);
     if (!f.atlas.empty()) WritePng(options.out_dir + "/atlas.png", f.atlas);
+    std::string frames_csv =
+        "frame,keyframe,offset,pose_bytes,coverage_bytes,video_bytes,record_bytes,decode_ms,"
+        "sender_ms,queue_ms,transmit_ms,latency_ms\n";
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+      const FrameTiming& t = timing[i];
+      frames_csv += rows[i] + "," + std::to_string(t.sender_ms) + "," + std::to_string(t.queue_ms) +
+                    "," + std::to_string(t.transmit_ms) + "," + std::to_string(t.latency_ms) + "\n";
+    }
     WriteFileAtomically(options.out_dir + "/frames.csv", frames_csv);
     nlohmann::json issues = nlohmann::json::array();
     for (const StreamIssue& i : report.issues)
@@ -233,6 +306,10 @@ PlaybackReport PlayStream(const std::string& stream_path, const PlaybackOptions&
                               {"total_kbit_per_s", report.total_kbps},
                               {"decode_ms_per_frame", report.mean_decode_ms},
                               {"max_decode_ms", report.max_decode_ms},
+                              {"latency_median_ms", report.median_latency_ms},
+                              {"latency_max_ms", report.max_latency_ms},
+                              {"latency_link_kbit_per_s", report.link_kbps},
+                              {"latency_includes_sender", report.sender_times},
                               {"evaluated_frames", report.evaluated_frames},
                               {"novel_view_psnr_vs_sender_db", Number(report.psnr_vs_sender_db)},
                               {"novel_view_ssim_vs_sender", Number(report.ssim_vs_sender)},

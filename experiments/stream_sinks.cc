@@ -71,7 +71,8 @@ void FrameSinks::AddFrame(int frame, const Pose& pose) {
   }
   if (sender_) {
     const StreamFrameStats s =
-        sender_->AddFrame(frame, pose, atlas, texturer_ ? &texturer_->triangle_frames() : nullptr);
+        sender_->AddFrame(frame, pose, atlas, texturer_ ? &texturer_->triangle_frames() : nullptr,
+                          atlas_ms - stamp_ms);
     if (tap_) tap_->OnRecord(sender_->last_record(), s.keyframe, stamp_ms, atlas_ms);
   }
 }

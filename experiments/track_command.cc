@@ -203,10 +203,11 @@ void RegisterTrackCommand(CLI::App* app) {
       const StreamSummary& s = result.stream;
       std::printf(
           "stream: %s: pose %.2f kbit/s, texture %.1f kbit/s, total %.1f kbit/s, %d "
-          "keyframes, hand error <= %.3f mm, encoding %.1f ms/frame\n",
+          "keyframes, hand error <= %.3f mm; per frame: atlas picture %.1f ms, encoding %.1f "
+          "ms (max %.1f; video CPU %.1f ms)\n",
           args->stream.empty() ? (args->out + "/stream.artx").c_str() : args->stream.c_str(),
-          s.pose_kbps, s.texture_kbps, s.total_kbps, s.keyframes,
-          s.max_hand_error_mm, s.mean_encode_ms);
+          s.pose_kbps, s.texture_kbps, s.total_kbps, s.keyframes, s.max_hand_error_mm,
+          s.mean_compose_ms, s.mean_encode_ms, s.max_encode_ms, s.mean_encode_cpu_ms);
     }
     if (result.has_ground_truth && result.novel_view_psnr_db == result.novel_view_psnr_db) {
       std::printf(

@@ -1,5 +1,6 @@
 #include "stream/stream_sender.h"
 
+#include <time.h>
 #include <unistd.h>
 #include <zlib.h>
 
@@ -19,6 +20,12 @@ namespace {
 
 double MsSince(std::chrono::steady_clock::time_point t) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count();
+}
+
+double ThreadCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
 }
 
 }  // namespace
@@ -148,15 +155,18 @@ StreamSender::~StreamSender() {
 }
 
 StreamFrameStats StreamSender::AddFrame(int frame, const Pose& pose, const cv::Mat& atlas,
-                                        const std::vector<int>* triangle_frames) {
+                                        const std::vector<int>* triangle_frames,
+                                        double compose_ms) {
   if (finished_) throw Error(path_ + ": frame added after Finish");
   StreamFrameStats s;
   s.frame = frame;
+  s.compose_ms = compose_ms;
   StreamRecord record;
   record.frame = static_cast<uint32_t>(frame);
   bool keyframe = summary_.frames % options_.keyframe_interval == 0;
   if (video_) {
     const auto t = std::chrono::steady_clock::now();
+    const double cpu = ThreadCpuMs();
     cv::Mat picture = atlas;
     const int side = header_.atlas_width;
     if (atlas.cols != side || atlas.rows != side)
@@ -165,6 +175,7 @@ StreamFrameStats StreamSender::AddFrame(int frame, const Pose& pose, const cv::M
     record.video = video_->Encode(picture, keyframe, &intra);
     keyframe = keyframe || intra;
     s.video_ms = MsSince(t);
+    s.video_cpu_ms = ThreadCpuMs() - cpu;
     std::vector<int> all;
     if (!triangle_frames) all.assign(template_.num_triangles(), 0);
     std::vector<uint8_t> bits = PackCoverage(triangle_frames ? *triangle_frames : all);
@@ -230,9 +241,14 @@ StreamSummary StreamSender::Finish() {
       sum += s.hand_error_mm;
       m.mean_encode_ms += s.pose_ms + s.video_ms;
       m.max_encode_ms = std::max(m.max_encode_ms, s.pose_ms + s.video_ms);
+      m.mean_encode_cpu_ms += s.video_cpu_ms;
+      m.mean_compose_ms += s.compose_ms;
+      m.max_compose_ms = std::max(m.max_compose_ms, s.compose_ms);
     }
     m.mean_hand_error_mm = sum / m.frames;
     m.mean_encode_ms /= m.frames;
+    m.mean_encode_cpu_ms /= m.frames;
+    m.mean_compose_ms /= m.frames;
   }
   return m;
 }

@@ -37,8 +37,12 @@ struct StreamFrameStats {
   int frame = 0;
   bool keyframe = false;
   std::size_t pose_bytes = 0, mask_bytes = 0, video_bytes = 0, record_bytes = 0;
-  double pose_ms = 0.0, video_ms = 0.0;  // encoding time
-  double hand_error_mm = 0.0;            // largest hand-vertex displacement by the quantisation
+  double pose_ms = 0.0, video_ms = 0.0;  // encoding time (wall)
+  // CPU time of the calling thread while encoding the picture: the whole encoder's with
+  // threads = 1 (wall above it means the thread waited for a core).
+  double video_cpu_ms = 0.0;
+  double compose_ms = 0.0;     // composing the atlas picture (by the caller; 0 when given one)
+  double hand_error_mm = 0.0;  // largest hand-vertex displacement by the quantisation
 };
 
 struct StreamSummary {
@@ -50,7 +54,9 @@ struct StreamSummary {
   double texture_kbps = 0.0;  // video + coverage payloads
   double total_kbps = 0.0;    // every record byte (framing included), header excluded
   double max_hand_error_mm = 0.0, mean_hand_error_mm = 0.0;
-  double mean_encode_ms = 0.0, max_encode_ms = 0.0;
+  double mean_encode_ms = 0.0, max_encode_ms = 0.0;    // pose + picture encoding, wall
+  double mean_encode_cpu_ms = 0.0;                     // picture encoding, calling thread's CPU
+  double mean_compose_ms = 0.0, max_compose_ms = 0.0;  // atlas composition (caller's, wall)
   std::vector<StreamFrameStats> per_frame;
 };
 
@@ -62,9 +68,10 @@ class StreamSender {
                double frame_rate, int atlas_size, bool texture, const StreamOptions& options);
   ~StreamSender();
   // atlas: CV_8UC3 atlas_size^2 (ignored without texture); triangle_frames: F, < 0 untextured
-  // (may be null: everything textured).
+  // (may be null: everything textured). compose_ms: the caller's time to compose `atlas`
+  // (reported in the statistics only).
   StreamFrameStats AddFrame(int frame, const Pose& pose, const cv::Mat& atlas,
-                            const std::vector<int>* triangle_frames);
+                            const std::vector<int>* triangle_frames, double compose_ms = 0.0);
   // Closes the stream (renames it into place) and returns the totals.
   StreamSummary Finish();
   // The bytes written so far: the header, and the record of the last AddFrame (live taps).

@@ -60,6 +60,16 @@ void I420ToFrame(const cv::Mat& i420, int width, int height, AVFrame* frame) {
   }
 }
 
+// Sets an encoder option; a value the encoder rejects (out of its range in this FFmpeg) is an
+// error rather than a silent fallback to the encoder's default.
+void SetEncoderOption(AVCodecContext* c, VideoCodec codec, const char* key,
+                      const std::string& value) {
+  const int rc = av_opt_set(c->priv_data, key, value.c_str(), 0);
+  if (rc < 0)
+    throw Error(std::string("atlas video: ") + EncoderName(codec) + " rejects " + key + "=" +
+                value + ": " + AvError(rc));
+}
+
 }  // namespace
 
 const char* VideoCodecName(VideoCodec c) {
@@ -87,8 +97,9 @@ bool VideoEncoderOptions::IsValid(std::string* error) const {
     msg << "stream.texture_kbps: expected >= 10, found " << bitrate_kbps;
   else if (buffer_ms < 1)
     msg << "stream.buffer_ms: expected >= 1, found " << buffer_ms;
-  else if (speed < 0 || speed > 10)
-    msg << "stream.speed: expected 0..10, found " << speed;
+  else if (speed < 0 || speed > (codec == VideoCodec::kH264 ? 9 : 8))
+    msg << "stream.speed: expected 0.." << (codec == VideoCodec::kH264 ? 9 : 8) << " for "
+        << VideoCodecName(codec) << ", found " << speed;
   else if (threads < 1)
     msg << "stream.threads: expected >= 1, found " << threads;
   else if (!(min_quantizer >= 0 && min_quantizer <= 63))
@@ -147,30 +158,31 @@ AtlasVideoEncoder::AtlasVideoEncoder(int width, int height, double frame_rate,
   c->color_primaries = AVCOL_PRI_SMPTE170M;
   c->color_trc = AVCOL_TRC_SMPTE170M;
   const std::string speed = std::to_string(options.speed);
-  switch (options.codec) {
+  const VideoCodec id = options.codec;
+  switch (id) {
     case VideoCodec::kVp9:
-      av_opt_set(c->priv_data, "deadline", "realtime", 0);
-      av_opt_set(c->priv_data, "cpu-used", speed.c_str(), 0);
-      av_opt_set(c->priv_data, "lag-in-frames", "0", 0);
-      av_opt_set(c->priv_data, "row-mt", "1", 0);
-      av_opt_set(c->priv_data, "tile-columns", "1", 0);
+      SetEncoderOption(c, id, "deadline", "realtime");
+      SetEncoderOption(c, id, "cpu-used", speed);
+      SetEncoderOption(c, id, "lag-in-frames", "0");
+      SetEncoderOption(c, id, "row-mt", "1");
+      SetEncoderOption(c, id, "tile-columns", "1");
       c->qmin = static_cast<int>(options.min_quantizer);
       c->qmax = 63;
       break;
     case VideoCodec::kAv1:
-      av_opt_set(c->priv_data, "usage", "realtime", 0);
-      av_opt_set(c->priv_data, "cpu-used", speed.c_str(), 0);
-      av_opt_set(c->priv_data, "lag-in-frames", "0", 0);
-      av_opt_set(c->priv_data, "row-mt", "1", 0);
+      SetEncoderOption(c, id, "usage", "realtime");
+      SetEncoderOption(c, id, "cpu-used", speed);
+      SetEncoderOption(c, id, "lag-in-frames", "0");
+      SetEncoderOption(c, id, "row-mt", "1");
       c->qmin = static_cast<int>(options.min_quantizer);
       c->qmax = 63;
       break;
     case VideoCodec::kH264: {
       static const char* kPresets[] = {"ultrafast", "superfast", "veryfast", "faster",  "fast",
                                        "medium",    "slow",      "slower",   "veryslow"};
-      av_opt_set(c->priv_data, "preset", kPresets[std::max(0, std::min(8, 9 - options.speed))], 0);
-      av_opt_set(c->priv_data, "tune", "zerolatency", 0);
-      av_opt_set(c->priv_data, "forced-idr", "1", 0);
+      SetEncoderOption(c, id, "preset", kPresets[std::max(0, std::min(8, 9 - options.speed))]);
+      SetEncoderOption(c, id, "tune", "zerolatency");
+      SetEncoderOption(c, id, "forced-idr", "1");
       break;
     }
   }

@@ -24,10 +24,10 @@ struct VideoEncoderOptions {
   int bitrate_kbps = 600;  // target bitrate of the atlas video (kbit/s); >= 10
   // Rate-control buffer (ms of the target rate): shorter follows the target more tightly.
   int buffer_ms = 1000;
-  // Encoder speed: libvpx cpu-used (0..9), libaom cpu-used (0..10), libx264 preset index
-  // (0 ultrafast .. 8 placebo) = max(0, 9 - speed).
+  // Encoder speed: libvpx / libaom cpu-used (0..8, the range FFmpeg passes on), libx264 preset
+  // by 9 - speed (9 ultrafast, 8 superfast, 7 veryfast, ..., 1 and 0 veryslow).
   int speed = 8;
-  int threads = 2;           // encoder threads; >= 1
+  int threads = 1;           // encoder threads; >= 1 (a second one gains nothing next to tracking)
   double min_quantizer = 4;  // libvpx / libaom qmin (0..63); keeps static texture sharp
 
   bool IsValid(std::string* error) const;

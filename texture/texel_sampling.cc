@@ -305,6 +305,75 @@ inline void SampleSurfaceFootprint(const Footprint& footprint, const FootprintCe
   PutTexel(rgbx, spill, out);
 }
 
+// Padding: each pass fills the empty texels next to filled ones with the mean of their filled
+// 8-neighbours (summed in the order dy, dx = -1 .. 1). Only the front is visited: the empty
+// texels next to the ones the last pass filled (the first pass: next to any filled texel), so a
+// pass costs the charts' perimeter, not the atlas. mask: 255 filled; 1 marks the next front.
+void PadAtlas(int padding, cv::Mat* out, cv::Mat* mask_image) {
+  if (padding <= 0) return;
+  const int size = out->rows;
+  uint8_t* mask = mask_image->data;
+  auto* color = reinterpret_cast<cv::Vec3f*>(out->data);
+  std::vector<int> front;
+  for (int y = 0; y < size; ++y) {
+    for (int x = 0; x < size; ++x) {
+      if (mask[y * size + x]) continue;
+      bool next_to_filled = false;
+      for (int dy = -1; dy <= 1 && !next_to_filled; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int yy = y + dy, xx = x + dx;
+          if (yy < 0 || xx < 0 || yy >= size || xx >= size || mask[yy * size + xx] != 255) continue;
+          next_to_filled = true;
+          break;
+        }
+      }
+      if (next_to_filled) front.push_back(y * size + x);
+    }
+  }
+  std::vector<cv::Vec3f> values;
+  std::vector<int> next;
+  for (int pass = 0; pass < padding && !front.empty(); ++pass) {
+    values.resize(front.size());
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, front.size(), 1024),
+        [&](const tbb::blocked_range<std::size_t>& range) {
+          for (std::size_t i = range.begin(); i < range.end(); ++i) {
+            const int y = front[i] / size, x = front[i] % size;
+            cv::Vec3f sum(0, 0, 0);
+            int n = 0;
+            for (int dy = -1; dy <= 1; ++dy) {
+              for (int dx = -1; dx <= 1; ++dx) {
+                const int yy = y + dy, xx = x + dx;
+                if (yy < 0 || xx < 0 || yy >= size || xx >= size || mask[yy * size + xx] != 255)
+                  continue;
+                sum += color[yy * size + xx];
+                ++n;
+              }
+            }
+            values[i] = sum / static_cast<float>(n);  // n >= 1 on the front
+          }
+        });
+    for (std::size_t i = 0; i < front.size(); ++i) {
+      color[front[i]] = values[i];
+      mask[front[i]] = 255;
+    }
+    if (pass + 1 == padding) break;
+    next.clear();
+    for (const int t : front) {
+      const int y = t / size, x = t % size;
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int yy = y + dy, xx = x + dx;
+          if (yy < 0 || xx < 0 || yy >= size || xx >= size || mask[yy * size + xx]) continue;
+          mask[yy * size + xx] = 1;
+          next.push_back(yy * size + xx);
+        }
+      }
+    }
+    front.swap(next);
+  }
+}
+
 }  // namespace
 
 AtlasMap::AtlasMap(const Template& tmpl, int size) : size_(size) {
@@ -544,32 +613,7 @@ cv::Mat ComposeAtlas(const AtlasMap& map, const TexelBuffer& base,
                         }
                       }
                     });
-  // Padding: each pass fills empty texels with the mean of their filled 8-neighbours.
-  for (int pass = 0; pass < padding; ++pass) {
-    cv::Mat next = out.clone();
-    cv::Mat next_mask = mask.clone();
-    tbb::parallel_for(0, size, [&](int y) {
-      for (int x = 0; x < size; ++x) {
-        if (mask.at<uint8_t>(y, x)) continue;
-        cv::Vec3f sum(0, 0, 0);
-        int n = 0;
-        for (int dy = -1; dy <= 1; ++dy) {
-          for (int dx = -1; dx <= 1; ++dx) {
-            const int yy = y + dy, xx = x + dx;
-            if (yy < 0 || xx < 0 || yy >= size || xx >= size || !mask.at<uint8_t>(yy, xx)) continue;
-            sum += out.at<cv::Vec3f>(yy, xx);
-            ++n;
-          }
-        }
-        if (n > 0) {
-          next.at<cv::Vec3f>(y, x) = sum / static_cast<float>(n);
-          next_mask.at<uint8_t>(y, x) = 255;
-        }
-      }
-    });
-    out = next;
-    mask = next_mask;
-  }
+  PadAtlas(padding, &out, &mask);
   cv::Mat out8;
   out.convertTo(out8, CV_8UC3, 255.0);
   return out8;

@@ -102,12 +102,41 @@ TEST_F(StreamPipelineTest, PlayedStreamMatchesTheSender) {
   EXPECT_LT(std::abs(r.receiver_psnr_db - r.sender_psnr_db), 1.0);
   EXPECT_TRUE(fs::exists(data_->root / "play" / "atlas.png"));
   EXPECT_TRUE(fs::exists(data_->root / "play" / "report.json"));
+  // The sender's times come from the run's stream_frames.csv: every frame's latency covers them.
+  EXPECT_TRUE(fs::exists(data_->root / "run" / "stream_frames.csv"));
+  EXPECT_TRUE(r.sender_times);
+  EXPECT_GT(r.median_latency_ms, 0.0);
+  EXPECT_GE(r.max_latency_ms, r.median_latency_ms);
   // Joining at frame 2 starts at the keyframe of frame 4.
   p.from_frame = 2;
   p.out_dir.clear();
   const PlaybackReport joined = PlayStream((data_->root / "track.artx").string(), p);
   EXPECT_EQ(joined.first_frame, 4);
   EXPECT_EQ(joined.frames, 4);
+}
+
+// The latency model: records sent one after another over the link, each after the sender's time.
+TEST(StreamLatencyTest, RecordsQueueBehindALargeKeyframe) {
+  // 30 Hz, a link of 240 kbit/s: a 1,000-byte record takes 33.33 ms, a 5,000-byte one 166.7 ms.
+  std::vector<FrameTiming> t(4);
+  for (int k = 0; k < 4; ++k) {
+    t[k].frame = k;
+    t[k].record_bytes = k == 0 ? 5000 : 1000;
+    t[k].sender_ms = 10.0;
+    t[k].decode_ms = 2.0;
+  }
+  StreamLatency(30.0, 240.0, &t);
+  EXPECT_NEAR(t[0].queue_ms, 0.0, 1e-9);
+  EXPECT_NEAR(t[0].latency_ms, 10.0 + 166.667 + 2.0, 1e-2);
+  // Frame 1 is ready at 33.3 + 10 ms but the link is busy until 176.7 ms.
+  EXPECT_NEAR(t[1].queue_ms, 176.667 - 43.333, 1e-2);
+  EXPECT_NEAR(t[1].latency_ms, 176.667 + 33.333 + 2.0 - 33.333, 1e-2);
+  // Each later frame is still behind by the keyframe's extra 133.3 ms.
+  EXPECT_NEAR(t[3].latency_ms, t[1].latency_ms, 1e-6);
+  // A faster link removes the queue.
+  StreamLatency(30.0, 2400.0, &t);
+  for (const FrameTiming& f : t) EXPECT_NEAR(f.queue_ms, 0.0, 1e-9) << "frame " << f.frame;
+  EXPECT_NEAR(t[2].latency_ms, 10.0 + 3.333 + 2.0, 1e-2);
 }
 
 }  // namespace
