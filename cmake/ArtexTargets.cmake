@@ -21,5 +21,11 @@ function(artex_add_library)
   install(DIRECTORY ${CMAKE_CURRENT_SOURCE_DIR}/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/artex/${ARG_NAME}
           COMPONENT devel FILES_MATCHING PATTERN "*.h")
   target_link_libraries(artex_${ARG_NAME} PUBLIC ${ARG_PUBLIC_DEPS} PRIVATE ${ARG_PRIVATE_DEPS})
+  if(ARTEX_SANITIZE)
+    # An installed sanitizer build needs its runtime in every executable that links it (inside
+    # this project the global link option of CMakeLists.txt does that).
+    target_link_options(artex_${ARG_NAME} INTERFACE
+                        $<INSTALL_INTERFACE:-fsanitize=${ARTEX_SANITIZE}>)
+  endif()
   artex_set_warnings(artex_${ARG_NAME})
 endfunction()
