@@ -24,15 +24,13 @@
 
 namespace artex {
 
-// When a tracked frame is fitted again by the multi-hypothesis initialisation in the same frame
+// Which tracked frames are fitted again by the multi-hypothesis initialisation in the same frame
 // (the better of both by quality score is kept): kLost, frames the tracking loses (always at
-// least these); kDoubtful, also frames it doubts (for frame sets that are not a continuous
-// recording, e.g. stills of different poses; costs an initialisation per doubtful frame).
-// Which tracked frames are initialised again in place (the better fit by quality kept): lost
-// ones; doubtful ones too; or auto: lost ones, a doubtful one that follows a good one (the
-// quality dropped), and every doubtful one while in-place re-initialisations keep beating
-// tracking (PipelineOptions::reinitialise_auto_*): a recording whose frames tracking cannot
-// follow from one to the next (stills, cuts, a very low frame rate).
+// least these); kDoubtful, also every frame it doubts (costs an initialisation per doubtful
+// frame); kAuto, lost ones, a doubtful one that follows a good one (the quality dropped), and
+// every doubtful one while in-place re-initialisations keep beating tracking
+// (PipelineOptions::reinitialise_auto_*): a recording whose frames tracking cannot follow from
+// one to the next (stills of different poses, cuts, a very low frame rate).
 enum class ReinitialiseOn { kLost, kDoubtful, kAuto };
 const std::map<std::string, ReinitialiseOn>& ReinitialiseOnNames();  // lost, doubtful, auto
 

@@ -257,7 +257,7 @@ void TrackStage::Process(FrameWork* work) {
         std::count(recent_replaced_.begin(), recent_replaced_.end(), true) >=
             options_.reinitialise_auto_wins));
   bool replaced = false;
-  if (!record.reinitialised && !record.fit.non_finite && enough_points &&
+  if (tracked && !record.fit.non_finite && enough_points &&
       (label == FitQualityLabel::kLost ||
        (label == FitQualityLabel::kDoubtful &&
         (doubted_long || doubtful_too)))) {

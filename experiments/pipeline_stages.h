@@ -11,10 +11,10 @@
 // uses the colours of that state (ColourMailbox).
 #pragma once
 
-#include <deque>
 #include <chrono>
 #include <condition_variable>
 #include <cstddef>
+#include <deque>
 #include <functional>
 #include <memory>
 #include <mutex>

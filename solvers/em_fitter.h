@@ -31,13 +31,13 @@
 #include "models/pose.h"
 #include "models/skinning.h"
 #include "models/template.h"
+#include "render/camera.h"
 #include "sensors/scan.h"
 #include "solvers/estep.h"
 #include "solvers/fit_solver.h"
 #include "solvers/icp_init.h"
 #include "solvers/out_of_view.h"
 #include "solvers/prediction.h"
-#include "render/camera.h"
 
 namespace artex {
 

@@ -34,11 +34,10 @@ struct ViewTest {
         lo_v(border - 0.5),
         hi_v(c.height - 0.5 - border) {}
   bool operator()(const Eigen::Vector3d& world) const {
-    const Eigen::Vector3d p = camera.world_to_camera * world;
-    if (!(p.z() > 1e-6)) return false;  // behind the camera (or not finite)
-    const double u = camera.fx * p.x() / p.z() + camera.cx;
-    const double v = camera.fy * p.y() / p.z() + camera.cy;
-    return u >= lo_u && u <= hi_u && v >= lo_v && v <= hi_v;
+    double z = 0.0;
+    const Eigen::Vector2d uv = camera.Project(world, &z);
+    if (!(z > 1e-6)) return false;  // behind the camera (or not finite)
+    return uv.x() >= lo_u && uv.x() <= hi_u && uv.y() >= lo_v && uv.y() <= hi_v;
   }
 };
 
