@@ -24,7 +24,7 @@ PREDICTORS = ["previous", "constant_velocity", "kalman", "particle"]
 METRICS = [
     ("mean_vertex_error_mm", "mean vertex error (mm)"),
     ("mean_joint_error_mm", "mean joint error (mm)"),
-    ("lost_gt", "lost frames (ground truth)"),
+    ("lost_gt", "lost frames (ground truth); hollow: re-initialised"),
     ("mean_em_iterations", "EM iterations per frame"),
 ]
 
@@ -51,6 +51,21 @@ def synth_motion(out, sequence):
         return "?"
 
 
+def reinitialisations(out, sequence, predictor):
+    """(frames, mean ms) of the tracking frames (all but the first) from the run's frames.csv:
+    how many a re-initialisation replaced, and the initialisation time per tracking frame
+    (every re-initialisation tried, kept or not); (nan, nan) when the run has no frames.csv."""
+    path = os.path.join(out, "runs", sequence, "fitting.prediction=" + predictor, "frames.csv")
+    try:
+        with open(path) as f:
+            tracked = [r for r in csv.DictReader(f) if r.get("frame") != "0"]
+    except OSError:
+        return float("nan"), float("nan")
+    replaced = sum(1 for r in tracked if r.get("reinitialised") == "1")
+    init_ms = sum(float(r.get("init_ms") or 0) for r in tracked)
+    return replaced, init_ms / max(1, len(tracked))
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("out")
@@ -70,9 +85,10 @@ def main():
     for (s, _), m in rows.items():
         m["frames"] = synth_value(args.out, s, "frames", 0)
         m["lost_gt"] = round(m.get("lost_fraction", 0.0) * m["frames"])
+        m["reinitialised"], m["init_ms"] = reinitialisations(args.out, s, _)
     print("| sequence | speed | step | predictor | vertex error (mm) | joint error (mm) | "
-          "lost (truth) | lost (quality) | EM iterations / frame | fit ms / frame |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "lost (truth) | lost (quality) | re-initialised | EM iterations / frame | fit ms / frame | re-initialisation ms / frame |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for s in sequences:
         speed = synth_value(args.out, s, "speed", 1)
         step = synth_value(args.out, s, "frame_step", 1)
@@ -80,11 +96,12 @@ def main():
             m = rows.get((s, p))
             if not m:
                 continue
-            print("| %s | %g | %g | %s | %.1f | %.1f | %d / %d | %d | %.1f | %.0f |" % (
+            print("| %s | %g | %g | %s | %.1f | %.1f | %d / %d | %d | %g | %.1f | %.0f | %.0f |" % (
                 s, speed, step, p, m.get("mean_vertex_error_mm", float("nan")),
                 m.get("mean_joint_error_mm", float("nan")), m["lost_gt"], m.get("frames", 0),
-                m.get("lost_frames", 0), m.get("mean_em_iterations", float("nan")),
-                m.get("fit_ms", float("nan"))))
+                m.get("lost_frames", 0), m["reinitialised"],
+                m.get("mean_em_iterations", float("nan")),
+                m.get("fit_ms", float("nan")), m["init_ms"]))
     if not args.output:
         return 0
     fig, axes = plt.subplots(2, 2, figsize=(10, 7))
@@ -111,6 +128,16 @@ def main():
                                 color=colours[p], alpha=0.6 if dropped else 0.9,
                                 label="%s, %s%s" % (p, motion,
                                                     " (frames dropped)" if dropped else ""))
+                        if metric == "lost_gt":
+                            re = sorted((speed * step, rows[(q, p)]["reinitialised"])
+                                        for q in sequences if (q, p) in rows
+                                        and synth_motion(args.out, q) == motion
+                                        for step in [synth_value(args.out, q, "frame_step", 1)]
+                                        for speed in [synth_value(args.out, q, "speed", 1)]
+                                        if (step > 1) == dropped or (speed * step == 1))
+                            ax.plot([x for x, _ in re], [y for _, y in re], style,
+                                    color=colours[p], alpha=0.6 if dropped else 0.9,
+                                    markerfacecolor="none")
         ax.set_xlabel("motion per frame (speed x frame step)")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
