@@ -13,6 +13,8 @@
 #include "models/template_io.h"
 #include "sensors/calibration.h"
 #include "sensors/sequence.h"
+#include "stream/stream_sender.h"
+#include "tests/models/small_makehuman.h"
 
 namespace fs = std::filesystem;
 
@@ -146,6 +148,7 @@ artex::Template SmallTemplate(const artex::Template& tmpl, int triangles_per_joi
   return small;
 }
 
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -226,6 +229,30 @@ int main(int argc, char** argv) {
     for (const auto& e : fs::directory_iterator(source / "configs/experiments")) {
       Put(out, "experiment", e.path().filename().string(), Read(e.path()));
     }
+    // Streams of the small template, 3 frames, a keyframe every 2: poses only, and with a
+    // 32 x 32 atlas video (VP9, the default codec) and its coverage.
+    for (const bool textured : {false, true}) {
+      artex::StreamOptions options;
+      options.keyframe_interval = 2;
+      options.video.bitrate_kbps = 100;
+      const fs::path stream = scratch / "stream.artx";
+      {
+        artex::StreamSender sender(stream.string(), small, artex::PinholeCamera(), 30.0, 32,
+                                   textured, options);
+        std::vector<int> triangle_frames(small.num_triangles(), 0);
+        triangle_frames[0] = -1;
+        for (int i = 0; i < 3; ++i) {
+          artex::Pose pose = artex::Pose::Identity(small.num_joints());
+          pose.translation.x() = 0.01 * i;
+          const cv::Mat atlas(32, 32, CV_8UC3, cv::Scalar(40 * i, 90, 160));
+          sender.AddFrame(i, pose, atlas, &triangle_frames);
+        }
+        sender.Finish();
+      }
+      Put(out, "stream", textured ? "textured.artx" : "poses.artx", Read(stream));
+    }
+    const artex::test_data::SmallMakeHuman mh = artex::test_data::MakeSmallMakeHuman();
+    Put(out, "makehuman", "box", mh.obj + sep + mh.rig + sep + mh.weights);
     fs::remove_all(scratch);
   } catch (const artex::Error& e) {
     std::fprintf(stderr, "make_seeds: %s\n", e.what());

@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <set>
 #include <sstream>
 #include <tuple>
@@ -91,6 +92,27 @@ Eigen::Vector3d JsonVector3(const nlohmann::json& value, const std::string& path
   }
   if (!v.allFinite()) throw Error(path + ": " + field + ": non-finite value");
   return v;
+}
+
+// object[key] as text ("" when absent); an error naming the file and field when not text.
+std::string JsonString(const nlohmann::json& object, const char* key, const std::string& path,
+                       const std::string& field) {
+  if (!object.contains(key)) return std::string();
+  const nlohmann::json& value = object[key];
+  if (!value.is_string()) {
+    throw Error(path + ": " + field + "." + key + ": expected text, found " +
+                std::string(value.type_name()));
+  }
+  return value.get<std::string>();
+}
+
+// A vertex index (an integer that fits an int; the caller checks the range).
+int JsonIndex(const nlohmann::json& value, const std::string& path, const std::string& field) {
+  if (!value.is_number_integer() || value.get<long long>() < 0 ||
+      value.get<long long>() > std::numeric_limits<int>::max()) {
+    throw Error(path + ": " + field + ": expected a vertex index, found " + value.dump());
+  }
+  return static_cast<int>(value.get<long long>());
 }
 
 }  // namespace
@@ -385,11 +407,11 @@ Eigen::Vector3d RigPoint(const nlohmann::json& point, const std::string& field,
                          const std::map<std::string, std::vector<int>>& group_vertices,
                          double unit_to_metres, const std::string& rig_path) {
   if (!point.is_object()) throw Error(rig_path + ": " + field + ": expected an object");
-  const std::string strategy = point.value("strategy", std::string());
+  const std::string strategy = JsonString(point, "strategy", rig_path, field);
   if (source == RigPositionSource::kJointCubes) {
     std::vector<int> indices;
     if (strategy == "CUBE" && point.contains("cube_name")) {
-      const std::string cube = point["cube_name"].get<std::string>();
+      const std::string cube = JsonString(point, "cube_name", rig_path, field);
       auto it = group_vertices.find(cube);
       if (it == group_vertices.end()) {
         throw Error(rig_path + ": " + field + ": joint cube '" + cube +
@@ -397,9 +419,13 @@ Eigen::Vector3d RigPoint(const nlohmann::json& point, const std::string& field,
       }
       indices = it->second;
     } else if ((strategy == "MEAN" || strategy == "VERTEX") && point.contains("vertex_indices")) {
-      indices = point["vertex_indices"].get<std::vector<int>>();
+      const nlohmann::json& list = point["vertex_indices"];
+      if (!list.is_array()) {
+        throw Error(rig_path + ": " + field + ".vertex_indices: expected a list of vertex indices");
+      }
+      for (const nlohmann::json& i : list) indices.push_back(JsonIndex(i, rig_path, field));
     } else if (strategy == "VERTEX" && point.contains("vertex_index")) {
-      indices = {point["vertex_index"].get<int>()};
+      indices = {JsonIndex(point["vertex_index"], rig_path, field)};
     }
     if (!indices.empty()) {
       Eigen::Vector3d sum = Eigen::Vector3d::Zero();
@@ -535,7 +561,7 @@ Template ImportMakeHuman(const std::string& folder, const MakeHumanImportOptions
     }
     RigBone bone;
     bone.name = it.key();
-    bone.parent = b.value("parent", std::string());
+    bone.parent = JsonString(b, "parent", rig_path, it.key());
     bone.head = b["head"];
     bone.tail = b["tail"];
     bones[bone.name] = bone;

@@ -18,6 +18,7 @@
 #include "models/skinning.h"
 #include "models/template_generator.h"
 #include "models/template_io.h"
+#include "tests/models/small_makehuman.h"
 
 namespace artex {
 namespace {
@@ -361,6 +362,80 @@ TEST_F(MakeHumanTest, ImportedTemplateRoundTripsThroughGlb) {
   EXPECT_TRUE((back.uv_triangles.array() == t.uv_triangles.array()).all());
   EXPECT_TRUE((back.vertex_joint.array() == t.vertex_joint.array()).all());
   EXPECT_LT((back.vertices - t.vertices).cwiseAbs().maxCoeff(), 1e-6);
+}
+
+// A folder of test_data::MakeSmallMakeHuman's files, one of them replaced.
+class SmallMakeHumanTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("artex_small_mh_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir_);
+    files_ = test_data::MakeSmallMakeHuman();
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string Folder() {
+    const MakeHumanImportOptions o;
+    std::ofstream(dir_ / o.obj_file) << files_.obj;
+    std::ofstream(dir_ / o.rig_file) << files_.rig;
+    std::ofstream(dir_ / o.weights_file) << files_.weights;
+    return dir_.string();
+  }
+  // Imports with `rig` in place of the rig file's text `from`; expects an artex::Error naming
+  // the rig file and `fragment`.
+  void ExpectRigError(const std::string& from, const std::string& to, const std::string& fragment,
+                      RigPositionSource source = RigPositionSource::kJointCubes) {
+    const std::string rig = files_.rig;
+    const size_t at = files_.rig.find(from);
+    ASSERT_NE(at, std::string::npos) << from;
+    files_.rig.replace(at, from.size(), to);
+    MakeHumanImportOptions options;
+    options.joint_positions = source;
+    try {
+      ImportMakeHuman(Folder(), options);
+      ADD_FAILURE() << "accepted: " << to;
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("mpfb_rig.cmu_mb.json: "), std::string::npos)
+          << e.what();
+      EXPECT_NE(std::string(e.what()).find(fragment), std::string::npos) << e.what();
+    }
+    files_.rig = rig;
+  }
+  fs::path dir_;
+  test_data::SmallMakeHuman files_;
+};
+
+TEST_F(SmallMakeHumanTest, ImportsAValidTemplate) {
+  MakeHumanImportReport report;
+  const Template tmpl = ImportMakeHuman(Folder(), MakeHumanImportOptions(), nullptr, &report);
+  std::string why;
+  EXPECT_TRUE(tmpl.IsValid(&why)) << why;
+  EXPECT_EQ(tmpl.num_vertices(), 8);
+  EXPECT_EQ(tmpl.num_joints(), 17);
+  EXPECT_EQ(report.boundary_edges, 0);
+  // The hips' centre is its joint cube's vertex mean (y = 9.0333 decimetres above the box's
+  // floor), not the rig's default position (0.9 m).
+  EXPECT_NEAR(tmpl.joints[0].center.y(), 0.90333333, 1e-6);
+}
+
+// Fields of the wrong JSON type (found by the makehuman fuzzer's kind of input) are errors
+// naming the file and field, not nlohmann::json exceptions.
+TEST_F(SmallMakeHumanTest, RigFieldsOfTheWrongTypeNameTheFileAndField) {
+  ExpectRigError("\"parent\": \"Hips\"", "\"parent\": 5", "parent: expected text");
+  ExpectRigError("\"strategy\": \"CUBE\"", "\"strategy\": [1]", "Hips.head.strategy");
+  ExpectRigError("\"cube_name\": \"joint-hips\"", "\"cube_name\": {}",
+                 "Hips.head.cube_name: expected text");
+  ExpectRigError("\"vertex_indices\": [2, 7]", "\"vertex_indices\": 2",
+                 "Neck.head.vertex_indices: expected a list");
+  ExpectRigError("\"vertex_indices\": [2, 7]", "\"vertex_indices\": [2, \"7\"]",
+                 "Neck.head: expected a vertex index, found \"7\"");
+  ExpectRigError("\"vertex_indices\": [2, 7]", "\"vertex_indices\": [2, 1e300]",
+                 "expected a vertex index");
+  ExpectRigError("\"vertex_indices\": [2, 7]", "\"vertex_indices\": [2, -1]",
+                 "expected a vertex index, found -1");
+  ExpectRigError("\"vertex_indices\": [2, 7]", "\"vertex_indices\": [2, 99]",
+                 "vertex index 99 outside");
 }
 
 TEST_F(MakeHumanTest, ReportsMissingAndBrokenFiles) {
