@@ -77,6 +77,13 @@ std::string LowerCaseExtension(const std::string& path) {
 }
 
 void WriteFileAtomically(const std::string& path, const std::string& contents) {
+  WriteFileAtomically(path, [&contents](std::ostream& out) {
+    out.write(contents.data(), static_cast<std::streamsize>(contents.size()));
+  });
+}
+
+void WriteFileAtomically(const std::string& path,
+                         const std::function<void(std::ostream&)>& write) {
   namespace fs = std::filesystem;
   const fs::path target(path);
   const fs::path dir = target.has_parent_path() ? target.parent_path() : fs::path(".");
@@ -91,7 +98,13 @@ void WriteFileAtomically(const std::string& path, const std::string& contents) {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     if (!out) throw Error(path + ": cannot write (cannot create a temporary file in " +
                           dir.string() + ")");
-    out.write(contents.data(), static_cast<std::streamsize>(contents.size()));
+    try {
+      write(out);
+    } catch (...) {
+      out.close();
+      fs::remove(tmp, ec);
+      throw;
+    }
     out.flush();
     if (!out) {
       out.close();

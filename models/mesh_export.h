@@ -3,6 +3,8 @@
 // Files are written to a temporary in the same folder and renamed: never partially.
 #pragma once
 
+#include <functional>
+#include <ostream>
 #include <string>
 
 #include <Eigen/Core>
@@ -30,6 +32,10 @@ void WritePosedMesh(const std::string& path, const Eigen::MatrixX3d& vertices,
 // Writes `contents` to `path` through a temporary file in the same folder and a rename.
 // Throws artex::Error naming `path` on failure (the temporary is removed).
 void WriteFileAtomically(const std::string& path, const std::string& contents);
+// The same, with the contents written by `write` (an exception from it removes the temporary
+// and propagates).
+void WriteFileAtomically(const std::string& path,
+                         const std::function<void(std::ostream&)>& write);
 
 // Lower-case extension of `path` including the dot ("" when none).
 std::string LowerCaseExtension(const std::string& path);

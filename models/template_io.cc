@@ -6,14 +6,18 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <limits>
 #include <map>
+#include <memory>
 #include <sstream>
 #include <unordered_map>
+
+#include <nlohmann/json.hpp>
 
 #include "models/error.h"
 #include "models/gltf_skinning.h"
@@ -73,6 +77,7 @@ class GltfBuilder {
   }
 
   int AddBufferView(const void* data, size_t bytes, int target) {
+    if (external_bytes_ > 0) throw Error("glTF builder: a buffer view after the external ones");
     std::vector<unsigned char>& buffer = model_->buffers[0].data;
     while (buffer.size() % 4 != 0) buffer.push_back(0);
     tinygltf::BufferView view;
@@ -106,6 +111,43 @@ class GltfBuilder {
     return Push(accessor);
   }
 
+  // A view of `bytes` (a multiple of 4) whose data the writer appends after the buffer's own
+  // (WriteAnimatedGlbTo): its offset counts from the buffer's end rounded up to 4. Every
+  // AddBufferView must come before the first external view.
+  int AddExternalView(size_t bytes, int target) {
+    const size_t base = (model_->buffers[0].data.size() + 3) / 4 * 4;
+    tinygltf::BufferView view;
+    view.buffer = 0;
+    view.byteOffset = base + external_bytes_;
+    view.byteLength = bytes;
+    view.target = target;
+    external_bytes_ += bytes;
+    model_->bufferViews.push_back(view);
+    return static_cast<int>(model_->bufferViews.size()) - 1;
+  }
+  size_t external_bytes() const { return external_bytes_; }
+
+  // `count` scalar floats, all 0 but `ones`[i] (ascending), which are 1: a sparse accessor
+  // (no data of its own; indices and values in two small views).
+  int AddSparseOnes(size_t count, const std::vector<uint32_t>& ones) {
+    tinygltf::Accessor accessor;
+    accessor.bufferView = -1;
+    accessor.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
+    accessor.type = TINYGLTF_TYPE_SCALAR;
+    accessor.count = count;
+    accessor.sparse.isSparse = true;
+    accessor.sparse.count = static_cast<int>(ones.size());
+    accessor.sparse.indices.bufferView =
+        AddBufferView(ones.data(), ones.size() * sizeof(uint32_t), 0);
+    accessor.sparse.indices.byteOffset = 0;
+    accessor.sparse.indices.componentType = TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
+    const std::vector<float> values(ones.size(), 1.0f);
+    accessor.sparse.values.bufferView =
+        AddBufferView(values.data(), values.size() * sizeof(float), 0);
+    accessor.sparse.values.byteOffset = 0;
+    return Push(accessor);
+  }
+
   int AddUnsignedShorts(const std::vector<uint16_t>& values, int type, int target) {
     const int components = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(type));
     tinygltf::Accessor accessor;
@@ -132,6 +174,7 @@ class GltfBuilder {
   }
 
   tinygltf::Model* model_;
+  size_t external_bytes_ = 0;
 };
 
 void AppendToVector(void* context, void* data, int size) {
@@ -180,20 +223,11 @@ void AppendQuaternion(const Eigen::Quaterniond& q, std::vector<float>* out) {
   out->push_back(static_cast<float>(q.w()));
 }
 
-// Builds the glTF model of a template; poses non-empty adds the animation; correctives
-// (one V x 3 rest-space displacement per pose, or null) add one morph target per pose, weighted
-// 1 at its own keyframe (models/gltf_skinning.h).
-tinygltf::Model BuildModel(const Template& tmpl, const std::vector<Pose>& poses,
-                           double frame_rate, const GlbTexture* texture,
-                           const std::vector<Eigen::MatrixX3d>* correctives = nullptr) {
-  std::string error;
-  if (!tmpl.IsValid(&error)) throw Error("template: " + error);
+// glTF vertices: one per (template vertex, uv index) pair (uv -1: none), sorted by template
+// vertex.
+std::vector<std::pair<int, int>> GltfVertexPairs(const Template& tmpl) {
   const int num_vertices = tmpl.num_vertices();
-  const int num_joints = tmpl.num_joints();
-  if (num_joints + 1 > 65535) throw Error("template: too many joints for JOINTS_0 (max 65534)");
   const bool has_uvs = tmpl.has_uvs();
-
-  // glTF vertices: one per (template vertex, uv index) pair, sorted by template vertex.
   std::vector<std::pair<int, int>> pairs;
   pairs.reserve(static_cast<size_t>(tmpl.num_triangles()) * 3 + num_vertices);
   for (int f = 0; f < tmpl.num_triangles(); ++f) {
@@ -208,6 +242,30 @@ tinygltf::Model BuildModel(const Template& tmpl, const std::vector<Pose>& poses,
   }
   std::sort(pairs.begin(), pairs.end());
   pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+  return pairs;
+}
+
+// The morph targets of an animated glb (one per pose, weighted 1 at its own keyframe,
+// models/gltf_skinning.h): their count and each one's POSITION bounds (glTF requires min/max).
+// Their displacements are not in the model: their views follow the buffer's own data, and
+// WriteAnimatedGlbTo appends them (`external` views, GltfBuilder::AddExternalView).
+struct MorphTargetLayout {
+  std::vector<Eigen::Vector3f> min, max;  // per target
+  int count() const { return static_cast<int>(min.size()); }
+};
+
+// Builds the glTF model of a template; poses non-empty adds the animation; `morphs` (or null)
+// adds the morph targets' accessors and views, without their data.
+tinygltf::Model BuildModel(const Template& tmpl, const std::vector<Pose>& poses,
+                           double frame_rate, const GlbTexture* texture,
+                           const MorphTargetLayout* morphs = nullptr) {
+  std::string error;
+  if (!tmpl.IsValid(&error)) throw Error("template: " + error);
+  const int num_vertices = tmpl.num_vertices();
+  const int num_joints = tmpl.num_joints();
+  if (num_joints + 1 > 65535) throw Error("template: too many joints for JOINTS_0 (max 65534)");
+  const bool has_uvs = tmpl.has_uvs();
+  const std::vector<std::pair<int, int>> pairs = GltfVertexPairs(tmpl);
   const int num_gltf_vertices = static_cast<int>(pairs.size());
   auto gltf_index = [&pairs](int v, int uv) {
     return static_cast<uint32_t>(std::lower_bound(pairs.begin(), pairs.end(),
@@ -293,20 +351,7 @@ tinygltf::Model BuildModel(const Template& tmpl, const std::vector<Pose>& poses,
       builder.AddFloats(lbs_values, TINYGLTF_TYPE_SCALAR, TINYGLTF_TARGET_ARRAY_BUFFER, false);
   primitive.attributes[kTauAttribute] =
       builder.AddFloats(tau_values, TINYGLTF_TYPE_SCALAR, TINYGLTF_TARGET_ARRAY_BUFFER, false);
-  const int num_targets = correctives ? static_cast<int>(correctives->size()) : 0;
-  for (int t = 0; t < num_targets; ++t) {
-    const Eigen::MatrixX3d& d = (*correctives)[t];
-    if (d.rows() != num_vertices) throw Error("correctives: wrong vertex count");
-    std::vector<float> displacement;
-    displacement.reserve(3 * num_gltf_vertices);
-    for (const auto& pair : pairs) {
-      for (int c = 0; c < 3; ++c) displacement.push_back(static_cast<float>(d(pair.first, c)));
-    }
-    // glTF requires min/max on morph-target POSITION accessors.
-    primitive.targets.push_back({{"POSITION", builder.AddFloats(displacement, TINYGLTF_TYPE_VEC3,
-                                                                TINYGLTF_TARGET_ARRAY_BUFFER,
-                                                                true)}});
-  }
+  const int num_targets = morphs ? morphs->count() : 0;
 
   // Material (and the optional embedded base-colour texture).
   tinygltf::Material material;
@@ -487,15 +532,47 @@ tinygltf::Model BuildModel(const Template& tmpl, const std::vector<Pose>& poses,
                   TINYGLTF_TYPE_VEC4);
     }
     if (num_targets > 0) {
-      // Keyframe f: weight 1 on frame f's corrective, 0 on the others (blended in between).
-      if (num_targets != num_frames) throw Error("correctives: expected one per pose");
-      std::vector<float> morph_weights(static_cast<size_t>(num_frames) * num_targets, 0.0f);
-      for (int f = 0; f < num_frames; ++f) {
-        morph_weights[static_cast<size_t>(f) * num_targets + f] = 1.0f;
+      // Keyframe f: weight 1 on frame f's corrective, 0 on the others (blended in between):
+      // a sparse accessor of num_frames^2 weights with num_frames ones (the dense one grew
+      // with the square of the frame count: 324 MB for 5 minutes at 30 Hz).
+      if (num_targets != num_frames) throw Error("morph targets: expected one per pose");
+      if (static_cast<uint64_t>(num_frames) * num_frames > 0xffffffffull) {
+        throw Error("poses: at most 65535 frames in an animated glb with morph targets, found " +
+                    std::to_string(num_frames));
       }
-      add_channel(kMeshNode, "weights", morph_weights, TINYGLTF_TYPE_SCALAR);
+      std::vector<uint32_t> ones(num_frames);
+      for (int f = 0; f < num_frames; ++f) {
+        ones[f] = static_cast<uint32_t>(f) * static_cast<uint32_t>(num_frames + 1);
+      }
+      tinygltf::AnimationSampler sampler;
+      sampler.input = input;
+      sampler.output =
+          builder.AddSparseOnes(static_cast<size_t>(num_frames) * num_frames, ones);
+      sampler.interpolation = "LINEAR";
+      animation.samplers.push_back(sampler);
+      tinygltf::AnimationChannel channel;
+      channel.sampler = static_cast<int>(animation.samplers.size()) - 1;
+      channel.target_node = kMeshNode;
+      channel.target_path = "weights";
+      animation.channels.push_back(channel);
     }
     model.animations.push_back(animation);
+  }
+  // The morph targets' displacements, last in the buffer (appended by WriteAnimatedGlbTo).
+  for (int t = 0; t < num_targets; ++t) {
+    tinygltf::Accessor accessor;
+    accessor.bufferView = builder.AddExternalView(
+        static_cast<size_t>(num_gltf_vertices) * 3 * sizeof(float), TINYGLTF_TARGET_ARRAY_BUFFER);
+    accessor.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
+    accessor.type = TINYGLTF_TYPE_VEC3;
+    accessor.count = num_gltf_vertices;
+    for (int c = 0; c < 3; ++c) {
+      accessor.minValues.push_back(morphs->min[t][c]);
+      accessor.maxValues.push_back(morphs->max[t][c]);
+    }
+    model.accessors.push_back(accessor);
+    model.meshes[0].primitives[0].targets.push_back(
+        {{"POSITION", static_cast<int>(model.accessors.size()) - 1}});
   }
   return model;
 }
@@ -1276,9 +1353,26 @@ bool AnimatedGlbOptions::IsValid(std::string* error) const {
   return corrective.IsValid(error);
 }
 
-std::string EncodeAnimatedGlb(const Template& tmpl, const std::vector<Pose>& poses,
-                              double frame_rate, const GlbTexture* texture,
-                              const AnimatedGlbOptions& options, AnimatedGlbSummary* summary) {
+namespace {
+
+struct FileCloser {
+  void operator()(std::FILE* f) const { std::fclose(f); }
+};
+
+void PutU32(std::ostream& out, uint32_t v) {
+  const unsigned char b[4] = {static_cast<unsigned char>(v), static_cast<unsigned char>(v >> 8),
+                              static_cast<unsigned char>(v >> 16),
+                              static_cast<unsigned char>(v >> 24)};
+  out.write(reinterpret_cast<const char*>(b), 4);
+}
+
+// The animated glb, written to `out` with the morph targets' displacements passing through an
+// anonymous temporary file: memory stays the template's, whatever the number of frames (each
+// target is 12 bytes per glTF vertex; 300 frames of the default template held ~200 MB in
+// copies before).
+void WriteAnimatedGlbTo(std::ostream& out, const Template& tmpl, const std::vector<Pose>& poses,
+                        double frame_rate, const GlbTexture* texture,
+                        const AnimatedGlbOptions& options, AnimatedGlbSummary* summary) {
   if (poses.empty()) throw Error("poses: expected at least one pose for an animation, found none");
   std::string why;
   if (!options.IsValid(&why)) throw Error("animated glb options: " + why);
@@ -1287,7 +1381,14 @@ std::string EncodeAnimatedGlb(const Template& tmpl, const std::vector<Pose>& pos
   AnimatedGlbSummary s;
   s.frames = static_cast<int>(poses.size());
   const Skinning skinning(tmpl);
-  std::vector<Eigen::MatrixX3d> correctives;
+  const std::vector<std::pair<int, int>> pairs = GltfVertexPairs(tmpl);
+  std::unique_ptr<std::FILE, FileCloser> spill;
+  if (options.exact) {
+    spill.reset(std::tmpfile());
+    if (!spill) throw Error("cannot create a temporary file for the morph targets");
+  }
+  MorphTargetLayout layout;
+  std::vector<float> displacement(3 * pairs.size());
   double lbs_sum = 0.0, exact_sum = 0.0;
   long long count = 0;
   for (std::size_t f = 0; f < poses.size(); ++f) {
@@ -1307,13 +1408,27 @@ std::string EncodeAnimatedGlb(const Template& tmpl, const std::vector<Pose>& pos
     GltfCorrectiveOffsets(tmpl, poses[f], artex_positions, options.corrective, &offsets, &stats);
     s.singular_vertices += stats.singular_vertices;
     // The residual of what the file holds: offsets rounded to float as written.
-    const Eigen::MatrixX3d stored = offsets.cast<float>().cast<double>();
+    const Eigen::MatrixX3f stored = offsets.cast<float>();
     Eigen::MatrixX3d exact_positions;
-    GltfSkinnedPositions(tmpl, poses[f], &stored, &exact_positions);
+    const Eigen::MatrixX3d stored_d = stored.cast<double>();
+    GltfSkinnedPositions(tmpl, poses[f], &stored_d, &exact_positions);
     const Eigen::VectorXd exact_error = (exact_positions - artex_positions).rowwise().norm();
     s.exact_max_residual_mm = std::max(s.exact_max_residual_mm, 1e3 * exact_error.maxCoeff());
     exact_sum += exact_error.sum();
-    correctives.push_back(stored);
+    Eigen::Vector3f lo = Eigen::Vector3f::Constant(std::numeric_limits<float>::infinity());
+    Eigen::Vector3f hi = -lo;
+    for (std::size_t i = 0; i < pairs.size(); ++i) {
+      const Eigen::Vector3f d = stored.row(pairs[i].first).transpose();
+      lo = lo.cwiseMin(d);
+      hi = hi.cwiseMax(d);
+      for (int c = 0; c < 3; ++c) displacement[3 * i + c] = d[c];
+    }
+    layout.min.push_back(lo);
+    layout.max.push_back(hi);
+    if (std::fwrite(displacement.data(), sizeof(float), displacement.size(), spill.get()) !=
+        displacement.size()) {
+      throw Error("cannot write the morph targets to a temporary file (disk full?)");
+    }
   }
   if (count > 0) s.lbs_mean_residual_mm = 1e3 * lbs_sum / static_cast<double>(count);
   if (options.exact && count > 0) {
@@ -1322,24 +1437,78 @@ std::string EncodeAnimatedGlb(const Template& tmpl, const std::vector<Pose>& pos
     s.exact_max_residual_mm = s.lbs_max_residual_mm;
     s.exact_mean_residual_mm = s.lbs_mean_residual_mm;
   }
-  s.morph_targets = options.exact ? static_cast<int>(correctives.size()) : 0;
-  const std::string bytes = Serialize(
-      BuildModel(tmpl, poses, frame_rate, texture, options.exact ? &correctives : nullptr));
-  s.bytes = bytes.size();
+  s.morph_targets = layout.count();
+  const tinygltf::Model model =
+      BuildModel(tmpl, poses, frame_rate, texture, options.exact ? &layout : nullptr);
+  const std::string glb = Serialize(model);  // the buffer's own data, without the targets
+  const uint64_t external = static_cast<uint64_t>(layout.count()) * pairs.size() * 12;
+  if (external == 0) {
+    out.write(glb.data(), static_cast<std::streamsize>(glb.size()));
+    s.bytes = glb.size();
+    if (summary) *summary = s;
+    return;
+  }
+  // Re-frame tinygltf's GLB: the JSON with the buffer's whole length, the BIN chunk with the
+  // targets appended (their views start at the own data's length rounded up to 4).
+  const uint32_t json_length = ReadU32(glb, 12);
+  const uint32_t bin_length = ReadU32(glb, 20 + json_length);
+  const uint64_t own = (model.buffers[0].data.size() + 3) / 4 * 4;
+  if (bin_length != own) throw Error("glTF serialisation: unexpected BIN chunk length");
+  nlohmann::json json = nlohmann::json::parse(glb.substr(20, json_length));
+  json["buffers"][0]["byteLength"] = own + external;
+  std::string text = json.dump();
+  while (text.size() % 4 != 0) text.push_back(' ');
+  const uint64_t total = 12 + 8 + text.size() + 8 + own + external;
+  if (total > 0xffffffffull) {
+    throw Error("animated glb: " + std::to_string(total) + " bytes, beyond GLB's 4 GiB (" +
+                std::to_string(poses.size()) + " frames of " + std::to_string(pairs.size()) +
+                " vertices); write fewer frames or without `exact`");
+  }
+  out.write("glTF", 4);
+  PutU32(out, 2);
+  PutU32(out, static_cast<uint32_t>(total));
+  PutU32(out, static_cast<uint32_t>(text.size()));
+  out.write("JSON", 4);
+  out.write(text.data(), static_cast<std::streamsize>(text.size()));
+  PutU32(out, static_cast<uint32_t>(own + external));
+  out.write("BIN\0", 4);
+  out.write(glb.data() + 28 + json_length, static_cast<std::streamsize>(own));
+  std::rewind(spill.get());
+  std::vector<char> block(1 << 20);
+  uint64_t copied = 0;
+  while (copied < external) {
+    const std::size_t n = std::fread(block.data(), 1, block.size(), spill.get());
+    if (n == 0) throw Error("cannot read the morph targets back from their temporary file");
+    out.write(block.data(), static_cast<std::streamsize>(n));
+    copied += n;
+  }
+  if (copied != external) throw Error("morph targets: temporary file of the wrong length");
+  s.bytes = total;
   if (summary) *summary = s;
-  return bytes;
+}
+
+}  // namespace
+
+std::string EncodeAnimatedGlb(const Template& tmpl, const std::vector<Pose>& poses,
+                              double frame_rate, const GlbTexture* texture,
+                              const AnimatedGlbOptions& options, AnimatedGlbSummary* summary) {
+  std::ostringstream out(std::ios::binary);
+  WriteAnimatedGlbTo(out, tmpl, poses, frame_rate, texture, options, summary);
+  return out.str();
 }
 
 void WriteAnimatedGlb(const std::string& path, const Template& tmpl,
                       const std::vector<Pose>& poses, double frame_rate, const GlbTexture* texture,
                       const AnimatedGlbOptions& options, AnimatedGlbSummary* summary) {
-  std::string bytes;
   try {
-    bytes = EncodeAnimatedGlb(tmpl, poses, frame_rate, texture, options, summary);
+    WriteFileAtomically(path, [&](std::ostream& out) {
+      WriteAnimatedGlbTo(out, tmpl, poses, frame_rate, texture, options, summary);
+    });
   } catch (const Error& e) {
-    Fail(path, e.what());
+    const std::string what = e.what();
+    if (what.rfind(path + ":", 0) == 0) throw;
+    Fail(path, what);
   }
-  WriteFileAtomically(path, bytes);
 }
 
 void WriteTemplateGlb(const std::string& path, const Template& tmpl, const GlbTexture* texture) {

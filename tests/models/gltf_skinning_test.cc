@@ -24,17 +24,39 @@
 namespace artex {
 namespace {
 
-// Accessor contents as floats (count x components); dense accessors only (artex writes those).
+// Accessor contents as floats (count x components), as a glTF viewer reads them: the view's
+// data (zeros without one), then a sparse accessor's values at its indices (artex writes the
+// morph weights sparse: one 1 per keyframe).
 std::vector<float> Floats(const tinygltf::Model& m, int index) {
   const tinygltf::Accessor& a = m.accessors[index];
-  const tinygltf::BufferView& view = m.bufferViews[a.bufferView];
   const int components = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(a.type));
-  std::vector<float> out(a.count * components);
+  std::vector<float> out(a.count * components, 0.0f);
   EXPECT_EQ(a.componentType, TINYGLTF_COMPONENT_TYPE_FLOAT);
-  const unsigned char* src = m.buffers[view.buffer].data.data() + view.byteOffset + a.byteOffset;
-  const size_t stride = view.byteStride ? view.byteStride : components * sizeof(float);
-  for (size_t i = 0; i < a.count; ++i)
-    std::memcpy(&out[i * components], src + i * stride, components * sizeof(float));
+  if (a.bufferView >= 0) {
+    const tinygltf::BufferView& view = m.bufferViews[a.bufferView];
+    const unsigned char* src =
+        m.buffers[view.buffer].data.data() + view.byteOffset + a.byteOffset;
+    const size_t stride = view.byteStride ? view.byteStride : components * sizeof(float);
+    for (size_t i = 0; i < a.count; ++i)
+      std::memcpy(&out[i * components], src + i * stride, components * sizeof(float));
+  }
+  if (a.sparse.isSparse) {
+    EXPECT_EQ(a.sparse.indices.componentType, TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT);
+    const tinygltf::BufferView& iv = m.bufferViews[a.sparse.indices.bufferView];
+    const tinygltf::BufferView& vv = m.bufferViews[a.sparse.values.bufferView];
+    const unsigned char* indices =
+        m.buffers[iv.buffer].data.data() + iv.byteOffset + a.sparse.indices.byteOffset;
+    const unsigned char* values =
+        m.buffers[vv.buffer].data.data() + vv.byteOffset + a.sparse.values.byteOffset;
+    for (int k = 0; k < a.sparse.count; ++k) {
+      uint32_t i = 0;
+      std::memcpy(&i, indices + 4 * k, 4);
+      EXPECT_LT(i, a.count);
+      if (i >= a.count) continue;
+      std::memcpy(&out[i * components], values + k * components * sizeof(float),
+                  components * sizeof(float));
+    }
+  }
   return out;
 }
 

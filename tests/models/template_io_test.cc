@@ -822,20 +822,27 @@ TEST_F(TemplateIoTest, KhronosValidatorAcceptsTheFiles) {
   WriteTemplateGlb(Path("static.glb"), tmpl);
   WriteTemplateGlb(Path("textured.glb"), tmpl, &texture);
   WriteAnimatedGlb(Path("animated.glb"), tmpl, poses, 24.0, &texture);
+  // With a morph target per frame (appended after the buffer's own data) and their weights
+  // as a sparse accessor.
+  AnimatedGlbSummary exact;
+  WriteAnimatedGlb(Path("exact.glb"), tmpl, poses, 24.0, &texture, AnimatedGlbOptions(), &exact);
+  EXPECT_EQ(exact.morph_targets, 3);
+  EXPECT_EQ(exact.bytes, fs::file_size(Path("exact.glb")));
   Eigen::MatrixX3d posed = tmpl.vertices;
   WritePosedMesh(Path("posed.glb"), posed, tmpl.triangles);
   const std::string report = Path("report.txt");
   const std::string command = "node '" + std::string(ARTEX_SOURCE_DIR) +
                               "/scripts/validate_gltf.mjs' --node-modules '" + modules + "' '" +
                               Path("static.glb") + "' '" + Path("textured.glb") + "' '" +
-                              Path("animated.glb") + "' '" + Path("posed.glb") + "' > '" + report +
-                              "' 2>&1";
+                              Path("animated.glb") + "' '" + Path("exact.glb") + "' '" +
+                              Path("posed.glb") + "' > '" + report + "' 2>&1";
   const int status = std::system(command.c_str());
   const std::string output = ReadBytes(report);
   std::printf("%s", output.c_str());
   EXPECT_EQ(status, 0) << output;
   EXPECT_NE(output.find("static.glb: 0 errors"), std::string::npos) << output;
   EXPECT_NE(output.find("animated.glb: 0 errors"), std::string::npos) << output;
+  EXPECT_NE(output.find("exact.glb: 0 errors, 0 warnings"), std::string::npos) << output;
   // And the validator does flag a corrupted file (the check can fail).
   Glb broken = ParseGlb(ReadBytes(Path("static.glb")));
   WriteFloat(&broken, AttributeAccessor(broken, "WEIGHTS_0"), 0, 0, 4, 0.25f);
