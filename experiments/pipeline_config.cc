@@ -565,7 +565,8 @@ bool PipelineOptions::IsValid(std::string* error) const {
 void BindShape(const Config& c, ShapeOptions* o) {
   c.CheckKeys({"mode", "retrack", "symmetric", "calibration_frames", "calibration_stride", "calibration_rounds", "radii",
                "iterations_per_stage", "over_relaxation", "bias_correction",
-               "visibility_min_cos", "girth_max_radius", "prior_weight", "pose_damping",
+               "visibility_min_cos", "girth_max_radius", "scan_to_model_weight",
+               "scan_to_model_voxel", "scan_to_model_max_distance", "prior_weight", "pose_damping",
                "bone_min", "bone_max", "girth_min", "girth_max", "refine_every",
                "refine_prior_weight", "max_fit_vertices"});
   c.GetEnum("mode", ShapeModeNames(), &o->mode);
@@ -580,6 +581,9 @@ void BindShape(const Config& c, ShapeOptions* o) {
   c.Get("bias_correction", &o->bias_correction);
   c.Get("visibility_min_cos", &o->visibility_min_cos);
   c.Get("girth_max_radius", &o->girth_max_radius);
+  c.Get("scan_to_model_weight", &o->scan_to_model_weight);
+  c.Get("scan_to_model_voxel", &o->scan_to_model_voxel);
+  c.Get("scan_to_model_max_distance", &o->scan_to_model_max_distance);
   c.Get("prior_weight", &o->prior_weight);
   c.Get("pose_damping", &o->pose_damping);
   c.Get("bone_min", &o->bone_min);

@@ -403,6 +403,19 @@ OutputStage::OutputStage(const PipelineOptions& options, const Template& tmpl,
       progress_(progress),
       start_(PipelineClock::now()) {}
 
+void OutputStage::SyncRestGeometry() {
+  const Template& current = skinning_.model();
+  // Only the joint centres enter PosedJointCenters (a girth-only change keeps them).
+  bool same = current.num_joints() == tmpl_.num_joints();
+  for (int j = 0; same && j < tmpl_.num_joints(); ++j) {
+    same = current.joints[j].center == tmpl_.joints[j].center;
+  }
+  if (same) return;
+  Eigen::MatrixX3d centers(tmpl_.num_joints(), 3);
+  for (int j = 0; j < tmpl_.num_joints(); ++j) centers.row(j) = tmpl_.joints[j].center.transpose();
+  skinning_.SetRestGeometry(tmpl_.vertices, centers);
+}
+
 void OutputStage::Process(FrameWork* work) {
   PipelineResult& result = *result_;
   FrameRecord& record = work->record;
@@ -458,6 +471,9 @@ void OutputStage::Process(FrameWork* work) {
     record.mean_vertex_error_mm = 1000.0 * mean;
     record.max_vertex_error_mm = 1000.0 * max;
     Eigen::MatrixX3d ours, theirs;
+    // Shape estimation swaps the subject's rest geometry into tmpl_ (TrackStage): the joint
+    // centres must be the subject's from then on, not the template's this stage started with.
+    SyncRestGeometry();
     skinning_.PosedJointCenters(frame_pose, &ours);
     ours = TransformRows(truth_.to_truth_world, ours);
     truth_.subject_skinning->PosedJointCenters(truth.pose, &theirs);

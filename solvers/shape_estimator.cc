@@ -4,7 +4,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <sstream>
+#include <unordered_map>
 
 #include "models/error.h"
 #include "models/normals.h"
@@ -31,6 +33,15 @@ bool ShapeOptions::IsValid(std::string* error) const {
     msg << "shape.visibility_min_cos: expected a value in [-1, 1), found " << visibility_min_cos;
   } else if (!(std::isfinite(girth_max_radius) && girth_max_radius > 0.0)) {
     msg << "shape.girth_max_radius: expected a finite value > 0 (m), found " << girth_max_radius;
+  } else if (!(std::isfinite(scan_to_model_weight) && scan_to_model_weight >= 0.0)) {
+    msg << "shape.scan_to_model_weight: expected a finite value >= 0, found "
+        << scan_to_model_weight;
+  } else if (!(std::isfinite(scan_to_model_voxel) && scan_to_model_voxel >= 0.0)) {
+    msg << "shape.scan_to_model_voxel: expected a finite value >= 0 (m; 0: every point), found "
+        << scan_to_model_voxel;
+  } else if (!positive(scan_to_model_max_distance)) {
+    msg << "shape.scan_to_model_max_distance: expected a finite value > 0 (m), found "
+        << scan_to_model_max_distance;
   } else if (!(std::isfinite(prior_weight) && prior_weight >= 0.0)) {
     msg << "shape.prior_weight: expected a finite value >= 0, found " << prior_weight;
   } else if (!(std::isfinite(pose_damping) && pose_damping >= 0.0)) {
@@ -59,6 +70,31 @@ bool ShapeOptions::IsValid(std::string* error) const {
 }
 
 namespace {
+// Mean point per occupied cubic cell of side `cell` (all points when cell <= 0).
+Eigen::MatrixX3d VoxelMeans(const Eigen::MatrixX3d& points, double cell) {
+  if (!(cell > 0.0)) return points;
+  std::unordered_map<std::int64_t, int> slot;
+  std::vector<Eigen::Vector3d> sum;
+  std::vector<int> count;
+  for (int k = 0; k < points.rows(); ++k) {
+    const Eigen::Vector3d p = points.row(k).transpose();
+    const auto key = [&](int a) {
+      return static_cast<std::int64_t>(std::floor(p[a] / cell)) & 0x1fffff;
+    };
+    const std::int64_t id = key(0) | key(1) << 21 | key(2) << 42;
+    const auto [it, inserted] = slot.emplace(id, static_cast<int>(sum.size()));
+    if (inserted) {
+      sum.push_back(Eigen::Vector3d::Zero());
+      count.push_back(0);
+    }
+    sum[it->second] += p;
+    ++count[it->second];
+  }
+  Eigen::MatrixX3d out(sum.size(), 3);
+  for (size_t c = 0; c < sum.size(); ++c) out.row(c) = sum[c].transpose() / count[c];
+  return out;
+}
+
 ShapeOptions Checked(const ShapeOptions& options) {
   std::string error;
   if (!options.IsValid(&error)) throw Error(error);
@@ -110,6 +146,16 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
   EStepOptions estep_options = options_.estep;
   estep_options.mode = EStepMode::kRadius;
   for (const Scan* s : scans) esteps.push_back(std::make_unique<EStep>(*s, estep_options));
+  const bool scan_to_model = options_.scan_to_model_weight > 0.0;
+  std::vector<Eigen::MatrixX3d> scan_samples(nf);
+  if (scan_to_model) {
+    for (int f = 0; f < nf; ++f) {
+      scan_samples[f] = VoxelMeans(scans[f]->points, options_.scan_to_model_voxel);
+    }
+  }
+  const double max_d2 = options_.scan_to_model_max_distance * options_.scan_to_model_max_distance;
+  std::vector<double> reverse_count;
+  Eigen::MatrixX3d reverse_sum;
   const Eigen::MatrixXd ete = model_.expansion().transpose() * model_.expansion();
 
   SkinningOptions serial;
@@ -171,13 +217,33 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
             }
           }
         }
+        // Scan-to-model: each scan sample's nearest fit vertex; per vertex the count and sum.
+        reverse_count.assign(n, 0.0);
+        reverse_sum.setZero(n, 3);
+        double c_reverse = 0.0;
+        if (scan_to_model && scan_samples[f].rows() > 0) {
+          const PointCloudIndex index(sub_posed);
+          double d2 = 0.0;
+          for (int k = 0; k < scan_samples[f].rows(); ++k) {
+            const Eigen::Vector3d p = scan_samples[f].row(k).transpose();
+            const int i = index.Nearest(p, &d2);
+            if (i < 0 || d2 > max_d2) continue;
+            reverse_count[i] += 1.0;
+            reverse_sum.row(i) += p.transpose();
+          }
+          c_reverse = options_.scan_to_model_weight / scan_samples[f].rows();
+        }
         const double c = 1.0 / total;
         model_.PosedJacobian(pose, fit_vertices_, &shape_jacobian);
         const int offset = nq + f * np;
         std::vector<int> index;
         Eigen::Matrix<double, 3, Eigen::Dynamic> local;
         for (int i = 0; i < n; ++i) {
-          const double w = c * targets.weight[i];
+          // Both terms are quadratic in the same vertex: w1 |v - a|^2 + w2 |v - b|^2 has the
+          // gradient and Gauss-Newton matrix of (w1 + w2) |v - (w1 a + w2 b) / (w1 + w2)|^2.
+          const double w1 = c * targets.weight[i];
+          const double w2 = c_reverse * reverse_count[i];
+          const double w = (w1 > 0.0 ? w1 : 0.0) + w2;
           if (!(w > 0.0)) continue;
           const int v = fit_vertices_[i];
           const std::vector<int>& cols = jacobian.Columns(v);
@@ -191,14 +257,24 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
             local.col(nq + k - 1) = block.col(k);
             index[nq + k - 1] = offset + cols[k];
           }
-          const Eigen::Vector3d e = (posed.row(v) - targets.mean.row(i)).transpose();
+          const Eigen::Vector3d x = posed.row(v).transpose();
+          Eigen::Vector3d target = Eigen::Vector3d::Zero();
+          if (w1 > 0.0) {
+            target += w1 * targets.mean.row(i).transpose();
+            cost += w1 * (x - targets.mean.row(i).transpose()).squaredNorm();
+          }
+          if (w2 > 0.0) {
+            const Eigen::Vector3d b = reverse_sum.row(i).transpose() / reverse_count[i];
+            target += w2 * b;
+            cost += w2 * (x - b).squaredNorm();
+          }
+          const Eigen::Vector3d e = x - target / w;
           const Eigen::MatrixXd jtj = w * local.transpose() * local;
           const Eigen::VectorXd jte = w * local.transpose() * e;
           for (int a = 0; a < m; ++a) {
             g[index[a]] += jte[a];
             for (int b = 0; b < m; ++b) h(index[a], index[b]) += jtj(a, b);
           }
-          cost += w * e.squaredNorm();
         }
       }
       const Eigen::VectorXd dq = q_ - q_ref;

@@ -60,6 +60,15 @@ struct ShapeOptions {
   double visibility_min_cos = 0.3;
   // Girths are held at stages with a radius above this (m): wide radii bias them most.
   double girth_max_radius = 0.04;
+  // Scan-to-model term: every scan point (voxel-subsampled, cell `scan_to_model_voxel` m)
+  // pulls its nearest posed template vertex (within `scan_to_model_max_distance` m), weight
+  // `scan_to_model_weight` relative to the data term (both normalised per frame). The
+  // template-to-scan E-step alone sees no scan beyond its radius: where the template's limbs
+  // are short (its feet on the subject's shins) the scan's feet pull nothing and the bone
+  // lengths stay short; this term makes the template cover the scan. 0: off.
+  double scan_to_model_weight = 0.0;
+  double scan_to_model_voxel = 0.01;
+  double scan_to_model_max_distance = 0.3;
   double prior_weight = 1e-5;             // towards the template (cost m^2 per unit^2 of a factor)
   double pose_damping = 1e-5;             // per frame on the pose update (per unit^2 / rad^2 / m^2)
   double bone_min = 0.7, bone_max = 1.4;  // bone length factor bounds
