@@ -566,7 +566,7 @@ void BindShape(const Config& c, ShapeOptions* o) {
   c.CheckKeys({"mode", "retrack", "symmetric", "calibration_frames", "calibration_stride", "calibration_rounds", "radii",
                "iterations_per_stage", "over_relaxation", "bias_correction",
                "visibility_min_cos", "girth_max_radius", "scan_to_model_weight",
-               "scan_to_model_voxel", "scan_to_model_max_distance", "prior_weight", "pose_damping",
+               "scan_to_model_voxel", "scan_to_model_max_distance", "scan_to_model_girth", "prior_weight", "pose_damping",
                "bone_min", "bone_max", "girth_min", "girth_max", "refine_every",
                "refine_prior_weight", "max_fit_vertices"});
   c.GetEnum("mode", ShapeModeNames(), &o->mode);
@@ -584,6 +584,7 @@ void BindShape(const Config& c, ShapeOptions* o) {
   c.Get("scan_to_model_weight", &o->scan_to_model_weight);
   c.Get("scan_to_model_voxel", &o->scan_to_model_voxel);
   c.Get("scan_to_model_max_distance", &o->scan_to_model_max_distance);
+  c.Get("scan_to_model_girth", &o->scan_to_model_girth);
   c.Get("prior_weight", &o->prior_weight);
   c.Get("pose_damping", &o->pose_damping);
   c.Get("bone_min", &o->bone_min);

@@ -95,6 +95,22 @@ Eigen::MatrixX3d VoxelMeans(const Eigen::MatrixX3d& points, double cell) {
   return out;
 }
 
+// Per point of `index` (the fit vertices): how many of `samples` have it as their nearest
+// (within sqrt(max_d2)) and their sum.
+void NearestSums(const PointCloudIndex& index, const Eigen::MatrixX3d& samples, double max_d2,
+                 std::vector<double>* count, Eigen::MatrixX3d* sum) {
+  count->assign(index.size(), 0.0);
+  sum->setZero(index.size(), 3);
+  double d2 = 0.0;
+  for (int k = 0; k < samples.rows(); ++k) {
+    const Eigen::Vector3d p = samples.row(k).transpose();
+    const int i = index.Nearest(p, &d2);
+    if (i < 0 || d2 > max_d2) continue;
+    (*count)[i] += 1.0;
+    sum->row(i) += p.transpose();
+  }
+}
+
 ShapeOptions Checked(const ShapeOptions& options) {
   std::string error;
   if (!options.IsValid(&error)) throw Error(error);
@@ -154,8 +170,8 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
     }
   }
   const double max_d2 = options_.scan_to_model_max_distance * options_.scan_to_model_max_distance;
-  std::vector<double> reverse_count;
-  Eigen::MatrixX3d reverse_sum;
+  std::vector<double> reverse_count, self_count;
+  Eigen::MatrixX3d reverse_sum, self_sum;
   const Eigen::MatrixXd ete = model_.expansion().transpose() * model_.expansion();
 
   SkinningOptions serial;
@@ -190,8 +206,8 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
         esteps[f]->Compute(view, radius, &targets);
         const double total = targets.total_weight();
         if (!(total > 0.0)) continue;
+        Scan self;  // the posed template's camera-facing vertices (bias_correction)
         if (options_.bias_correction) {
-          Scan self;
           std::vector<int> visible;
           for (int v = 0; v < posed.rows(); ++v) {
             const Eigen::Vector3d x = posed.row(v).transpose();
@@ -223,13 +239,19 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
         double c_reverse = 0.0;
         if (scan_to_model && scan_samples[f].rows() > 0) {
           const PointCloudIndex index(sub_posed);
-          double d2 = 0.0;
-          for (int k = 0; k < scan_samples[f].rows(); ++k) {
-            const Eigen::Vector3d p = scan_samples[f].row(k).transpose();
-            const int i = index.Nearest(p, &d2);
-            if (i < 0 || d2 > max_d2) continue;
-            reverse_count[i] += 1.0;
-            reverse_sum.row(i) += p.transpose();
+          NearestSums(index, scan_samples[f], max_d2, &reverse_count, &reverse_sum);
+          if (options_.bias_correction) {
+            // The same bias as the E-step's: a one-sided scan's samples pull a limb's side
+            // vertices towards the camera and inwards. Measured on the template's own
+            // camera-facing vertices (sampled alike) and subtracted: the truth is a fixed point.
+            NearestSums(index, VoxelMeans(self.points, options_.scan_to_model_voxel), max_d2,
+                        &self_count, &self_sum);
+            for (int i = 0; i < n; ++i) {
+              if (reverse_count[i] > 0.0 && self_count[i] > 0.0) {
+                reverse_sum.row(i) -= reverse_count[i] * (self_sum.row(i) / self_count[i] -
+                                                          sub_posed.row(i));
+              }
+            }
           }
           c_reverse = options_.scan_to_model_weight / scan_samples[f].rows();
         }
@@ -239,8 +261,6 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
         std::vector<int> index;
         Eigen::Matrix<double, 3, Eigen::Dynamic> local;
         for (int i = 0; i < n; ++i) {
-          // Both terms are quadratic in the same vertex: w1 |v - a|^2 + w2 |v - b|^2 has the
-          // gradient and Gauss-Newton matrix of (w1 + w2) |v - (w1 a + w2 b) / (w1 + w2)|^2.
           const double w1 = c * targets.weight[i];
           const double w2 = c_reverse * reverse_count[i];
           const double w = (w1 > 0.0 ? w1 : 0.0) + w2;
@@ -258,22 +278,26 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
             index[nq + k - 1] = offset + cols[k];
           }
           const Eigen::Vector3d x = posed.row(v).transpose();
-          Eigen::Vector3d target = Eigen::Vector3d::Zero();
-          if (w1 > 0.0) {
-            target += w1 * targets.mean.row(i).transpose();
-            cost += w1 * (x - targets.mean.row(i).transpose()).squaredNorm();
-          }
+          const auto accumulate = [&](double weight, const Eigen::Vector3d& e,
+                                      const Eigen::Matrix<double, 3, Eigen::Dynamic>& jac) {
+            const Eigen::MatrixXd jtj = weight * jac.transpose() * jac;
+            const Eigen::VectorXd jte = weight * jac.transpose() * e;
+            for (int a = 0; a < m; ++a) {
+              g[index[a]] += jte[a];
+              for (int b = 0; b < m; ++b) h(index[a], index[b]) += jtj(a, b);
+            }
+            cost += weight * e.squaredNorm();
+          };
+          if (w1 > 0.0) accumulate(w1, x - targets.mean.row(i).transpose(), local);
           if (w2 > 0.0) {
             const Eigen::Vector3d b = reverse_sum.row(i).transpose() / reverse_count[i];
-            target += w2 * b;
-            cost += w2 * (x - b).squaredNorm();
-          }
-          const Eigen::Vector3d e = x - target / w;
-          const Eigen::MatrixXd jtj = w * local.transpose() * local;
-          const Eigen::VectorXd jte = w * local.transpose() * e;
-          for (int a = 0; a < m; ++a) {
-            g[index[a]] += jte[a];
-            for (int b = 0; b < m; ++b) h(index[a], index[b]) += jtj(a, b);
+            if (options_.scan_to_model_girth) {
+              accumulate(w2, x - b, local);
+            } else {
+              Eigen::Matrix<double, 3, Eigen::Dynamic> held = local;
+              for (int p : girth_columns) held.col(p).setZero();
+              accumulate(w2, x - b, held);
+            }
           }
         }
       }

@@ -69,6 +69,8 @@ struct ShapeOptions {
   double scan_to_model_weight = 0.0;
   double scan_to_model_voxel = 0.01;
   double scan_to_model_max_distance = 0.3;
+  // The term also moves the girths (false: bone lengths and poses only).
+  bool scan_to_model_girth = true;
   double prior_weight = 1e-5;             // towards the template (cost m^2 per unit^2 of a factor)
   double pose_damping = 1e-5;             // per frame on the pose update (per unit^2 / rad^2 / m^2)
   double bone_min = 0.7, bone_max = 1.4;  // bone length factor bounds
