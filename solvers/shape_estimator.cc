@@ -42,6 +42,8 @@ bool ShapeOptions::IsValid(std::string* error) const {
   } else if (!positive(scan_to_model_max_distance)) {
     msg << "shape.scan_to_model_max_distance: expected a finite value > 0 (m), found "
         << scan_to_model_max_distance;
+  } else if (!(std::isfinite(chain_prior_weight) && chain_prior_weight >= 0.0)) {
+    msg << "shape.chain_prior_weight: expected a finite value >= 0, found " << chain_prior_weight;
   } else if (!(std::isfinite(prior_weight) && prior_weight >= 0.0)) {
     msg << "shape.prior_weight: expected a finite value >= 0, found " << prior_weight;
   } else if (!(std::isfinite(pose_damping) && pose_damping >= 0.0)) {
@@ -95,6 +97,15 @@ Eigen::MatrixX3d VoxelMeans(const Eigen::MatrixX3d& points, double cell) {
   return out;
 }
 
+// A fixed pseudo-random number in [0, 1) per index (splitmix64).
+double Uniform01(std::uint64_t i) {
+  std::uint64_t z = i + 0x9e3779b97f4a7c15ULL;
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  z ^= z >> 31;
+  return static_cast<double>(z >> 11) * 0x1.0p-53;
+}
+
 // Per point of `index` (the fit vertices): how many of `samples` have it as their nearest
 // (within sqrt(max_d2)) and their sum.
 void NearestSums(const PointCloudIndex& index, const Eigen::MatrixX3d& samples, double max_d2,
@@ -119,13 +130,34 @@ ShapeOptions Checked(const ShapeOptions& options) {
 }  // namespace
 
 ShapeEstimator::ShapeEstimator(const Template& base, const ShapeOptions& options)
-    : options_(Checked(options)), model_(base, options.mode, options.symmetric) {
+    : options_(Checked(options)),
+      model_(base, options.mode, options.symmetric, options.leaf_lengths) {
   q_ = Eigen::VectorXd::Zero(model_.num_parameters());
   const int v = base.num_vertices();
   const int stride = options_.max_fit_vertices > 0 && v > options_.max_fit_vertices
                          ? (v + options_.max_fit_vertices - 1) / options_.max_fit_vertices
                          : 1;
   for (int i = 0; i < v; i += stride) fit_vertices_.push_back(i);
+  // Chain prior: bone j and the bone continuing it (the child stretching segment j) when the
+  // two are collinear (cosine >= 0.9 of their rest offsets): thigh/shank, upper arm/forearm,
+  // spine/chest/neck/head, not the lateral hip or shoulder offsets.
+  const int nj = base.num_joints();
+  std::vector<std::pair<int, int>> pairs;
+  for (int j = 1; j < nj; ++j) {
+    const Eigen::Vector3d bone = base.joints[j].center - base.joints[base.joints[j].parent].center;
+    for (int c = j + 1; c < nj; ++c) {
+      if (base.joints[c].parent != j) continue;
+      const Eigen::Vector3d next = base.joints[c].center - base.joints[j].center;
+      if (bone.norm() > 0.0 && next.norm() > 0.0 &&
+          bone.dot(next) >= 0.9 * bone.norm() * next.norm()) {
+        pairs.emplace_back(j, c);
+      }
+    }
+  }
+  chain_ = Eigen::MatrixXd::Zero(static_cast<int>(pairs.size()), model_.num_parameters());
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    chain_.row(k) = model_.expansion().row(pairs[k].first) - model_.expansion().row(pairs[k].second);
+  }
 }
 
 ShapeEstimator::~ShapeEstimator() = default;
@@ -134,9 +166,10 @@ void ShapeEstimator::ClampToBounds(Eigen::VectorXd* q) const {
   const int nj = model_.base().num_joints();
   const Eigen::MatrixXd& e = model_.expansion();
   for (int p = 0; p < q->size(); ++p) {
-    // A parameter moves girth rows only (bones_girth's girths) or bone rows (also kScale).
+    // A parameter moves girth rows only (bones_girth's girths) or length rows: bones (also
+    // kScale) or leaf segments.
     bool bone = false;
-    for (int r = 0; r < nj; ++r) bone = bone || e(r, p) != 0.0;
+    for (int r = 0; r < nj; ++r) bone = bone || e(r, p) != 0.0 || e(2 * nj + r, p) != 0.0;
     const double lo = (bone ? options_.bone_min : options_.girth_min) - 1.0;
     const double hi = (bone ? options_.bone_max : options_.girth_max) - 1.0;
     (*q)[p] = std::clamp((*q)[p], lo, hi);
@@ -182,7 +215,9 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
   // Columns of q that move girths only (held at wide radii).
   std::vector<int> girth_columns;
   for (int p = 0; p < nq; ++p) {
-    if (model_.expansion().col(p).head(base.num_joints()).isZero()) girth_columns.push_back(p);
+    const int nj = base.num_joints();
+    const auto col = model_.expansion().col(p);
+    if (col.head(nj).isZero() && col.tail(nj).isZero()) girth_columns.push_back(p);
   }
   bool first = true;
   for (double radius : options_.radii) {
@@ -211,8 +246,14 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
           std::vector<int> visible;
           for (int v = 0; v < posed.rows(); ++v) {
             const Eigen::Vector3d x = posed.row(v).transpose();
-            if (!has_camera_ || normals.row(v).dot((camera_center_ - x).normalized()) >
-                                    options_.visibility_min_cos) {
+            const double facing =
+                has_camera_ ? normals.row(v).dot((camera_center_ - x).normalized()) : 1.0;
+            if (facing <= options_.visibility_min_cos) continue;
+            // A depth camera samples a surface with a density ~ cos(angle to the view ray);
+            // the template's vertices are uniform: keep each with that probability (a fixed
+            // pseudo-random number per vertex) so the self E-step sees the scan's sampling.
+            if (options_.bias_density && has_camera_ && Uniform01(v) > facing) continue;
+            {
               visible.push_back(v);
             }
           }
@@ -305,6 +346,13 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
       cost += prior_weight * dq.dot(ete * dq);
       h.topLeftCorner(nq, nq) += prior_weight * ete;
       g.head(nq) += prior_weight * ete * dq;
+      if (options_.chain_prior_weight > 0.0 && chain_.rows() > 0) {
+        // w |C q|^2, C q the differences of collinear bones' length factors.
+        const Eigen::VectorXd d = chain_ * q_;
+        cost += options_.chain_prior_weight * d.squaredNorm();
+        h.topLeftCorner(nq, nq) += options_.chain_prior_weight * chain_.transpose() * chain_;
+        g.head(nq) += options_.chain_prior_weight * chain_.transpose() * d;
+      }
       for (int f = 0; f < nf; ++f) {
         const int offset = nq + f * np;
         for (int p = 1; p < np; ++p) h(offset + p, offset + p) += options_.pose_damping;

@@ -34,6 +34,12 @@ struct ShapeOptions {
   // second fitting pass. Not with pipeline.live.
   bool retrack = false;
   bool symmetric = true;       // l_/r_ joints share their parameters
+  // After a calibration solve the tracker continues from the current frame's pose as the solve
+  // refined it with the new shape (false: from its own pose, fitted with the previous shape).
+  bool seed_pose = false;
+  // bones, bones_girth: leaf segments (head, hands, feet) get their own length parameter
+  // instead of stretching with their bone (models/shape.h).
+  bool leaf_lengths = false;
   int calibration_frames = 5;  // accepted frames per calibration round (>= 1)
   // Every n-th accepted frame (with a settled global scale) is a calibration frame: poses
   // further apart constrain the bone lengths better. >= 1.
@@ -58,6 +64,10 @@ struct ShapeOptions {
   // uses only the template vertices facing the camera (cosine of the normal with the direction
   // to the camera above this) when the camera centre is known (SetCameraCenter), else all.
   double visibility_min_cos = 0.3;
+  // ... and keeps each of them with probability cos(angle to the view ray), the depth camera's
+  // sampling density (the template's vertices are uniform over the surface; a scan thins out
+  // towards the silhouette, which moves its E-step means further inwards).
+  bool bias_density = false;
   // Girths are held at stages with a radius above this (m): wide radii bias them most.
   double girth_max_radius = 0.04;
   // Scan-to-model term: every scan point (voxel-subsampled, cell `scan_to_model_voxel` m)
@@ -71,6 +81,12 @@ struct ShapeOptions {
   double scan_to_model_max_distance = 0.3;
   // The term also moves the girths (false: bone lengths and poses only).
   bool scan_to_model_girth = true;
+  // Chain prior: chain_prior_weight |b_j - b_c|^2 per pair of collinear bones (a bone and the
+  // one continuing it: thigh/shank, upper arm/forearm, spine/chest/neck/head). Their split is
+  // seen only through the bends (the knee in a walk; the elbow and the spine hardly bend), so
+  // without it the split drifts (the generator and real bodies keep it within a few per cent).
+  // Cost m^2 per unit^2 of a factor difference, as prior_weight. 0: off.
+  double chain_prior_weight = 0.0;
   double prior_weight = 1e-5;             // towards the template (cost m^2 per unit^2 of a factor)
   double pose_damping = 1e-5;             // per frame on the pose update (per unit^2 / rad^2 / m^2)
   double bone_min = 0.7, bone_max = 1.4;  // bone length factor bounds
@@ -139,6 +155,7 @@ class ShapeEstimator {
   Eigen::Vector3d camera_center_ = Eigen::Vector3d::Zero();
   bool has_camera_ = false;
   std::vector<int> fit_vertices_;
+  Eigen::MatrixXd chain_;  // collinear bone pairs x Q: difference of their length factors
   Eigen::VectorXd q_;
   std::vector<Scan> scans_;
   std::vector<Pose> poses_;
