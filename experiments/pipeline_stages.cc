@@ -19,7 +19,6 @@
 #include "models/mesh_export.h"
 #include "models/normals.h"
 #include "solvers/particle_predictor.h"
-#include "solvers/estep.h"  // DEBUGPARTS
 
 namespace artex {
 namespace {
@@ -479,19 +478,6 @@ void OutputStage::Process(FrameWork* work) {
     double mean = 0.0, max = 0.0;
     const Eigen::MatrixX3d tracked_in_truth = TransformRows(truth_.to_truth_world, posed);
     SurfaceErrors(tracked_in_truth, truth.vertices, truth_normals, &mean, &max);
-    if (std::getenv("ARTEX_DEBUG_PARTS")) {  // DEBUGPARTS
-      PointCloudIndex index(truth.vertices);
-      std::vector<double> sum(tmpl_.num_joints(), 0.0), mx(tmpl_.num_joints(), 0.0);
-      std::vector<int> cnt(tmpl_.num_joints(), 0);
-      for (int v = 0; v < tracked_in_truth.rows(); ++v) {
-        double d2 = 0; index.Nearest(tracked_in_truth.row(v).transpose(), &d2);
-        const int j = tmpl_.vertex_joint[v];
-        sum[j] += std::sqrt(d2); cnt[j]++; mx[j] = std::max(mx[j], std::sqrt(d2));
-      }
-      std::fprintf(stderr, "PARTS %d", i);
-      for (int j = 0; j < tmpl_.num_joints(); ++j) std::fprintf(stderr, " %s:%.0f/%.0f", tmpl_.joints[j].name.c_str(), 1000 * sum[j] / std::max(1, cnt[j]), 1000 * mx[j]);
-      std::fprintf(stderr, "\n");
-    }
     record.mean_vertex_error_mm = 1000.0 * mean;
     record.max_vertex_error_mm = 1000.0 * max;
     Eigen::MatrixX3d ours, theirs;
@@ -503,11 +489,6 @@ void OutputStage::Process(FrameWork* work) {
     truth_.subject_skinning->PosedJointCenters(truth.pose, &theirs);
     double joint = 0.0;
     for (const auto& [a, b] : truth_.joint_pairs) joint += (ours.row(a) - theirs.row(b)).norm();
-    if (std::getenv("ARTEX_DEBUG_PARTS")) {  // DEBUGPARTS
-      std::fprintf(stderr, "JOINTS %d", i);
-      for (const auto& [a, b] : truth_.joint_pairs) std::fprintf(stderr, " %s:%.0f", tmpl_.joints[a].name.c_str(), 1000 * (ours.row(a) - theirs.row(b)).norm());
-      std::fprintf(stderr, "\n");
-    }
     record.mean_joint_error_mm =
         truth_.joint_pairs.empty() ? 0.0 : 1000.0 * joint / truth_.joint_pairs.size();
     // A failed fit's kept pose is no measurement: it counts as lost and stays out of the

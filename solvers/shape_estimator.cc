@@ -131,7 +131,7 @@ ShapeOptions Checked(const ShapeOptions& options) {
 
 ShapeEstimator::ShapeEstimator(const Template& base, const ShapeOptions& options)
     : options_(Checked(options)),
-      model_(base, options.mode, options.symmetric, options.leaf_lengths) {
+      model_(base, options.mode, options.symmetric, options.leaf_lengths, options.fork_widths) {
   q_ = Eigen::VectorXd::Zero(model_.num_parameters());
   const int v = base.num_vertices();
   const int stride = options_.max_fit_vertices > 0 && v > options_.max_fit_vertices
@@ -169,7 +169,9 @@ void ShapeEstimator::ClampToBounds(Eigen::VectorXd* q) const {
     // A parameter moves girth rows only (bones_girth's girths) or length rows: bones (also
     // kScale) or leaf segments.
     bool bone = false;
-    for (int r = 0; r < nj; ++r) bone = bone || e(r, p) != 0.0 || e(2 * nj + r, p) != 0.0;
+    for (int r = 0; r < nj; ++r) {
+      bone = bone || e(r, p) != 0.0 || e(2 * nj + r, p) != 0.0 || e(3 * nj + r, p) != 0.0;
+    }
     const double lo = (bone ? options_.bone_min : options_.girth_min) - 1.0;
     const double hi = (bone ? options_.bone_max : options_.girth_max) - 1.0;
     (*q)[p] = std::clamp((*q)[p], lo, hi);
@@ -217,7 +219,7 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
   for (int p = 0; p < nq; ++p) {
     const int nj = base.num_joints();
     const auto col = model_.expansion().col(p);
-    if (col.head(nj).isZero() && col.tail(nj).isZero()) girth_columns.push_back(p);
+    if (col.head(nj).isZero() && col.tail(2 * nj).isZero()) girth_columns.push_back(p);
   }
   bool first = true;
   for (double radius : options_.radii) {

@@ -36,10 +36,13 @@ struct ShapeOptions {
   bool symmetric = true;       // l_/r_ joints share their parameters
   // After a calibration solve the tracker continues from the current frame's pose as the solve
   // refined it with the new shape (false: from its own pose, fitted with the previous shape).
-  bool seed_pose = false;
+  bool seed_pose = true;
   // bones, bones_girth: leaf segments (head, hands, feet) get their own length parameter
   // instead of stretching with their bone (models/shape.h).
-  bool leaf_lengths = false;
+  bool leaf_lengths = true;
+  // bones, bones_girth: the shoulders' and hips' offsets get a width factor across the parent's
+  // axis besides their length along it (models/shape.h).
+  bool fork_widths = true;
   int calibration_frames = 5;  // accepted frames per calibration round (>= 1)
   // Every n-th accepted frame (with a settled global scale) is a calibration frame: poses
   // further apart constrain the bone lengths better. >= 1.
@@ -67,7 +70,7 @@ struct ShapeOptions {
   // ... and keeps each of them with probability cos(angle to the view ray), the depth camera's
   // sampling density (the template's vertices are uniform over the surface; a scan thins out
   // towards the silhouette, which moves its E-step means further inwards).
-  bool bias_density = false;
+  bool bias_density = true;
   // Girths are held at stages with a radius above this (m): wide radii bias them most.
   double girth_max_radius = 0.04;
   // Scan-to-model term: every scan point (voxel-subsampled, cell `scan_to_model_voxel` m)
@@ -76,7 +79,7 @@ struct ShapeOptions {
   // template-to-scan E-step alone sees no scan beyond its radius: where the template's limbs
   // are short (its feet on the subject's shins) the scan's feet pull nothing and the bone
   // lengths stay short; this term makes the template cover the scan. 0: off.
-  double scan_to_model_weight = 0.0;
+  double scan_to_model_weight = 0.3;
   double scan_to_model_voxel = 0.01;
   double scan_to_model_max_distance = 0.3;
   // The term also moves the girths (false: bone lengths and poses only).
@@ -86,7 +89,7 @@ struct ShapeOptions {
   // seen only through the bends (the knee in a walk; the elbow and the spine hardly bend), so
   // without it the split drifts (the generator and real bodies keep it within a few per cent).
   // Cost m^2 per unit^2 of a factor difference, as prior_weight. 0: off.
-  double chain_prior_weight = 0.0;
+  double chain_prior_weight = 1e-3;
   double prior_weight = 1e-5;             // towards the template (cost m^2 per unit^2 of a factor)
   double pose_damping = 1e-5;             // per frame on the pose update (per unit^2 / rad^2 / m^2)
   double bone_min = 0.7, bone_max = 1.4;  // bone length factor bounds

@@ -39,16 +39,25 @@ ShapeOptions Options(ShapeMode mode) {
   ShapeOptions o;
   o.mode = mode;
   o.prior_weight = 1e-8;
+  // Random known shapes have independent factors along a limb: no chain prior (it would pull
+  // the thigh and shank together).
+  o.chain_prior_weight = 0.0;
   o.max_fit_vertices = 0;
   return o;
 }
 
 // Known shape parameters are recovered from noise-free scans of a subject with that shape,
-// jointly with (perturbed) poses, starting from the template.
+// jointly with (perturbed) poses, starting from the template; with and without the leaf
+// lengths and fork widths (5 more parameters, the hands' and feet's lengths seen on few
+// vertices of this coarse mesh: the surface fit is looser).
 TEST(ShapeEstimatorTest, RecoversKnownShapeFromNoiseFreeScans) {
   const Template& t = CoarseTemplate();
-  for (ShapeMode mode : {ShapeMode::kBones, ShapeMode::kBonesGirth}) {
-    ShapeEstimator estimator(t, Options(mode));
+  for (int variant = 0; variant < 4; ++variant) {
+    const ShapeMode mode = variant % 2 == 0 ? ShapeMode::kBones : ShapeMode::kBonesGirth;
+    const bool extended = variant >= 2;
+    ShapeOptions options = Options(mode);
+    options.leaf_lengths = options.fork_widths = extended;
+    ShapeEstimator estimator(t, options);
     const ShapeModel& model = estimator.model();
     std::mt19937 rng(11);
     std::uniform_real_distribution<double> u(-0.12, 0.12);
@@ -83,7 +92,8 @@ TEST(ShapeEstimatorTest, RecoversKnownShapeFromNoiseFreeScans) {
     Skinning(estimator.SubjectTemplate()).Apply(poses[0], &ours);
     Skinning(t).Apply(poses[0], &before);
     EXPECT_GT((before - scans[0].points).rowwise().norm().mean(), 5e-3);
-    EXPECT_LT((ours - scans[0].points).rowwise().norm().mean(), 1.5e-3) << ShapeModeName(mode);
+    EXPECT_LT((ours - scans[0].points).rowwise().norm().mean(), extended ? 2.5e-3 : 1.5e-3)
+        << ShapeModeName(mode) << " extended " << extended;
   }
 }
 
