@@ -53,7 +53,7 @@ struct ShapeOptions {
   int calibration_rounds = 3;
   // Radius E-step schedule (m) of the joint solve, coarse to fine, and GN iterations per stage.
   std::vector<double> radii = {0.06, 0.04, 0.03};
-  int iterations_per_stage = 8;
+  int iterations_per_stage = 12;
   // Over-relaxed EM (as EMFitterOptions::over_relaxation): the GN step is scaled by this
   // factor; the correspondences pull tangentially (along the limbs, where the bone lengths act)
   // only weakly per E-step, plain EM (1) creeps there. In [1, 2).
