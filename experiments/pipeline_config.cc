@@ -563,14 +563,20 @@ bool PipelineOptions::IsValid(std::string* error) const {
 
 // Section shape (solvers/shape_estimator.h).
 void BindShape(const Config& c, ShapeOptions* o) {
-  c.CheckKeys({"mode", "retrack", "symmetric", "calibration_frames", "calibration_stride", "calibration_rounds", "radii",
+  c.CheckKeys({"mode", "retrack", "symmetric", "seed_pose", "leaf_lengths", "fork_widths",
+               "calibration_frames", "calibration_stride", "calibration_rounds", "radii",
                "iterations_per_stage", "over_relaxation", "bias_correction",
-               "visibility_min_cos", "girth_max_radius", "prior_weight", "pose_damping",
-               "bone_min", "bone_max", "girth_min", "girth_max", "refine_every",
-               "refine_prior_weight", "max_fit_vertices"});
+               "visibility_min_cos", "bias_density", "girth_max_radius", "scan_to_model_weight",
+               "scan_to_model_voxel", "scan_to_model_max_distance", "scan_to_model_girth",
+               "chain_prior_weight", "prior_weight", "pose_damping", "bone_min", "bone_max",
+               "girth_min", "girth_max", "refine_every", "refine_prior_weight",
+               "max_fit_vertices"});
   c.GetEnum("mode", ShapeModeNames(), &o->mode);
   c.Get("retrack", &o->retrack);
   c.Get("symmetric", &o->symmetric);
+  c.Get("seed_pose", &o->seed_pose);
+  c.Get("leaf_lengths", &o->leaf_lengths);
+  c.Get("fork_widths", &o->fork_widths);
   c.Get("calibration_frames", &o->calibration_frames);
   c.Get("calibration_stride", &o->calibration_stride);
   c.Get("calibration_rounds", &o->calibration_rounds);
@@ -579,7 +585,13 @@ void BindShape(const Config& c, ShapeOptions* o) {
   c.Get("over_relaxation", &o->over_relaxation);
   c.Get("bias_correction", &o->bias_correction);
   c.Get("visibility_min_cos", &o->visibility_min_cos);
+  c.Get("bias_density", &o->bias_density);
   c.Get("girth_max_radius", &o->girth_max_radius);
+  c.Get("scan_to_model_weight", &o->scan_to_model_weight);
+  c.Get("scan_to_model_voxel", &o->scan_to_model_voxel);
+  c.Get("scan_to_model_max_distance", &o->scan_to_model_max_distance);
+  c.Get("scan_to_model_girth", &o->scan_to_model_girth);
+  c.Get("chain_prior_weight", &o->chain_prior_weight);
   c.Get("prior_weight", &o->prior_weight);
   c.Get("pose_damping", &o->pose_damping);
   c.Get("bone_min", &o->bone_min);

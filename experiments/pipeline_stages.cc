@@ -305,13 +305,23 @@ void TrackStage::Process(FrameWork* work) {
   // A lost frame's pose is not texture: it would paint the room onto the body.
   work->texture_frame = !lost_frame && (options_.texture_doubtful_frames ||
                                         record.quality.label == FitQualityLabel::kGood);
+  Pose refined;
   if (shape_ != nullptr && tmpl_ != nullptr && shape_->enabled() && record.fit.ok() &&
       !lost_frame &&
       shape_->AddFrame(scan_, work->pose,
                        !fitter_->ScaleIsFree() ||
-                           fitter_->scale_samples() >= options_.fitting.scale_estimation_frames)) {
+                           fitter_->scale_samples() >= options_.fitting.scale_estimation_frames,
+                       &refined)) {
     *tmpl_ = shape_->SubjectTemplate();
     fitter_->SetRestShape(*tmpl_);
+    if (options_.shape.seed_pose && refined.AllFinite() &&
+        refined.num_joints() == tmpl_->num_joints()) {
+      // The tracked pose was fitted with the previous shape (e.g. the template's feet on the
+      // subject's shins); the solve refined this frame's pose with the new one: continue
+      // from it, as after a re-initialisation (the motion history restarts).
+      fitter_->Reset(/*keep_scale=*/true);
+      fitter_->AcceptPose(scan_, refined);
+    }
     if (shape_calibrated_frame < 0) shape_calibrated_frame = record.frame;
   }
   if (lost_frame) {
@@ -403,6 +413,19 @@ OutputStage::OutputStage(const PipelineOptions& options, const Template& tmpl,
       progress_(progress),
       start_(PipelineClock::now()) {}
 
+void OutputStage::SyncRestGeometry() {
+  const Template& current = skinning_.model();
+  // Only the joint centres enter PosedJointCenters (a girth-only change keeps them).
+  bool same = current.num_joints() == tmpl_.num_joints();
+  for (int j = 0; same && j < tmpl_.num_joints(); ++j) {
+    same = current.joints[j].center == tmpl_.joints[j].center;
+  }
+  if (same) return;
+  Eigen::MatrixX3d centers(tmpl_.num_joints(), 3);
+  for (int j = 0; j < tmpl_.num_joints(); ++j) centers.row(j) = tmpl_.joints[j].center.transpose();
+  skinning_.SetRestGeometry(tmpl_.vertices, centers);
+}
+
 void OutputStage::Process(FrameWork* work) {
   PipelineResult& result = *result_;
   FrameRecord& record = work->record;
@@ -458,6 +481,9 @@ void OutputStage::Process(FrameWork* work) {
     record.mean_vertex_error_mm = 1000.0 * mean;
     record.max_vertex_error_mm = 1000.0 * max;
     Eigen::MatrixX3d ours, theirs;
+    // Shape estimation swaps the subject's rest geometry into tmpl_ (TrackStage): the joint
+    // centres must be the subject's from then on, not the template's this stage started with.
+    SyncRestGeometry();
     skinning_.PosedJointCenters(frame_pose, &ours);
     ours = TransformRows(truth_.to_truth_world, ours);
     truth_.subject_skinning->PosedJointCenters(truth.pose, &theirs);

@@ -164,6 +164,10 @@ class OutputStage {
  private:
   const PipelineOptions& options_;
   const Template& tmpl_;
+  // Takes tmpl_'s rest geometry into skinning_ when its joint centres changed (a subject
+  // shape swapped in).
+  void SyncRestGeometry();
+
   Skinning skinning_;  // its own: the track stage's is busy
   GroundTruthContext truth_;
   std::string out_dir_;

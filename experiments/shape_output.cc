@@ -47,6 +47,12 @@ void AddShapeToSummary(const std::string& summary_path, const PipelineResult& re
     nlohmann::json jj;
     jj["name"] = subject.joints[j].name;
     jj["girth"] = body.girth[j];
+    if (est.options().leaf_lengths && body.leaf_length[j] != 1.0) {
+      jj["leaf_length_factor"] = body.leaf_length[j];
+    }
+    if (est.options().fork_widths && body.fork_width[j] != 1.0) {
+      jj["width_factor"] = body.fork_width[j];
+    }
     if (j > 0) {
       const int p = subject.joints[j].parent;
       const double length =

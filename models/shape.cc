@@ -35,6 +35,8 @@ BodyShape BodyShape::Identity(int num_joints) {
   BodyShape s;
   s.bone_length = Eigen::VectorXd::Ones(num_joints);
   s.girth = Eigen::VectorXd::Ones(num_joints);
+  s.leaf_length = Eigen::VectorXd::Ones(num_joints);
+  s.fork_width = Eigen::VectorXd::Ones(num_joints);
   return s;
 }
 
@@ -47,7 +49,8 @@ int MirrorOf(const Template& t, int j) {
 }
 }  // namespace
 
-ShapeModel::ShapeModel(const Template& base, ShapeMode mode, bool symmetric)
+ShapeModel::ShapeModel(const Template& base, ShapeMode mode, bool symmetric, bool leaf_lengths,
+                       bool fork_widths)
     : base_(base), mode_(mode) {
   std::string error;
   if (!base_.IsValid(&error)) throw Error("ShapeModel: invalid template: " + error);
@@ -75,6 +78,25 @@ ShapeModel::ShapeModel(const Template& base, ShapeMode mode, bool symmetric)
     }
     if (!has_child && j > 0) segment_bone_[j] = j;
   }
+  // The full row whose factor stretches segment j: its bone's, or a leaf's own length.
+  const bool per_bone = mode_ == ShapeMode::kBones || mode_ == ShapeMode::kBonesGirth;
+  const bool leaves = leaf_lengths && per_bone;
+  // Forks: a bone mostly across its parent's twist axis (|lateral| > 0.5 |offset|: the
+  // shoulders, the hips) with fork_widths gets a width factor on that lateral component; its
+  // bone factor then scales the component along the axis only.
+  fork_.assign(nj, false);
+  bone_axial_.assign(nj, Eigen::Vector3d::Zero());
+  bone_lateral_.assign(nj, Eigen::Vector3d::Zero());
+  for (int j = 1; j < nj; ++j) {
+    const Eigen::Vector3d a = base_.joints[base_.joints[j].parent].twist_axis.normalized();
+    bone_axial_[j] = a.dot(bone_offset_[j]) * a;
+    bone_lateral_[j] = bone_offset_[j] - bone_axial_[j];
+    fork_[j] = fork_widths && per_bone && bone_lateral_[j].norm() > 0.5 * bone_offset_[j].norm();
+  }
+  stretch_row_ = segment_bone_;
+  for (int j = 1; j < nj; ++j) {
+    if (leaves && segment_bone_[j] == j) stretch_row_[j] = 2 * nj + j;
+  }
   alpha_.resize(nv);
   rho_.resize(nv, 3);
   for (int v = 0; v < nv; ++v) {
@@ -93,21 +115,26 @@ ShapeModel::ShapeModel(const Template& base, ShapeMode mode, bool symmetric)
     for (int j = 0; j < nj; ++j) rows.back().push_back(nj + j);
   } else if (mode_ == ShapeMode::kBones || mode_ == ShapeMode::kBonesGirth) {
     const int groups = mode_ == ShapeMode::kBones ? 1 : 2;
-    for (int g = 0; g < groups; ++g) {
+    for (int g : {0, 1, 2, 3}) {
+      if (g == 1 && groups < 2) continue;
+      if (g == 2 && !leaves) continue;
       std::vector<int> index_of(nj, -1);
       for (int j = g == 0 ? 1 : 0; j < nj; ++j) {
+        if (g == 2 && stretch_row_[j] != 2 * nj + j) continue;  // leaves only
+        if (g == 3 && !fork_[j]) continue;                       // forks only
         const int mirror = symmetric ? MirrorOf(base_, j) : -1;
         if (mirror >= 0 && index_of[mirror] >= 0) {
           rows[index_of[mirror]].push_back(g * nj + j);
           continue;
         }
         index_of[j] = static_cast<int>(rows.size());
-        names_.push_back((g == 0 ? "bone:" : "girth:") + base_.joints[j].name);
+        static const char* const kPrefix[] = {"bone:", "girth:", "length:", "width:"};
+        names_.push_back(kPrefix[g] + base_.joints[j].name);
         rows.push_back({g * nj + j});
       }
     }
   }
-  expansion_ = Eigen::MatrixXd::Zero(2 * nj, static_cast<int>(names_.size()));
+  expansion_ = Eigen::MatrixXd::Zero(4 * nj, static_cast<int>(names_.size()));
   for (size_t p = 0; p < rows.size(); ++p) {
     for (int r : rows[p]) expansion_(r, static_cast<int>(p)) = 1.0;
   }
@@ -122,12 +149,14 @@ BodyShape ShapeModel::Expand(const Eigen::VectorXd& q) const {
   }
   const int nj = base_.num_joints();
   const Eigen::VectorXd full =
-      Eigen::VectorXd::Ones(2 * nj) +
-      (q.size() ? Eigen::VectorXd(expansion_ * q) : Eigen::VectorXd::Zero(2 * nj));
+      Eigen::VectorXd::Ones(4 * nj) +
+      (q.size() ? Eigen::VectorXd(expansion_ * q) : Eigen::VectorXd::Zero(4 * nj));
   BodyShape s;
   s.bone_length = full.head(nj);
   s.bone_length[0] = 1.0;
-  s.girth = full.tail(nj);
+  s.girth = full.segment(nj, nj);
+  s.leaf_length = full.segment(2 * nj, nj);
+  s.fork_width = full.tail(nj);
   return s;
 }
 
@@ -138,8 +167,11 @@ void ShapeModel::RestGeometry(const Eigen::VectorXd& q, Eigen::MatrixX3d* center
   centers->resize(nj, 3);
   centers->row(0) = base_.joints[0].center.transpose();
   for (int j = 1; j < nj; ++j) {
-    centers->row(j) =
-        centers->row(base_.joints[j].parent) + s.bone_length[j] * bone_offset_[j].transpose();
+    const Eigen::Vector3d offset =
+        fork_[j] ? Eigen::Vector3d(s.bone_length[j] * bone_axial_[j] +
+                                   s.fork_width[j] * bone_lateral_[j])
+                 : Eigen::Vector3d(s.bone_length[j] * bone_offset_[j]);
+    centers->row(j) = centers->row(base_.joints[j].parent) + offset.transpose();
   }
   const int nv = base_.num_vertices();
   vertices->resize(nv, 3);
@@ -148,7 +180,8 @@ void ShapeModel::RestGeometry(const Eigen::VectorXd& q, Eigen::MatrixX3d* center
     const int parent = std::max(0, base_.joints[k].parent);
     const double w = base_.lbs_weight[v];
     const double g = w * s.girth[k] + (1.0 - w) * s.girth[k == 0 ? 0 : parent];
-    const double l = segment_bone_[k] >= 0 ? s.bone_length[segment_bone_[k]] : 1.0;
+    const int row = stretch_row_[k];
+    const double l = row < 0 ? 1.0 : row < nj ? s.bone_length[row] : s.leaf_length[row - 2 * nj];
     const Eigen::Vector3d a = base_.joints[k].twist_axis.normalized();
     vertices->row(v) = centers->row(k) + (l * alpha_[v]) * a.transpose() + g * rho_.row(v);
   }
@@ -185,7 +218,7 @@ void ShapeModel::PosedJacobian(const Pose& pose, const std::vector<int>& vertice
     twist[j] = st.twist_angle;
   }
   const int n = vertices.empty() ? base_.num_vertices() : static_cast<int>(vertices.size());
-  Eigen::Matrix<double, 3, Eigen::Dynamic> full(3, 2 * nj);
+  Eigen::Matrix<double, 3, Eigen::Dynamic> full(3, 4 * nj);
   jacobian->resize(3 * n, num_parameters());
   for (int i = 0; i < n; ++i) {
     const int v = vertices.empty() ? i : vertices[i];
@@ -196,11 +229,18 @@ void ShapeModel::PosedJacobian(const Pose& pose, const std::vector<int>& vertice
     const Eigen::Vector3d rho = rho_.row(v).transpose();
     full.setZero();
     // Posed joint centre c_k = c_root + sum over the chain of s0 W_m bone_length[m] e_m.
-    for (int m = k; m > 0; m = base_.joints[m].parent) full.col(m) = world[m] * bone_offset_[m];
+    for (int m = k; m > 0; m = base_.joints[m].parent) {
+      if (fork_[m]) {
+        full.col(m) = world[m] * bone_axial_[m];
+        full.col(3 * nj + m) = world[m] * bone_lateral_[m];
+      } else {
+        full.col(m) = world[m] * bone_offset_[m];
+      }
+    }
     // v' = c_k + s0 W_k (w R^LBS + (1 - w) 1) (L alpha a + g Rot(a, tau theta) rho).
     const Eigen::Matrix3d g_map =
         world[k] * (w * swing[k] + (1.0 - w) * Eigen::Matrix3d::Identity());
-    if (segment_bone_[k] >= 0) full.col(segment_bone_[k]) += g_map * (alpha_[v] * a);
+    if (stretch_row_[k] >= 0) full.col(stretch_row_[k]) += g_map * (alpha_[v] * a);
     const double angle = tau * twist[k];
     const Eigen::Vector3d r = std::cos(angle) * rho + std::sin(angle) * a.cross(rho);
     const Eigen::Vector3d dg = g_map * r;

@@ -14,11 +14,18 @@
 // (w_l the vertex's LBS weight: the girth blends across joints like the skinning; the root
 // blends with itself). L_k, the segment's axial stretch, is the bone_length of k's child whose
 // bone points along a_k (cosine >= 0.9; e.g. the upper arm stretches with the elbow's bone),
-// for a leaf joint its own bone_length (the hand with the forearm), else 1.
+// for a leaf joint its own bone_length (the hand with the forearm), else 1. With `leaf_lengths`
+// a leaf segment (head, hands, feet) has its own axial stretch leaf_length[k] instead: a foot's
+// length is no shank's (a subject with long legs has no long feet). With `fork_widths` a bone
+// mostly across its parent's twist axis (shoulders, hips: broad shoulders are wider, not
+// higher) is t_j = t_parent + bone_length[j] o_axial + fork_width[j] o_lateral, o_axial and
+// o_lateral the rest offset's components along and across the parent's twist axis.
 //
 // Reduced parameters q (what the estimator optimises), full = 1 + E q, by mode:
 //   kFixed: none (Q = 0); kScale: one factor for every bone length and girth (Q = 1);
-//   kBones: one per bone (J - 1, or fewer with symmetry); kBonesGirth: bones then girths.
+//   kBones: one per bone (J - 1, or fewer with symmetry); kBonesGirth: bones then girths;
+//   with leaf_lengths (kBones, kBonesGirth) then one per leaf segment ("length:<joint>"), with
+//   fork_widths one per fork bone ("width:<joint>").
 // With `symmetric`, joints named l_X and r_X share their parameters (the l_ one is kept).
 #pragma once
 
@@ -39,20 +46,25 @@ const char* ShapeModeName(ShapeMode mode);
 struct BodyShape {
   Eigen::VectorXd bone_length;  // J (entry 0, the root, unused)
   Eigen::VectorXd girth;        // J
+  Eigen::VectorXd leaf_length;  // J: a leaf segment's own axial stretch (1 where unused)
+  Eigen::VectorXd fork_width;   // J: a fork bone's lateral factor (1 where unused)
   static BodyShape Identity(int num_joints);
 };
 
 class ShapeModel {
  public:
   // Throws artex::Error on an invalid template (Template::IsValid).
-  ShapeModel(const Template& base, ShapeMode mode, bool symmetric);
+  ShapeModel(const Template& base, ShapeMode mode, bool symmetric, bool leaf_lengths = false,
+             bool fork_widths = false);
 
   const Template& base() const { return base_; }
   ShapeMode mode() const { return mode_; }
   int num_parameters() const { return static_cast<int>(names_.size()); }  // Q
-  // Q names: "bone:<joint>" (the bone ending at the joint), "girth:<joint>", "scale".
+  // Q names: "bone:<joint>" (the bone ending at the joint), "girth:<joint>", "length:<leaf>",
+  // "scale".
   const std::vector<std::string>& parameter_names() const { return names_; }
-  // 2 J x Q 0/1 matrix E: rows 0..J-1 bone lengths, J..2J-1 girths.
+  // 4 J x Q 0/1 matrix E: rows 0..J-1 bone lengths, J..2J-1 girths, 2J..3J-1 leaf lengths,
+  // 3J..4J-1 fork widths.
   const Eigen::MatrixXd& expansion() const { return expansion_; }
 
   // full = 1 + E q. Throws artex::Error when q has not Q entries.
@@ -77,6 +89,10 @@ class ShapeModel {
   Eigen::MatrixXd expansion_;                 // 2J x Q
   std::vector<Eigen::Vector3d> bone_offset_;  // J: t0_j - t0_parent(j) (root: 0)
   std::vector<int> segment_bone_;  // J: joint whose bone_length stretches segment j (-1: none)
+  std::vector<int> stretch_row_;   // J: full row stretching segment j (-1: none; >= 2J: leaf)
+  std::vector<bool> fork_;         // J: the bone has a width factor (fork_widths)
+  std::vector<Eigen::Vector3d> bone_axial_, bone_lateral_;  // J: bone_offset_ along / across
+                                                            // the parent's twist axis
   Eigen::VectorXd alpha_;          // V: axial rest coordinate
   Eigen::MatrixX3d rho_;           // V x 3: radial rest offset
 };

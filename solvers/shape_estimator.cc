@@ -4,7 +4,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <sstream>
+#include <unordered_map>
 
 #include "models/error.h"
 #include "models/normals.h"
@@ -31,6 +33,17 @@ bool ShapeOptions::IsValid(std::string* error) const {
     msg << "shape.visibility_min_cos: expected a value in [-1, 1), found " << visibility_min_cos;
   } else if (!(std::isfinite(girth_max_radius) && girth_max_radius > 0.0)) {
     msg << "shape.girth_max_radius: expected a finite value > 0 (m), found " << girth_max_radius;
+  } else if (!(std::isfinite(scan_to_model_weight) && scan_to_model_weight >= 0.0)) {
+    msg << "shape.scan_to_model_weight: expected a finite value >= 0, found "
+        << scan_to_model_weight;
+  } else if (!(std::isfinite(scan_to_model_voxel) && scan_to_model_voxel >= 0.0)) {
+    msg << "shape.scan_to_model_voxel: expected a finite value >= 0 (m; 0: every point), found "
+        << scan_to_model_voxel;
+  } else if (!positive(scan_to_model_max_distance)) {
+    msg << "shape.scan_to_model_max_distance: expected a finite value > 0 (m), found "
+        << scan_to_model_max_distance;
+  } else if (!(std::isfinite(chain_prior_weight) && chain_prior_weight >= 0.0)) {
+    msg << "shape.chain_prior_weight: expected a finite value >= 0, found " << chain_prior_weight;
   } else if (!(std::isfinite(prior_weight) && prior_weight >= 0.0)) {
     msg << "shape.prior_weight: expected a finite value >= 0, found " << prior_weight;
   } else if (!(std::isfinite(pose_damping) && pose_damping >= 0.0)) {
@@ -59,6 +72,56 @@ bool ShapeOptions::IsValid(std::string* error) const {
 }
 
 namespace {
+// Mean point per occupied cubic cell of side `cell` (all points when cell <= 0).
+Eigen::MatrixX3d VoxelMeans(const Eigen::MatrixX3d& points, double cell) {
+  if (!(cell > 0.0)) return points;
+  std::unordered_map<std::int64_t, int> slot;
+  std::vector<Eigen::Vector3d> sum;
+  std::vector<int> count;
+  for (int k = 0; k < points.rows(); ++k) {
+    const Eigen::Vector3d p = points.row(k).transpose();
+    const auto key = [&](int a) {
+      return static_cast<std::int64_t>(std::floor(p[a] / cell)) & 0x1fffff;
+    };
+    const std::int64_t id = key(0) | key(1) << 21 | key(2) << 42;
+    const auto [it, inserted] = slot.emplace(id, static_cast<int>(sum.size()));
+    if (inserted) {
+      sum.push_back(Eigen::Vector3d::Zero());
+      count.push_back(0);
+    }
+    sum[it->second] += p;
+    ++count[it->second];
+  }
+  Eigen::MatrixX3d out(sum.size(), 3);
+  for (size_t c = 0; c < sum.size(); ++c) out.row(c) = sum[c].transpose() / count[c];
+  return out;
+}
+
+// A fixed pseudo-random number in [0, 1) per index (splitmix64).
+double Uniform01(std::uint64_t i) {
+  std::uint64_t z = i + 0x9e3779b97f4a7c15ULL;
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  z ^= z >> 31;
+  return static_cast<double>(z >> 11) * 0x1.0p-53;
+}
+
+// Per point of `index` (the fit vertices): how many of `samples` have it as their nearest
+// (within sqrt(max_d2)) and their sum.
+void NearestSums(const PointCloudIndex& index, const Eigen::MatrixX3d& samples, double max_d2,
+                 std::vector<double>* count, Eigen::MatrixX3d* sum) {
+  count->assign(index.size(), 0.0);
+  sum->setZero(index.size(), 3);
+  double d2 = 0.0;
+  for (int k = 0; k < samples.rows(); ++k) {
+    const Eigen::Vector3d p = samples.row(k).transpose();
+    const int i = index.Nearest(p, &d2);
+    if (i < 0 || d2 > max_d2) continue;
+    (*count)[i] += 1.0;
+    sum->row(i) += p.transpose();
+  }
+}
+
 ShapeOptions Checked(const ShapeOptions& options) {
   std::string error;
   if (!options.IsValid(&error)) throw Error(error);
@@ -67,13 +130,34 @@ ShapeOptions Checked(const ShapeOptions& options) {
 }  // namespace
 
 ShapeEstimator::ShapeEstimator(const Template& base, const ShapeOptions& options)
-    : options_(Checked(options)), model_(base, options.mode, options.symmetric) {
+    : options_(Checked(options)),
+      model_(base, options.mode, options.symmetric, options.leaf_lengths, options.fork_widths) {
   q_ = Eigen::VectorXd::Zero(model_.num_parameters());
   const int v = base.num_vertices();
   const int stride = options_.max_fit_vertices > 0 && v > options_.max_fit_vertices
                          ? (v + options_.max_fit_vertices - 1) / options_.max_fit_vertices
                          : 1;
   for (int i = 0; i < v; i += stride) fit_vertices_.push_back(i);
+  // Chain prior: bone j and the bone continuing it (the child stretching segment j) when the
+  // two are collinear (cosine >= 0.9 of their rest offsets): thigh/shank, upper arm/forearm,
+  // spine/chest/neck/head, not the lateral hip or shoulder offsets.
+  const int nj = base.num_joints();
+  std::vector<std::pair<int, int>> pairs;
+  for (int j = 1; j < nj; ++j) {
+    const Eigen::Vector3d bone = base.joints[j].center - base.joints[base.joints[j].parent].center;
+    for (int c = j + 1; c < nj; ++c) {
+      if (base.joints[c].parent != j) continue;
+      const Eigen::Vector3d next = base.joints[c].center - base.joints[j].center;
+      if (bone.norm() > 0.0 && next.norm() > 0.0 &&
+          bone.dot(next) >= 0.9 * bone.norm() * next.norm()) {
+        pairs.emplace_back(j, c);
+      }
+    }
+  }
+  chain_ = Eigen::MatrixXd::Zero(static_cast<int>(pairs.size()), model_.num_parameters());
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    chain_.row(k) = model_.expansion().row(pairs[k].first) - model_.expansion().row(pairs[k].second);
+  }
 }
 
 ShapeEstimator::~ShapeEstimator() = default;
@@ -82,9 +166,12 @@ void ShapeEstimator::ClampToBounds(Eigen::VectorXd* q) const {
   const int nj = model_.base().num_joints();
   const Eigen::MatrixXd& e = model_.expansion();
   for (int p = 0; p < q->size(); ++p) {
-    // A parameter moves girth rows only (bones_girth's girths) or bone rows (also kScale).
+    // A parameter moves girth rows only (bones_girth's girths) or length rows: bones (also
+    // kScale) or leaf segments.
     bool bone = false;
-    for (int r = 0; r < nj; ++r) bone = bone || e(r, p) != 0.0;
+    for (int r = 0; r < nj; ++r) {
+      bone = bone || e(r, p) != 0.0 || e(2 * nj + r, p) != 0.0 || e(3 * nj + r, p) != 0.0;
+    }
     const double lo = (bone ? options_.bone_min : options_.girth_min) - 1.0;
     const double hi = (bone ? options_.bone_max : options_.girth_max) - 1.0;
     (*q)[p] = std::clamp((*q)[p], lo, hi);
@@ -110,6 +197,16 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
   EStepOptions estep_options = options_.estep;
   estep_options.mode = EStepMode::kRadius;
   for (const Scan* s : scans) esteps.push_back(std::make_unique<EStep>(*s, estep_options));
+  const bool scan_to_model = options_.scan_to_model_weight > 0.0;
+  std::vector<Eigen::MatrixX3d> scan_samples(nf);
+  if (scan_to_model) {
+    for (int f = 0; f < nf; ++f) {
+      scan_samples[f] = VoxelMeans(scans[f]->points, options_.scan_to_model_voxel);
+    }
+  }
+  const double max_d2 = options_.scan_to_model_max_distance * options_.scan_to_model_max_distance;
+  std::vector<double> reverse_count, self_count;
+  Eigen::MatrixX3d reverse_sum, self_sum;
   const Eigen::MatrixXd ete = model_.expansion().transpose() * model_.expansion();
 
   SkinningOptions serial;
@@ -120,7 +217,9 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
   // Columns of q that move girths only (held at wide radii).
   std::vector<int> girth_columns;
   for (int p = 0; p < nq; ++p) {
-    if (model_.expansion().col(p).head(base.num_joints()).isZero()) girth_columns.push_back(p);
+    const int nj = base.num_joints();
+    const auto col = model_.expansion().col(p);
+    if (col.head(nj).isZero() && col.tail(2 * nj).isZero()) girth_columns.push_back(p);
   }
   bool first = true;
   for (double radius : options_.radii) {
@@ -144,13 +243,19 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
         esteps[f]->Compute(view, radius, &targets);
         const double total = targets.total_weight();
         if (!(total > 0.0)) continue;
+        Scan self;  // the posed template's camera-facing vertices (bias_correction)
         if (options_.bias_correction) {
-          Scan self;
           std::vector<int> visible;
           for (int v = 0; v < posed.rows(); ++v) {
             const Eigen::Vector3d x = posed.row(v).transpose();
-            if (!has_camera_ || normals.row(v).dot((camera_center_ - x).normalized()) >
-                                    options_.visibility_min_cos) {
+            const double facing =
+                has_camera_ ? normals.row(v).dot((camera_center_ - x).normalized()) : 1.0;
+            if (facing <= options_.visibility_min_cos) continue;
+            // A depth camera samples a surface with a density ~ cos(angle to the view ray);
+            // the template's vertices are uniform: keep each with that probability (a fixed
+            // pseudo-random number per vertex) so the self E-step sees the scan's sampling.
+            if (options_.bias_density && has_camera_ && Uniform01(v) > facing) continue;
+            {
               visible.push_back(v);
             }
           }
@@ -171,13 +276,37 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
             }
           }
         }
+        // Scan-to-model: each scan sample's nearest fit vertex; per vertex the count and sum.
+        reverse_count.assign(n, 0.0);
+        reverse_sum.setZero(n, 3);
+        double c_reverse = 0.0;
+        if (scan_to_model && scan_samples[f].rows() > 0) {
+          const PointCloudIndex index(sub_posed);
+          NearestSums(index, scan_samples[f], max_d2, &reverse_count, &reverse_sum);
+          if (options_.bias_correction) {
+            // The same bias as the E-step's: a one-sided scan's samples pull a limb's side
+            // vertices towards the camera and inwards. Measured on the template's own
+            // camera-facing vertices (sampled alike) and subtracted: the truth is a fixed point.
+            NearestSums(index, VoxelMeans(self.points, options_.scan_to_model_voxel), max_d2,
+                        &self_count, &self_sum);
+            for (int i = 0; i < n; ++i) {
+              if (reverse_count[i] > 0.0 && self_count[i] > 0.0) {
+                reverse_sum.row(i) -= reverse_count[i] * (self_sum.row(i) / self_count[i] -
+                                                          sub_posed.row(i));
+              }
+            }
+          }
+          c_reverse = options_.scan_to_model_weight / scan_samples[f].rows();
+        }
         const double c = 1.0 / total;
         model_.PosedJacobian(pose, fit_vertices_, &shape_jacobian);
         const int offset = nq + f * np;
         std::vector<int> index;
         Eigen::Matrix<double, 3, Eigen::Dynamic> local;
         for (int i = 0; i < n; ++i) {
-          const double w = c * targets.weight[i];
+          const double w1 = c * targets.weight[i];
+          const double w2 = c_reverse * reverse_count[i];
+          const double w = (w1 > 0.0 ? w1 : 0.0) + w2;
           if (!(w > 0.0)) continue;
           const int v = fit_vertices_[i];
           const std::vector<int>& cols = jacobian.Columns(v);
@@ -191,20 +320,41 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
             local.col(nq + k - 1) = block.col(k);
             index[nq + k - 1] = offset + cols[k];
           }
-          const Eigen::Vector3d e = (posed.row(v) - targets.mean.row(i)).transpose();
-          const Eigen::MatrixXd jtj = w * local.transpose() * local;
-          const Eigen::VectorXd jte = w * local.transpose() * e;
-          for (int a = 0; a < m; ++a) {
-            g[index[a]] += jte[a];
-            for (int b = 0; b < m; ++b) h(index[a], index[b]) += jtj(a, b);
+          const Eigen::Vector3d x = posed.row(v).transpose();
+          const auto accumulate = [&](double weight, const Eigen::Vector3d& e,
+                                      const Eigen::Matrix<double, 3, Eigen::Dynamic>& jac) {
+            const Eigen::MatrixXd jtj = weight * jac.transpose() * jac;
+            const Eigen::VectorXd jte = weight * jac.transpose() * e;
+            for (int a = 0; a < m; ++a) {
+              g[index[a]] += jte[a];
+              for (int b = 0; b < m; ++b) h(index[a], index[b]) += jtj(a, b);
+            }
+            cost += weight * e.squaredNorm();
+          };
+          if (w1 > 0.0) accumulate(w1, x - targets.mean.row(i).transpose(), local);
+          if (w2 > 0.0) {
+            const Eigen::Vector3d b = reverse_sum.row(i).transpose() / reverse_count[i];
+            if (options_.scan_to_model_girth) {
+              accumulate(w2, x - b, local);
+            } else {
+              Eigen::Matrix<double, 3, Eigen::Dynamic> held = local;
+              for (int p : girth_columns) held.col(p).setZero();
+              accumulate(w2, x - b, held);
+            }
           }
-          cost += w * e.squaredNorm();
         }
       }
       const Eigen::VectorXd dq = q_ - q_ref;
       cost += prior_weight * dq.dot(ete * dq);
       h.topLeftCorner(nq, nq) += prior_weight * ete;
       g.head(nq) += prior_weight * ete * dq;
+      if (options_.chain_prior_weight > 0.0 && chain_.rows() > 0) {
+        // w |C q|^2, C q the differences of collinear bones' length factors.
+        const Eigen::VectorXd d = chain_ * q_;
+        cost += options_.chain_prior_weight * d.squaredNorm();
+        h.topLeftCorner(nq, nq) += options_.chain_prior_weight * chain_.transpose() * chain_;
+        g.head(nq) += options_.chain_prior_weight * chain_.transpose() * d;
+      }
       for (int f = 0; f < nf; ++f) {
         const int offset = nq + f * np;
         for (int p = 1; p < np; ++p) h(offset + p, offset + p) += options_.pose_damping;

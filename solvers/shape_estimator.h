@@ -34,6 +34,15 @@ struct ShapeOptions {
   // second fitting pass. Not with pipeline.live.
   bool retrack = false;
   bool symmetric = true;       // l_/r_ joints share their parameters
+  // After a calibration solve the tracker continues from the current frame's pose as the solve
+  // refined it with the new shape (false: from its own pose, fitted with the previous shape).
+  bool seed_pose = true;
+  // bones, bones_girth: leaf segments (head, hands, feet) get their own length parameter
+  // instead of stretching with their bone (models/shape.h).
+  bool leaf_lengths = true;
+  // bones, bones_girth: the shoulders' and hips' offsets get a width factor across the parent's
+  // axis besides their length along it (models/shape.h).
+  bool fork_widths = true;
   int calibration_frames = 5;  // accepted frames per calibration round (>= 1)
   // Every n-th accepted frame (with a settled global scale) is a calibration frame: poses
   // further apart constrain the bone lengths better. >= 1.
@@ -44,7 +53,7 @@ struct ShapeOptions {
   int calibration_rounds = 3;
   // Radius E-step schedule (m) of the joint solve, coarse to fine, and GN iterations per stage.
   std::vector<double> radii = {0.06, 0.04, 0.03};
-  int iterations_per_stage = 8;
+  int iterations_per_stage = 12;
   // Over-relaxed EM (as EMFitterOptions::over_relaxation): the GN step is scaled by this
   // factor; the correspondences pull tangentially (along the limbs, where the bone lengths act)
   // only weakly per E-step, plain EM (1) creeps there. In [1, 2).
@@ -58,8 +67,29 @@ struct ShapeOptions {
   // uses only the template vertices facing the camera (cosine of the normal with the direction
   // to the camera above this) when the camera centre is known (SetCameraCenter), else all.
   double visibility_min_cos = 0.3;
+  // ... and keeps each of them with probability cos(angle to the view ray), the depth camera's
+  // sampling density (the template's vertices are uniform over the surface; a scan thins out
+  // towards the silhouette, which moves its E-step means further inwards).
+  bool bias_density = true;
   // Girths are held at stages with a radius above this (m): wide radii bias them most.
   double girth_max_radius = 0.04;
+  // Scan-to-model term: every scan point (voxel-subsampled, cell `scan_to_model_voxel` m)
+  // pulls its nearest posed template vertex (within `scan_to_model_max_distance` m), weight
+  // `scan_to_model_weight` relative to the data term (both normalised per frame). The
+  // template-to-scan E-step alone sees no scan beyond its radius: where the template's limbs
+  // are short (its feet on the subject's shins) the scan's feet pull nothing and the bone
+  // lengths stay short; this term makes the template cover the scan. 0: off.
+  double scan_to_model_weight = 0.3;
+  double scan_to_model_voxel = 0.01;
+  double scan_to_model_max_distance = 0.3;
+  // The term also moves the girths (false: bone lengths and poses only).
+  bool scan_to_model_girth = true;
+  // Chain prior: chain_prior_weight |b_j - b_c|^2 per pair of collinear bones (a bone and the
+  // one continuing it: thigh/shank, upper arm/forearm, spine/chest/neck/head). Their split is
+  // seen only through the bends (the knee in a walk; the elbow and the spine hardly bend), so
+  // without it the split drifts (the generator and real bodies keep it within a few per cent).
+  // Cost m^2 per unit^2 of a factor difference, as prior_weight. 0: off.
+  double chain_prior_weight = 1e-3;
   double prior_weight = 1e-5;             // towards the template (cost m^2 per unit^2 of a factor)
   double pose_damping = 1e-5;             // per frame on the pose update (per unit^2 / rad^2 / m^2)
   double bone_min = 0.7, bone_max = 1.4;  // bone length factor bounds
@@ -128,6 +158,7 @@ class ShapeEstimator {
   Eigen::Vector3d camera_center_ = Eigen::Vector3d::Zero();
   bool has_camera_ = false;
   std::vector<int> fit_vertices_;
+  Eigen::MatrixXd chain_;  // collinear bone pairs x Q: difference of their length factors
   Eigen::VectorXd q_;
   std::vector<Scan> scans_;
   std::vector<Pose> poses_;

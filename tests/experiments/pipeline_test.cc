@@ -564,7 +564,8 @@ TEST(PipelineTest, ShapeCalibrationWritesTheSubjectTemplate) {
   EXPECT_EQ(shape.at("mode").get<std::string>(), "bones_girth");
   EXPECT_TRUE(shape.at("calibrated").get<bool>());
   EXPECT_GE(shape.at("calibrated_after_frame").get<int>(), 1);
-  EXPECT_EQ(shape.at("parameters").size(), 21u);
+  // 10 bone lengths, 11 girths, 3 leaf lengths (head, hand, foot), 2 fork widths (shoulder, hip).
+  EXPECT_EQ(shape.at("parameters").size(), 26u);
   EXPECT_GT(shape.at("calibration").at("iterations").get<int>(), 0);
   ASSERT_TRUE(fs::exists(out / "subject.glb"));
   const Template subject = ReadTemplateGlb((out / "subject.glb").string());

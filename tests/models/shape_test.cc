@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <random>
 
 #include "models/error.h"
@@ -92,13 +93,15 @@ TEST(ShapeModelTest, BoneLengthsScaleJointOffsets) {
 }
 
 // The analytic Jacobian of the posed vertices w.r.t. the shape parameters against central
-// differences of Skinning(Apply(q)).Apply(pose), with and without symmetry, at several poses.
+// differences of Skinning(Apply(q)).Apply(pose), with and without symmetry, with and without
+// the leaf lengths and fork widths, at several poses.
 TEST(ShapeModelTest, PosedJacobianMatchesFiniteDifferences) {
   const Template& t = CoarseTemplate();
   std::mt19937 rng(7);
   for (ShapeMode mode : {ShapeMode::kScale, ShapeMode::kBones, ShapeMode::kBonesGirth}) {
-    for (bool symmetric : {false, true}) {
-      const ShapeModel m(t, mode, symmetric);
+    for (int variant = 0; variant < 4; ++variant) {
+      const bool symmetric = variant % 2 == 1, extended = variant >= 2;
+      const ShapeModel m(t, mode, symmetric, extended, extended);
       for (int trial = 0; trial < 2; ++trial) {
         const Pose pose = RandomPose(t.num_joints(), &rng, 0.6);
         const Eigen::VectorXd q = RandomShape(m.num_parameters(), &rng, 0.2);
@@ -125,10 +128,58 @@ TEST(ShapeModelTest, PosedJacobianMatchesFiniteDifferences) {
           }
         }
         EXPECT_GT(largest, 0.05) << ShapeModeName(mode);  // the columns are not all zero
-        EXPECT_LT(worst, 1e-7) << ShapeModeName(mode) << " symmetric " << symmetric;
+        EXPECT_LT(worst, 1e-7) << ShapeModeName(mode) << " symmetric " << symmetric
+                               << " leaf lengths and fork widths " << extended;
       }
     }
   }
+}
+
+// With leaf lengths a foot keeps its length when the shank stretches (and has its own
+// factor); with fork widths a shoulder moves across the chest's axis only.
+TEST(ShapeModelTest, LeafLengthsAndForkWidths) {
+  const Template& t = CoarseTemplate();
+  const ShapeModel plain(t, ShapeMode::kBones, true);
+  const ShapeModel m(t, ShapeMode::kBones, true, true, true);
+  const auto index = [&](const ShapeModel& model, const std::string& name) {
+    const auto& names = model.parameter_names();
+    return static_cast<int>(std::find(names.begin(), names.end(), name) - names.begin());
+  };
+  // Symmetric leaves: head, hand, foot; forks: shoulder, hip.
+  EXPECT_EQ(m.num_parameters(), plain.num_parameters() + 3 + 2);
+  ASSERT_LT(index(m, "length:l_ankle"), m.num_parameters());
+  ASSERT_LT(index(m, "width:l_shoulder"), m.num_parameters());
+  ASSERT_LT(index(m, "width:l_hip"), m.num_parameters());
+  EXPECT_EQ(index(m, "width:l_knee"), m.num_parameters());  // collinear with the thigh
+  const int ankle = t.FindJoint("l_ankle");
+  const auto foot_extent = [&](const Template& shaped) {
+    const Eigen::Vector3d a = t.joints[ankle].twist_axis.normalized();
+    double lo = 1e9, hi = -1e9;
+    for (int v = 0; v < t.num_vertices(); ++v) {
+      if (t.vertex_joint[v] != ankle) continue;
+      const double x = a.dot(shaped.vertices.row(v).transpose() - shaped.joints[ankle].center);
+      lo = std::min(lo, x);
+      hi = std::max(hi, x);
+    }
+    return hi - lo;
+  };
+  Eigen::VectorXd q = Eigen::VectorXd::Zero(m.num_parameters());
+  q[index(m, "bone:l_ankle")] = 0.3;
+  EXPECT_NEAR(foot_extent(m.Apply(q)), foot_extent(t), 1e-12);
+  Eigen::VectorXd qp = Eigen::VectorXd::Zero(plain.num_parameters());
+  qp[index(plain, "bone:l_ankle")] = 0.3;
+  EXPECT_NEAR(foot_extent(plain.Apply(qp)), 1.3 * foot_extent(t), 1e-9);
+  q[index(m, "length:l_ankle")] = 0.1;
+  EXPECT_NEAR(foot_extent(m.Apply(q)), 1.1 * foot_extent(t), 1e-9);
+  // Fork width: the shoulder moves across the chest's twist axis, not along it.
+  Eigen::VectorXd w = Eigen::VectorXd::Zero(m.num_parameters());
+  w[index(m, "width:l_shoulder")] = 0.2;
+  const Template wide = m.Apply(w);
+  const int shoulder = t.FindJoint("l_shoulder");
+  const Eigen::Vector3d axis = t.joints[t.joints[shoulder].parent].twist_axis.normalized();
+  const Eigen::Vector3d moved = wide.joints[shoulder].center - t.joints[shoulder].center;
+  EXPECT_GT(moved.norm(), 0.01);
+  EXPECT_LT(std::abs(moved.dot(axis)), 1e-12);
 }
 
 TEST(ShapeModelTest, SetRestGeometryEqualsANewSkinning) {
