@@ -492,11 +492,11 @@ tinygltf::Model BuildModel(const Template& tmpl, const std::vector<Pose>& poses,
     const int input = builder.AddFloats(times, TINYGLTF_TYPE_SCALAR, 0, true);
     tinygltf::Animation animation;
     animation.name = "artex_motion";
-    auto add_channel = [&](int node, const std::string& path, const std::vector<float>& values,
-                           int type) {
+    // A linear channel animating `path` of `node` with the keyframe values of accessor `output`.
+    auto add_channel_output = [&](int node, const std::string& path, int output) {
       tinygltf::AnimationSampler sampler;
       sampler.input = input;
-      sampler.output = builder.AddFloats(values, type, 0, false);
+      sampler.output = output;
       sampler.interpolation = "LINEAR";
       animation.samplers.push_back(sampler);
       tinygltf::AnimationChannel channel;
@@ -504,6 +504,10 @@ tinygltf::Model BuildModel(const Template& tmpl, const std::vector<Pose>& poses,
       channel.target_node = node;
       channel.target_path = path;
       animation.channels.push_back(channel);
+    };
+    auto add_channel = [&](int node, const std::string& path, const std::vector<float>& values,
+                           int type) {
+      add_channel_output(node, path, builder.AddFloats(values, type, 0, false));
     };
     // Quaternion tracks keep the sign closest to the previous key (shortest interpolation).
     auto rotation_track = [&](const std::function<Eigen::Matrix3d(const Pose&)>& get) {
@@ -544,17 +548,8 @@ tinygltf::Model BuildModel(const Template& tmpl, const std::vector<Pose>& poses,
       for (int f = 0; f < num_frames; ++f) {
         ones[f] = static_cast<uint32_t>(f) * static_cast<uint32_t>(num_frames + 1);
       }
-      tinygltf::AnimationSampler sampler;
-      sampler.input = input;
-      sampler.output =
-          builder.AddSparseOnes(static_cast<size_t>(num_frames) * num_frames, ones);
-      sampler.interpolation = "LINEAR";
-      animation.samplers.push_back(sampler);
-      tinygltf::AnimationChannel channel;
-      channel.sampler = static_cast<int>(animation.samplers.size()) - 1;
-      channel.target_node = kMeshNode;
-      channel.target_path = "weights";
-      animation.channels.push_back(channel);
+      add_channel_output(kMeshNode, "weights",
+                         builder.AddSparseOnes(static_cast<size_t>(num_frames) * num_frames, ones));
     }
     model.animations.push_back(animation);
   }
@@ -1500,15 +1495,14 @@ std::string EncodeAnimatedGlb(const Template& tmpl, const std::vector<Pose>& pos
 void WriteAnimatedGlb(const std::string& path, const Template& tmpl,
                       const std::vector<Pose>& poses, double frame_rate, const GlbTexture* texture,
                       const AnimatedGlbOptions& options, AnimatedGlbSummary* summary) {
-  try {
-    WriteFileAtomically(path, [&](std::ostream& out) {
+  // WriteFileAtomically's own errors name `path` already; the encoder's get it here.
+  WriteFileAtomically(path, [&](std::ostream& out) {
+    try {
       WriteAnimatedGlbTo(out, tmpl, poses, frame_rate, texture, options, summary);
-    });
-  } catch (const Error& e) {
-    const std::string what = e.what();
-    if (what.rfind(path + ":", 0) == 0) throw;
-    Fail(path, what);
-  }
+    } catch (const Error& e) {
+      Fail(path, e.what());
+    }
+  });
 }
 
 void WriteTemplateGlb(const std::string& path, const Template& tmpl, const GlbTexture* texture) {
