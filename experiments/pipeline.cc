@@ -213,6 +213,7 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
   const std::size_t stream_bytes = texturing.stream_bytes;
   const int tracked_frames = track.tracked_frames, evaluated = output.evaluated;
   result.initialisations = track.initialisations;
+  result.gap_refits = track.gap_refits;
   if (result.realtime.frames_dropped > 0) {
     result.warnings.push_back("live: " + std::to_string(result.realtime.frames_dropped) + " of " +
                               std::to_string(result.realtime.frames_offered) +

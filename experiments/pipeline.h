@@ -76,6 +76,14 @@ struct PipelineOptions {
   // place too (the better fit kept): a wrong facing chosen at the start, which tracking keeps
   // doubtful but never loses, is corrected. 0: never.
   int reinitialise_after_doubtful = 10;
+  // A tracking frame this many frames or more after the last processed one (frames dropped in
+  // live mode, e.g. during the first frame's initialisation) is fitted by RefitFromPose
+  // (solvers/initializer.h): the last pose re-centred on the scan, the first-frame schedule.
+  // 0: tracked as any frame (the prediction from before the gap).
+  int gap_refit_frames = 3;
+  // Its E-step radii (m) and EM iterations per radius (empty: the first-frame schedule).
+  std::vector<double> gap_refit_radii = {0.08, 0.04, 0.03};
+  int gap_refit_iterations_per_stage = 4;
   // With ground truth: novel-view texture quality (texture/texture_quality.h) every n-th frame
   // and at the last frame; 0: off.
   int texture_quality_every = 10;
@@ -103,6 +111,8 @@ struct FrameRecord {
   FitSummary fit;
   FitQuality quality;            // without ground truth; failed fits are kLost
   bool reinitialised = false;    // fitted by the multi-hypothesis initialisation
+  int gap_frames = 0;            // frames not processed since the previous processed one
+  bool gap_refit = false;        // fitted by RefitFromPose after such a gap
   double init_seconds = 0.0;
   std::string init_report;       // the initialisation's hypotheses and choice
   SegmentationStats segmentation;  // foreground segmentation (no background frames)
@@ -124,6 +134,7 @@ struct PipelineResult {
   // points, non-finite, diverged) count as lost and also as failed.
   int good_frames = 0, doubtful_frames = 0, lost_frames = 0, failed_frames = 0;
   int initialisations = 0;  // first frame and re-initialisations after lost frames
+  int gap_refits = 0;       // frames fitted after a gap (pipeline.gap_refit_frames)
   double init_ms_per_initialisation = 0.0;
   double quality_ms_per_frame = 0.0;
   bool has_ground_truth = false;

@@ -1,4 +1,5 @@
 // Configuration keys of the pipeline (docs/configuration.md lists them with their defaults).
+#include <algorithm>
 #include <cmath>
 #include <map>
 #include <sstream>
@@ -435,7 +436,8 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
                "export_foreground", "export_glb", "glb_exact", "glb_exact_max_frames", "export_bvh",
                "export_textured_mesh", "mesh_up_axis", "lost_threshold_mm",
                "texture_doubtful_frames", "reinitialise_on", "reinitialise_after_doubtful",
-               "reinitialise_auto_wins", "reinitialise_auto_window",
+               "reinitialise_auto_wins", "reinitialise_auto_window", "gap_refit_frames",
+               "gap_refit_radii", "gap_refit_iterations_per_stage",
                "texture_quality_every", "texture_quality_yaws_deg", "texture_quality_height",
                "export_atlases", "stream", "concurrency", "queue_depth", "live",
                "live_queue_depth", "live_rate_hz", "colour_delay_frames"});
@@ -457,6 +459,9 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("reinitialise_after_doubtful", &o->reinitialise_after_doubtful);
   c.Get("reinitialise_auto_wins", &o->reinitialise_auto_wins);
   c.Get("reinitialise_auto_window", &o->reinitialise_auto_window);
+  c.Get("gap_refit_frames", &o->gap_refit_frames);
+  c.Get("gap_refit_radii", &o->gap_refit_radii);
+  c.Get("gap_refit_iterations_per_stage", &o->gap_refit_iterations_per_stage);
   c.Get("texture_quality_every", &o->texture_quality_every);
   c.Get("texture_quality_yaws_deg", &o->held_out.yaws_deg);
   c.Get("texture_quality_height", &o->held_out.height);
@@ -547,6 +552,14 @@ bool PipelineOptions::IsValid(std::string* error) const {
   else if (reinitialise_after_doubtful < 0)
     msg << "pipeline.reinitialise_after_doubtful: expected >= 0 (0: never), found "
         << reinitialise_after_doubtful;
+  else if (gap_refit_frames < 0)
+    msg << "pipeline.gap_refit_frames: expected >= 0 (0: off), found " << gap_refit_frames;
+  else if (gap_refit_iterations_per_stage < 1)
+    msg << "pipeline.gap_refit_iterations_per_stage: expected >= 1, found "
+        << gap_refit_iterations_per_stage;
+  else if (std::any_of(gap_refit_radii.begin(), gap_refit_radii.end(),
+                       [](double r) { return !(r > 0.0) || !std::isfinite(r); }))
+    msg << "pipeline.gap_refit_radii: expected finite radii > 0 (m)";
   else if (reinitialise_auto_wins < 1 || reinitialise_auto_window < reinitialise_auto_wins)
     msg << "pipeline.reinitialise_auto_wins/window: expected 1 <= wins <= window, found "
         << reinitialise_auto_wins << " / " << reinitialise_auto_window;

@@ -64,7 +64,7 @@ void WriteFramesCsv(const std::string& path, const PipelineResult& result) {
                 "seam_edges,changed_triangles,seam_rms_before,seam_rms_after,"
                 "mean_vertex_error_mm,max_vertex_error_mm,mean_joint_error_mm,novel_view_psnr_db,"
                 "novel_view_ssim,texture_coverage,silhouette_violations,unobserved_joints,unsupported_parts,"
-                "out_of_view_joints\n";
+                "out_of_view_joints,gap_frames,gap_refit\n";
   for (const FrameRecord& r : result.frames) {
     frames_csv << r.frame << "," << r.skipped << "," << r.scan_points << ","
                << r.segmentation.subject_pixels << "," << r.segmentation.tracked << ","
@@ -89,7 +89,8 @@ void WriteFramesCsv(const std::string& path, const PipelineResult& result) {
                << (r.texture_quality.views ? Fixed(r.texture_quality.coverage) : "nan") << ","
                << (r.fit.trace.empty() ? 0 : r.fit.trace.back().silhouette_violations) << ","
                << (r.fit.trace.empty() ? 0 : r.fit.trace.back().unobserved_joints) << ","
-               << r.quality.unsupported_parts << "," << r.fit.out_of_view_joints << "\n";
+               << r.quality.unsupported_parts << "," << r.fit.out_of_view_joints << ","
+               << r.gap_frames << "," << r.gap_refit << "\n";
   }
   WriteFileAtomically(path, frames_csv.str());
 }
@@ -210,6 +211,7 @@ void WriteMetricsJson(const std::string& path, const PipelineResult& result) {
                    {"lost_frames", result.lost_frames},
                    {"failed_frames", result.failed_frames},
                    {"initialisations", result.initialisations},
+                   {"gap_refits", result.gap_refits},
                    {"has_ground_truth", result.has_ground_truth},
                    {"evaluated_frames", result.evaluated_frames},
                    {"mean_vertex_error_mm", Number(result.mean_vertex_error_mm)},

@@ -229,8 +229,25 @@ void TrackStage::Process(FrameWork* work) {
 
   // Fit: the multi-hypothesis initialisation on the first frame and after a lost one.
   const bool enough_points = scan_.size() >= options_.fitting.min_scan_points;
+  // Frames of the recording not processed since the last one: dropped by the live reader, or
+  // missing from the recording (its own frame numbers).
+  record.gap_frames = last_frame_ >= 0 ? std::max(0, frame.index - last_frame_ - 1) : 0;
+  last_frame_ = frame.index;
   if (need_init_ && enough_points) {
     Initialise(&record);
+  } else if (options_.gap_refit_frames > 0 && record.gap_frames >= options_.gap_refit_frames &&
+             fitter_->tracking() && enough_points) {
+    // Frames were dropped (live): the subject may have moved beyond the tracking radii.
+    GapRefitOptions refit;
+    refit.coarse_iterations = options_.initializer.coarse_iterations;
+    refit.radii = options_.gap_refit_radii;
+    refit.iterations_per_stage = options_.gap_refit_iterations_per_stage;
+    refit.quality = options_.quality;
+    record.fit = RefitFromPose(fitter_, scan_, calibration_.depth, fitter_->pose(), refit);
+    record.gap_refit = true;
+    fit_seconds += record.fit.total_seconds;
+    ++tracked_frames;
+    ++gap_refits;
   } else {
     record.fit = TrackFrame(fitter_, scan_, calibration_.depth, options_.quality);
     fit_seconds += record.fit.total_seconds;

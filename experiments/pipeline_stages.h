@@ -89,7 +89,7 @@ class TrackStage {
 
   // Totals over the processed frames.
   double fit_seconds = 0.0, init_seconds = 0.0, quality_seconds = 0.0;
-  int tracked_frames = 0, initialisations = 0;
+  int tracked_frames = 0, initialisations = 0, gap_refits = 0;
 
  private:
   void Initialise(FrameRecord* record);
@@ -103,6 +103,7 @@ class TrackStage {
   Template* tmpl_ = nullptr;
   Scan scan_;
   bool need_init_ = true;
+  int last_frame_ = -1;  // Frame::index of the last processed frame
   int doubtful_run_ = 0;  // consecutive doubtful frames
   // Per recent tracked frame (at most reinitialise_auto_window): did an in-place
   // re-initialisation replace the tracked fit? (ReinitialiseOn::kAuto)

@@ -192,8 +192,12 @@ void RegisterTrackCommand(CLI::App* app) {
     std::printf("frames: %zu: %d good, %d doubtful, %d lost (%d failed fits), %d skipped\n",
                 result.frames.size(), result.good_frames, result.doubtful_frames,
                 result.lost_frames, result.failed_frames, result.skipped_frames);
-    std::printf("initialisations: %d (%.0f ms each)\n", result.initialisations,
+    std::printf("initialisations: %d (%.0f ms each)", result.initialisations,
                 result.init_ms_per_initialisation);
+    if (result.gap_refits > 0) {
+      std::printf(", %d frames fitted again after dropped frames", result.gap_refits);
+    }
+    std::printf("\n");
     std::printf("EM iterations per frame: %.1f\n", result.mean_em_iterations);
     std::printf("fitting: %.1f ms/frame, texturing: %.1f ms/frame\n", result.fit_ms_per_frame,
                 result.texture_ms_per_frame);

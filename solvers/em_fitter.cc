@@ -450,6 +450,11 @@ void EMFitter::BeginFrame(const Scan& scan, const Pose& initial_guess) {
   if (radius_mode) st.radii = st.first_frame ? options_.first_frame_radii : options_.tracking_radii;
   st.iterations_per_stage = st.first_frame ? options_.first_frame_iterations_per_stage
                                            : options_.tracking_iterations_per_stage;
+  if (radius_mode && !next_radii_.empty()) {
+    st.radii = next_radii_;
+    st.iterations_per_stage = next_iterations_per_stage_;
+  }
+  next_radii_.clear();
   st.max_iterations = st.first_frame ? 2 * options_.max_iterations : options_.max_iterations;
   if (!radius_mode) st.iterations_per_stage = st.max_iterations;
   if (!history_.empty()) {
@@ -780,6 +785,19 @@ void EMFitter::AcceptPose(const Scan& scan, const Pose& pose, const Eigen::Matri
   }
   state_.reset();
   Commit(scan, pose, ScaleIsFree(), information);
+}
+
+void EMFitter::SetNextFrameSchedule(const std::vector<double>& radii, int iterations_per_stage) {
+  const bool radii_ok = !radii.empty() && std::all_of(radii.begin(), radii.end(), [](double r) {
+    return std::isfinite(r) && r > 0.0;
+  });
+  if (!radii_ok || iterations_per_stage < 1) {
+    throw Error("EMFitter::SetNextFrameSchedule: expected finite radii > 0 (m) and >= 1 "
+                "iterations per stage, found " + std::to_string(radii.size()) +
+                " radii and " + std::to_string(iterations_per_stage) + " iterations");
+  }
+  next_radii_ = radii;
+  next_iterations_per_stage_ = iterations_per_stage;
 }
 
 FitSummary EMFitter::FitFrame(const Scan& scan) {

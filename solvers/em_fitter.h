@@ -281,6 +281,12 @@ class EMFitter {
   // Frames counted towards the scale estimate (at most scale_estimation_frames).
   int scale_samples() const { return static_cast<int>(scale_samples_.size()); }
 
+  // The E-step radius schedule of the next frame begun (BeginFrame, FitFrame) instead of the
+  // first-frame or tracking one (EStepMode::kRadius only; one frame, e.g. RefitFromPose in
+  // solvers/initializer.h). Throws artex::Error for an empty list, a radius <= 0 or
+  // iterations_per_stage < 1.
+  void SetNextFrameSchedule(const std::vector<double>& radii, int iterations_per_stage);
+
   // Progress hook, called after every EM iteration (never prints).
   void SetIterationCallback(std::function<void(const EMIterationInfo&)> callback) {
     callback_ = std::move(callback);
@@ -302,6 +308,8 @@ class EMFitter {
   std::unique_ptr<FitSolver> solver_;
   Eigen::MatrixX3d template_colors_;
   Pose initial_pose_;
+  std::vector<double> next_radii_;  // SetNextFrameSchedule (empty: none)
+  int next_iterations_per_stage_ = 0;
   Pose pose_;
   PinholeCamera camera_;
   bool has_camera_ = false;

@@ -368,4 +368,87 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
   return result;
 }
 
+bool GapRefitOptions::IsValid(std::string* error) const {
+  std::ostringstream msg;
+  if (coarse_iterations < 0) {
+    msg << "coarse_iterations: expected >= 0, found " << coarse_iterations;
+  } else if (iterations_per_stage < 1) {
+    msg << "iterations_per_stage: expected >= 1, found " << iterations_per_stage;
+  } else if (std::any_of(radii.begin(), radii.end(),
+                         [](double r) { return !(r > 0.0) || !std::isfinite(r); })) {
+    msg << "radii: expected finite radii > 0 (m)";
+  } else if (!icp.IsValid(error)) {
+    return false;
+  } else {
+    return quality.IsValid(error);
+  }
+  if (error) *error = msg.str();
+  return false;
+}
+
+FitSummary RefitFromPose(EMFitter* fitter, const Scan& scan, const PinholeCamera& depth_camera,
+                         const Pose& start, const GapRefitOptions& options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw Error("gap refit options: " + error);
+  if (fitter == nullptr) throw Error("RefitFromPose: expected an EM fitter, found null");
+  const Skinning& skinning = fitter->skinning();
+  const Template& model = skinning.model();
+  if (start.num_joints() != model.num_joints()) {
+    throw Error("RefitFromPose: expected a pose of " + std::to_string(model.num_joints()) +
+                " joints, found " + std::to_string(start.num_joints()));
+  }
+  if (fitter->depth_camera() == nullptr) fitter->SetDepthCamera(depth_camera);
+  Pose pose = start;
+  if (options.coarse_iterations > 0 && scan.size() > 0 && scan.points.allFinite() &&
+      start.AllFinite()) {
+    Eigen::MatrixX3d x, xn;
+    skinning.Apply(start, &x);
+    ComputeVertexNormals(x, model.triangles, &xn);
+    const Eigen::Vector3d scan_centroid = scan.points.colwise().mean().transpose();
+    const Eigen::Vector3d eye = depth_camera.Center();
+    Eigen::Vector3d shift = Eigen::Vector3d::Zero();
+    for (int it = 0; it < options.coarse_iterations; ++it) {
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      int count = 0;
+      for (int t = 0; t < x.rows(); ++t) {
+        const Eigen::Vector3d w = x.row(t).transpose() + shift;
+        if (xn.row(t).dot(eye - w) <= 0.0) continue;
+        double z = 0.0;
+        const Eigen::Vector2d uv = depth_camera.Project(w, &z);
+        if (!(z > 0.0) || uv.x() < -0.5 || uv.y() < -0.5 || uv.x() > depth_camera.width - 0.5 ||
+            uv.y() > depth_camera.height - 0.5) {
+          continue;
+        }
+        sum += w;
+        ++count;
+      }
+      if (count == 0) break;
+      shift += scan_centroid - sum / count;
+    }
+    Pose moved = start;
+    moved.translation += shift;
+    // The centroid is biased (the far side of the template, parts the scan lacks): a rigid ICP
+    // of the moved start against the scan places it.
+    if (options.align_moved) {
+      IcpInitOptions icp = options.icp;
+      icp.coarse_alignment = false;
+      icp.estimate_scale = false;
+      moved = AlignByIcp(skinning, moved, scan, icp).pose;
+    }
+    const auto score = [&](const Pose& p) {
+      Eigen::MatrixX3d posed;
+      skinning.Apply(p, &posed);
+      return EvaluateFitQuality(posed, model.triangles, scan, depth_camera, options.quality).score;
+    };
+    if (shift.allFinite() && score(moved) > score(start)) pose = moved;
+  }
+  fitter->Reset(/*keep_scale=*/true);
+  if (!options.radii.empty()) {
+    fitter->SetNextFrameSchedule(options.radii, options.iterations_per_stage);
+  }
+  fitter->BeginFrame(scan, pose);
+  while (!fitter->frame_done()) fitter->Iterate();
+  return fitter->EndFrame();
+}
+
 }  // namespace artex

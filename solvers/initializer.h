@@ -119,6 +119,37 @@ struct InitResult {
 InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera& depth_camera,
                          const InitializerOptions& options);
 
+// Refit after a gap in the frames (RefitFromPose).
+struct GapRefitOptions {
+  int coarse_iterations = 5;  // fixed-point steps of the re-centred start (0: none)
+  // E-step radii (m) and EM iterations per radius of the refit (empty: the first-frame schedule).
+  std::vector<double> radii = {0.08, 0.04, 0.03};
+  int iterations_per_stage = 4;
+  bool align_moved = true;  // rigid ICP of the re-centred start (`icp`, coarse step and scale off)
+  IcpInitOptions icp = [] {
+    IcpInitOptions o;
+    o.max_scan_points = 1500;
+    o.max_iterations = 30;
+    return o;
+  }();
+  FitQualityOptions quality;  // ranks the two starts
+
+  bool IsValid(std::string* error) const;
+};
+
+// Fits `scan` after a gap in the frames (live mode: frames dropped while the tracker was busy,
+// e.g. during the first frame's initialisation) from `start` (the last fitted pose), which the
+// motion since may have left beyond a tracking frame's E-step radii. Two starts are ranked by
+// the fit quality score: `start` itself, and `start` translated so that the centroid of its
+// template vertices facing the camera and inside the depth image matches the scan centroid (the
+// initialiser's coarse placement: it follows a subject that walked on, but is biased by a few
+// centimetres, so a subject that stayed keeps `start`). The better is fitted as a first frame
+// with options.radii; the fitter's history restarts from this frame (Reset, the scale estimate
+// kept: the motion before the gap says little about the speed after it); no ICP, no other
+// hypotheses. Throws artex::Error for a pose with the wrong joint count or invalid options.
+FitSummary RefitFromPose(EMFitter* fitter, const Scan& scan, const PinholeCamera& depth_camera,
+                         const Pose& start, const GapRefitOptions& options);
+
 // Yaw (radians) of a global rotation: the angle about +Y of its image of the template front
 // +Z, atan2(x, z) of R e_z (0: facing +Z).
 double YawOfRotation(const Eigen::Matrix3d& rotation);

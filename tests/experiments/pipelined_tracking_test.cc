@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <string>
 #include <thread>
@@ -185,12 +186,64 @@ TEST(PipelinedTrackingTest, LiveModeAccountsForEveryFrame) {
   }
 }
 
+// The fixture's sequence without frames 1-3 (as if a live reader had dropped them): frame 4
+// follows frame 0 after a gap of 3 frames.
+std::string SequenceWithAGap() {
+  const fs::path gap = TestData().root / "gap_sequence";
+  if (!fs::exists(gap / "frames.csv")) {
+    fs::copy(TestData().sequence, gap, fs::copy_options::recursive);
+    std::ifstream in(gap / "frames.csv");
+    std::string line, kept;
+    std::getline(in, line);
+    kept = line + "\n";
+    for (int row = 0; std::getline(in, line); ++row) {
+      if (row < 1 || row > 3) kept += line + "\n";
+    }
+    in.close();
+    std::ofstream(gap / "frames.csv", std::ios::trunc) << kept;
+  }
+  return gap.string();
+}
+
+TEST(PipelinedTrackingTest, FramesAfterAGapAreRefitted) {
+  for (const int refit_after : {3, 4, 0}) {
+    Config config = BaseConfig();
+    config.Set("pipeline.gap_refit_frames", std::to_string(refit_after));
+    const PipelineOptions options = LoadPipelineOptions(config);
+    const std::string name = "gap" + std::to_string(refit_after);
+    const PipelineResult r = RunPipeline(SequenceWithAGap(), TestData().template_path, options,
+                                         config, (TestData().root / name).string());
+    ASSERT_EQ(r.frames.size(), 3u);
+    EXPECT_EQ(r.frames[0].gap_frames, 0);
+    EXPECT_EQ(r.frames[1].gap_frames, 3);
+    EXPECT_EQ(r.frames[2].gap_frames, 0);
+    const bool refitted = refit_after == 3;
+    EXPECT_EQ(r.frames[1].gap_refit, refitted) << name;
+    EXPECT_FALSE(r.frames[2].gap_refit);
+    EXPECT_EQ(r.gap_refits, refitted ? 1 : 0);
+    EXPECT_TRUE(r.frames[1].fit.ok()) << name;
+    EXPECT_NE(r.frames[1].quality.label, FitQualityLabel::kLost) << name;
+    EXPECT_FALSE(r.frames[1].reinitialised) << name;
+    // frames.csv says which frame was refitted after how long a gap.
+    std::ifstream csv(TestData().root / name / "frames.csv");
+    std::string header, first, second;
+    std::getline(csv, header);
+    std::getline(csv, first);
+    std::getline(csv, second);
+    EXPECT_NE(header.find(",gap_frames,gap_refit"), std::string::npos);
+    EXPECT_EQ(second.substr(second.size() - 4), refitted ? ",3,1" : ",3,0") << second;
+  }
+}
+
 TEST(PipelinedTrackingTest, RejectsInvalidOptions) {
   for (const auto& [key, value] :
        std::vector<std::pair<std::string, std::string>>{{"pipeline.queue_depth", "0"},
                                                         {"pipeline.live_queue_depth", "0"},
                                                         {"pipeline.live_rate_hz", "-1"},
-                                                        {"pipeline.colour_delay_frames", "-1"}}) {
+                                                        {"pipeline.colour_delay_frames", "-1"},
+                                                        {"pipeline.gap_refit_frames", "-1"},
+                                                        {"pipeline.gap_refit_radii", "[0.05, 0]"},
+                                                        {"pipeline.gap_refit_iterations_per_stage", "0"}}) {
     Config config = BaseConfig();
     config.Set(key, value);
     try {

@@ -189,6 +189,76 @@ TEST(InitializerTest, UpperBodyCroppedByTheImageGetsTheTrueScale) {
   EXPECT_GE(good, kFrames * 9 / 10);
 }
 
+// Frames dropped while the tracker was busy (live mode): the subject's limbs (the walk is in
+// place) and, in a second scan shifted sideways, the whole subject have moved on. Frame 0 is
+// initialised, frames 1-5 tracked, then frame 5 + kGap follows. RefitFromPose (the better start
+// of the last pose and the last pose moved onto the scan, fitted with wider radii) explains it
+// better than tracking the same frame from the stale pose, and places the subject.
+TEST(InitializerTest, RefitAfterAGapRecoversTheSubject) {
+  constexpr int kGap = 24;
+  const testing_util::KinectScans data =
+      testing_util::SynthesizeScans(testing_util::TestSynthOptions(6 + kGap), "initializer_gap");
+  const Template tmpl = GenerateTemplate();
+  EMFitter fitter(tmpl, EMFitterOptions());
+  ASSERT_TRUE(InitializeFit(&fitter, data.scans[0], data.depth_camera, InitializerOptions()).ok);
+  for (int i = 1; i <= 5; ++i) ASSERT_TRUE(fitter.FitFrame(data.scans[i]).ok());
+  const Pose before_gap = fitter.pose();
+  const int after = 5 + kGap;
+  double limb_change_deg = 0.0;  // how far the limbs moved during the gap
+  for (int j = 0; j < data.truth[after].num_joints(); ++j) {
+    const Eigen::AngleAxisd d(data.truth[after].joint_rotations[j] *
+                              data.truth[5].joint_rotations[j].transpose());
+    limb_change_deg = std::max(limb_change_deg, d.angle() * kRadToDeg);
+  }
+  EXPECT_GT(limb_change_deg, 20.0);
+  for (const double shift : {0.0, 0.25}) {
+    Scan scan = data.scans[after];
+    scan.points.col(0).array() += shift;
+    const auto quality = [&](const Pose& pose) {
+      Eigen::MatrixX3d posed;
+      fitter.skinning().Apply(pose, &posed);
+      return EvaluateFitQuality(posed, tmpl.triangles, scan, data.depth_camera,
+                                FitQualityOptions());
+    };
+    // Fitters whose history is the last pose, its scale settled (as after the scale estimation).
+    EMFitterOptions settled;
+    settled.scale_mode = ScaleMode::kFixed;
+    EMFitter tracker(tmpl, settled);  // tracked across the gap from the stale pose
+    tracker.SetDepthCamera(data.depth_camera);
+    tracker.AcceptPose(data.scans[5], before_gap);
+    const FitSummary tracked = tracker.FitFrame(scan);
+    const FitQuality tracked_quality = quality(tracker.pose());
+    EMFitter refitter(tmpl, settled);
+    refitter.AcceptPose(data.scans[5], before_gap);
+    const FitSummary refit =
+        RefitFromPose(&refitter, scan, data.depth_camera, before_gap, GapRefitOptions());
+    const FitQuality refit_quality = quality(refitter.pose());
+    const Eigen::Vector3d expected =
+        before_gap.translation + (data.truth[after].translation - data.truth[5].translation) +
+        Eigen::Vector3d(shift, 0.0, 0.0);
+    const double translation_error = (refitter.pose().translation - expected).norm();
+    std::printf("gap of %d frames (limbs %.0f deg), scan shifted %.0f mm: refit %d iterations, "
+                "%s, translation error %.0f mm; tracked %d iterations, %s\n",
+                kGap, limb_change_deg, 1e3 * shift, refit.iterations,
+                refit_quality.BriefReport().c_str(), 1e3 * translation_error, tracked.iterations,
+                tracked_quality.BriefReport().c_str());
+    ASSERT_TRUE(refit.ok());
+    EXPECT_EQ(refit_quality.label, FitQualityLabel::kGood) << refit_quality.BriefReport();
+    EXPECT_GT(refit_quality.score, tracked_quality.score + 0.01);
+    EXPECT_LT(translation_error, 0.03);
+    // The scale estimate is kept, the history restarts from the refitted frame.
+    EXPECT_EQ(refitter.pose().scale, before_gap.scale);
+    EXPECT_EQ(refitter.frames_fitted(), 1);
+  }
+  GapRefitOptions bad;
+  bad.radii = {0.0};
+  EXPECT_THROW(RefitFromPose(&fitter, data.scans[after], data.depth_camera, before_gap, bad),
+               Error);
+  EXPECT_THROW(RefitFromPose(&fitter, data.scans[after], data.depth_camera, Pose::Identity(3),
+                             GapRefitOptions()),
+               Error);
+}
+
 TEST(InitializerTest, TooFewPointsFailsAsAFrame) {
   BodyShapeOptions coarse;
   coarse.resolution = 0;

@@ -49,6 +49,60 @@ TEST(TextureQualityTest, SsimIsOneForEqualImagesAndDropsWithNoise) {
   EXPECT_GT(noisy, 0.0);
 }
 
+// The SSIM of the whole image, filtered everywhere (the definition MaskedSsim restricts to the
+// mask's bounding box).
+double WholeImageSsim(const cv::Mat& a_bgr, const cv::Mat& b_bgr, const cv::Mat& mask, int side,
+                      double sigma) {
+  cv::Mat a, b;
+  cv::cvtColor(a_bgr, a, cv::COLOR_BGR2GRAY);
+  cv::cvtColor(b_bgr, b, cv::COLOR_BGR2GRAY);
+  a.convertTo(a, CV_64F);
+  b.convertTo(b, CV_64F);
+  const cv::Size window(side, side);
+  const double c1 = std::pow(0.01 * 255, 2), c2 = std::pow(0.03 * 255, 2);
+  cv::Mat mu_a, mu_b, aa, bb, ab, inner;
+  cv::GaussianBlur(a, mu_a, window, sigma);
+  cv::GaussianBlur(b, mu_b, window, sigma);
+  cv::GaussianBlur(a.mul(a), aa, window, sigma);
+  cv::GaussianBlur(b.mul(b), bb, window, sigma);
+  cv::GaussianBlur(a.mul(b), ab, window, sigma);
+  cv::erode(mask, inner, cv::Mat::ones(window, CV_8UC1), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT,
+            cv::Scalar(0));
+  double sum = 0.0;
+  long n = 0;
+  for (int y = 0; y < a.rows; ++y) {
+    for (int x = 0; x < a.cols; ++x) {
+      if (!inner.at<uint8_t>(y, x)) continue;
+      const double ma = mu_a.at<double>(y, x), mb = mu_b.at<double>(y, x);
+      const double va = aa.at<double>(y, x) - ma * ma, vb = bb.at<double>(y, x) - mb * mb;
+      const double cov = ab.at<double>(y, x) - ma * mb;
+      sum += ((2 * ma * mb + c1) * (2 * cov + c2)) / ((ma * ma + mb * mb + c1) * (va + vb + c2));
+      ++n;
+    }
+  }
+  return sum / n;
+}
+
+TEST(TextureQualityTest, SsimOfTheMaskBoxEqualsTheWholeImages) {
+  const cv::Mat a = Pattern(160, 120);
+  cv::Mat noise(120, 160, CV_8UC3), b;
+  cv::randn(noise, cv::Scalar::all(0), cv::Scalar::all(25));
+  cv::add(a, noise, b, cv::noArray(), CV_8UC3);
+  // A blob in the middle, one touching the image's corner, and both.
+  cv::Mat middle(120, 160, CV_8UC1, cv::Scalar(0)), corner = middle.clone();
+  cv::ellipse(middle, cv::Point(80, 60), cv::Size(30, 20), 15, 0, 360, cv::Scalar(255), -1);
+  cv::circle(corner, cv::Point(3, 118), 25, cv::Scalar(255), -1);
+  cv::Mat both = middle | corner;
+  for (const cv::Mat* mask : std::initializer_list<const cv::Mat*>{&middle, &corner, &both}) {
+    for (int side : {3, 7, 11}) {
+      const double expected = WholeImageSsim(a, b, *mask, side, 1.5);
+      EXPECT_LT(expected, 0.95);
+      EXPECT_EQ(MaskedSsim(a, b, *mask, side, 1.5), expected) << "window " << side;
+    }
+  }
+  EXPECT_TRUE(std::isnan(MaskedSsim(a, b, cv::Mat(120, 160, CV_8UC1, cv::Scalar(0)))));
+}
+
 TEST(TextureQualityTest, AccumulatorPoolsViewsAndMeasuresCoverage) {
   HeldOutViewOptions o;
   NovelViewAccumulator acc(o);
