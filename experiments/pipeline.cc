@@ -237,7 +237,9 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
     result.warnings.push_back(w.str());
   }
   result.texture_ms_per_frame = 1000.0 * texture_seconds / fitted;
-  result.stream_kbit_per_s = 8.0 * stream_bytes / fitted * calibration.frame_rate / 1000.0;
+  result.stream_kbit_per_s = options.stream_estimate
+                                 ? 8.0 * stream_bytes / fitted * calibration.frame_rate / 1000.0
+                                 : std::numeric_limits<double>::quiet_NaN();
   if (output.quality_evaluations > 0) {
     result.mean_novel_view_psnr_db = output.psnr_sum / output.quality_evaluations;
     result.mean_novel_view_ssim = output.ssim_sum / output.quality_evaluations;

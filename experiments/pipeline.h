@@ -92,6 +92,9 @@ struct PipelineOptions {
   // as atlases/NNNNNN_textured.png, one row): the input of `artex stream encode RUN/`.
   bool export_atlases = false;
   std::string stream_path;  // also write the tele-presence stream here (.artx; "" none)
+  // The earlier bandwidth estimate stream_kbit_per_s (raw pose + a JPEG of the atlas box that
+  // changed, encoded every frame in the texture stage: ~10 ms of CPU per frame); off: NaN.
+  bool stream_estimate = false;
   StreamOptions stream;     // section stream
   // Sequential or pipelined stages, live replay (pipeline.concurrency, .queue_depth, .live,
   // .live_rate_hz, .colour_delay_frames; experiments/realtime_options.h).

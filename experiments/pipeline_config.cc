@@ -439,7 +439,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
                "reinitialise_auto_wins", "reinitialise_auto_window", "gap_refit_frames",
                "gap_refit_radii", "gap_refit_iterations_per_stage",
                "texture_quality_every", "texture_quality_yaws_deg", "texture_quality_height",
-               "export_atlases", "stream", "concurrency", "queue_depth", "live",
+               "export_atlases", "stream", "stream_estimate", "concurrency", "queue_depth", "live",
                "live_queue_depth", "live_rate_hz", "colour_delay_frames"});
   c.Get("texture", &o->texture);
   c.Get("colour_term", &o->colour_term);
@@ -467,6 +467,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("texture_quality_height", &o->held_out.height);
   c.Get("export_atlases", &o->export_atlases);
   c.Get("stream", &o->stream_path);
+  c.Get("stream_estimate", &o->stream_estimate);
   c.GetEnum("concurrency", PipelineConcurrencyNames(), &o->realtime.concurrency);
   c.Get("queue_depth", &o->realtime.queue_depth);
   c.Get("live", &o->realtime.live);

@@ -373,11 +373,11 @@ bool TextureStage::Process(FrameWork* work, Eigen::MatrixX3d* colours) {
   const int i = done.frame;
   FrameRecord& record = work->record;
   bool changed = false;
-  stream_bytes += sizeof(float) * work->pose.num_parameters();
+  if (options_.stream_estimate) stream_bytes += sizeof(float) * work->pose.num_parameters();
   if (texturer_ && work->texture_frame) {
     record.texture = texturer_->AddFrame(i, work->frame.color, calibration_.color, work->posed);
     texture_seconds += record.texture.seconds_total;
-    stream_bytes += TextureUpdateBytes(*texturer_);
+    if (options_.stream_estimate) stream_bytes += TextureUpdateBytes(*texturer_);
     if (options_.colour_term) {
       std::vector<uint8_t> valid;
       Eigen::MatrixX3d& c = *colours;

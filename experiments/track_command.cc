@@ -2,6 +2,7 @@
 // texturing of every frame (experiments/pipeline.h), with a progress line on stderr. The
 // recording is an artex sequence or a TUM RGB-D folder (sensors/frame_source.h).
 #include <CLI/CLI.hpp>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -201,8 +202,10 @@ void RegisterTrackCommand(CLI::App* app) {
     std::printf("EM iterations per frame: %.1f\n", result.mean_em_iterations);
     std::printf("fitting: %.1f ms/frame, texturing: %.1f ms/frame\n", result.fit_ms_per_frame,
                 result.texture_ms_per_frame);
-    std::printf("stream estimate: %.1f kbit/s (raw pose + JPEG of the changed atlas patch)\n",
-                result.stream_kbit_per_s);
+    if (std::isfinite(result.stream_kbit_per_s)) {
+      std::printf("stream estimate: %.1f kbit/s (raw pose + JPEG of the changed atlas patch)\n",
+                  result.stream_kbit_per_s);
+    }
     if (result.has_stream) {
       const StreamSummary& s = result.stream;
       std::printf(

@@ -109,7 +109,16 @@ TEST(PipelineTest, ResultCoversEveryFrameWithFiniteErrors) {
   EXPECT_EQ(r.lost_fraction, 0.0);
   EXPECT_GT(r.mean_em_iterations, 0.0);
   EXPECT_GT(r.texture_ms_per_frame, 0.0);
+  EXPECT_TRUE(std::isnan(r.stream_kbit_per_s));  // pipeline.stream_estimate is off
+}
+
+TEST(PipelineTest, StreamEstimateOnRequest) {
+  Config config = SmallConfig();
+  config.Set("pipeline.stream_estimate", "true");
+  config.Set("pipeline.max_frames", "2");
+  const PipelineResult r = Track(TestData().sequence, OutDir("stream_estimate").string(), config);
   EXPECT_GT(r.stream_kbit_per_s, 0.0);
+  EXPECT_TRUE(std::isfinite(r.stream_kbit_per_s));
 }
 
 TEST(PipelineTest, PosesAndFramesCsvHaveOneRowPerFrame) {

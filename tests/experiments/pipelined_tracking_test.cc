@@ -59,6 +59,7 @@ Config BaseConfig() {
   config.Set("pipeline.texture", "true");
   config.Set("pipeline.texture_quality_every", "2");
   config.Set("pipeline.export_glb", "false");
+  config.Set("pipeline.stream_estimate", "true");
   return config;
 }
 
