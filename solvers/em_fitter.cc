@@ -486,7 +486,11 @@ EMIterationInfo EMFitter::Iterate() {
                                 st.normals_age + 1 >= options_.normal_refresh_iterations);
   const int n_fit = static_cast<int>(fit_vertices_.size());
   if (refresh_normals) {
-    skinning_->Apply(pose_, &st.full_posed);
+    if (st.summary.iterations == 0 && st.initial_posed.rows() == model.num_vertices()) {
+      st.full_posed = st.initial_posed;  // BeginFrame posed the initial guess, pose_ still is it
+    } else {
+      skinning_->Apply(pose_, &st.full_posed);
+    }
     ComputeVertexNormals(st.full_posed, model.triangles, &st.full_normals);
     if (subset) {
       st.posed.resize(n_fit, 3);
