@@ -17,13 +17,16 @@
 // machine), wall_ratio / cpu_ratio to the default of the same kind, EM iterations, E-/M-step
 // ms, kd-tree queries and scan candidates visited per frame, error_mm (mean per-vertex error
 // against the true pose, i.e. including tangential sliding), and for the dense variant the mean
-// per-vertex difference to the default fit (mm).
+// per-vertex difference to the default fit (mm). With ARTEX_BENCH_DUMP_POSES set, BM_Track*
+// print every tracked pose parameter as hexadecimal floats to stderr.
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <memory>
 #include <random>
 #include <vector>
@@ -234,6 +237,16 @@ void RunSequence(benchmark::State& state, EMFitterOptions options, bool is_defau
           testing_util::MeanVertexError(*f.skinning, fitter.pose(), f.sequence_truth[frame]);
       totals.error += error;
       totals.max_error = std::max(totals.max_error, error);
+      if (std::getenv("ARTEX_BENCH_DUMP_POSES") != nullptr) {
+        // Every pose parameter as a hexadecimal float (bit-identity checks between builds).
+        std::fprintf(stderr, "frame %d scale %a t", frame, fitter.pose().scale);
+        for (int i = 0; i < 3; ++i) std::fprintf(stderr, " %a", fitter.pose().translation[i]);
+        for (int i = 0; i < 9; ++i) std::fprintf(stderr, " %a", fitter.pose().rotation(i));
+        for (const Eigen::Matrix3d& r : fitter.pose().joint_rotations) {
+          for (int i = 0; i < 9; ++i) std::fprintf(stderr, " %a", r(i));
+        }
+        std::fprintf(stderr, "\n");
+      }
     }
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();

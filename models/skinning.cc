@@ -30,6 +30,13 @@ void ForEachVertexRange(int n, const SkinningOptions& options, const Body& body)
                     [&](const tbb::blocked_range<int>& r) { body(r.begin(), r.end()); });
 }
 
+// cos and sin of an angle (one out-of-line function, so that every caller gets the same bits
+// for the same angle).
+__attribute__((noinline)) void CosSin(double angle, double* c, double* s) {
+  *c = std::cos(angle);
+  *s = std::sin(angle);
+}
+
 }  // namespace
 
 void TwistSlerpWeights(double theta, double tau, double* w_s, double* wbar_s) {
@@ -91,6 +98,8 @@ struct Skinning::JointFrame {
   Eigen::Vector3d center_unscaled;    // o_j
   Eigen::Vector3d center;             // c_j
   double twist_angle = 0.0;           // theta_j, signed, about a_j
+  double twist_cos = 1.0;             // cos theta_j, sin theta_j (vertices with tau = 1)
+  double twist_sin = 0.0;
   Eigen::RowVector3d twist_gradient;  // d theta_j / d w_j for R_j <- Exp(w_j) R_j
 };
 
@@ -198,6 +207,7 @@ void Skinning::ComputeJointFrames(const Pose& pose, std::vector<JointFrame>* fra
     f.swing = st.swing;
     f.scaled_swing = f.scaled_parent * st.swing;
     f.twist_angle = st.twist_angle;
+    CosSin(f.twist_angle, &f.twist_cos, &f.twist_sin);
     // theta = 2 atan2(p, q.w), p = q.vec . a. For R <- Exp(w) R, dq = (0, w/2) (x) q:
     //   dq.w = -q.vec . w / 2,  dp = (q.w a + q.vec x a) . w / 2,
     //   dtheta/dw = (q.w (q.w a + q.vec x a) + p q.vec) / (q.w^2 + p^2),
@@ -242,9 +252,20 @@ void Skinning::Evaluate(const Pose& pose, Eigen::MatrixX3d* posed,
       const Eigen::Vector3d d = radial_.row(v).transpose();
       const Eigen::Vector3d ad = a.cross(d);
       // SLERP bracket on the cylinder: (w_s R^SLERP + wbar_s 1) d = Rot(a, tau theta) d = r.
+      // cos and sin of tau theta: a vertex with tau = 1 (its whole segment twists) takes its
+      // joint's, tau theta = 0 (tau = 0, untwisted joint) has cos 1 and sin tau theta (+-0) as
+      // libm gives them; the same values as evaluating them per vertex, bit for bit.
       const double angle = tau * f.twist_angle;
-      const double c = std::cos(angle);
-      const double s = std::sin(angle);
+      double c, s;
+      if (tau == 1.0) {
+        c = f.twist_cos;
+        s = f.twist_sin;
+      } else if (angle == 0.0) {
+        c = 1.0;
+        s = angle;
+      } else {
+        CosSin(angle, &c, &s);
+      }
       // u = r + t' - t_k = (v - t_k) + (r - d)
       const Eigen::Vector3d u = offset_.row(v).transpose() + (c - 1.0) * d + s * ad;
       // v' = s0 W_k (w R^LBS u + (1 - w) u) + c_k

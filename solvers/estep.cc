@@ -10,13 +10,19 @@
 #include <nanoflann.hpp>
 #include <new>
 #include <sstream>
+#include <utility>
 
 #include "models/error.h"
 #include "solvers/estep_pairs.h"
 
 namespace artex {
 
+using estep_internal::CheckPosed;
+using estep_internal::CheckScan;
+using estep_internal::Finish;
+using estep_internal::ForRange;
 using estep_internal::kPackedStride;
+using estep_internal::ResizeTargets;
 using estep_internal::VertexQuery;
 using estep_internal::VertexSums;
 using estep_internal::WeighVertex;
@@ -56,70 +62,6 @@ bool EStepOptions::IsValid(std::string* error) const {
 }
 
 // ---------------------------------------------------------------------------------------------
-// PointCloudIndex
-
-namespace {
-struct RowMajorCloud {
-  std::vector<double> xyz;  // 3 N
-  size_t kdtree_get_point_count() const { return xyz.size() / 3; }
-  double kdtree_get_pt(size_t i, size_t d) const { return xyz[3 * i + d]; }
-  template <class Box>
-  bool kdtree_get_bbox(Box&) const {
-    return false;
-  }
-};
-using KdTree =
-    nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, RowMajorCloud>,
-                                        RowMajorCloud, 3, int>;
-}  // namespace
-
-struct PointCloudIndex::Impl {
-  RowMajorCloud cloud;
-  std::unique_ptr<KdTree> tree;
-};
-
-PointCloudIndex::PointCloudIndex(const Eigen::MatrixX3d& points, int leaf_size) : impl_(new Impl) {
-  impl_->cloud.xyz.resize(3 * points.rows());
-  for (Eigen::Index i = 0; i < points.rows(); ++i) {
-    for (int d = 0; d < 3; ++d) impl_->cloud.xyz[3 * i + d] = points(i, d);
-  }
-  impl_->tree = std::make_unique<KdTree>(3, impl_->cloud,
-                                         nanoflann::KDTreeSingleIndexAdaptorParams(leaf_size));
-  if (points.rows() > 0) impl_->tree->buildIndex();
-}
-
-PointCloudIndex::~PointCloudIndex() = default;
-
-int PointCloudIndex::size() const {
-  return static_cast<int>(impl_->cloud.kdtree_get_point_count());
-}
-
-int PointCloudIndex::Nearest(const Eigen::Vector3d& query, double* distance2) const {
-  int index = -1;
-  double d2 = std::numeric_limits<double>::infinity();
-  if (size() > 0) KNearest(query, 1, &index, &d2);
-  if (distance2) *distance2 = d2;
-  return index;
-}
-
-int PointCloudIndex::KNearest(const Eigen::Vector3d& query, int k, int* indices,
-                              double* distances2) const {
-  if (size() == 0 || k <= 0) return 0;
-  nanoflann::KNNResultSet<double, int, int> result(k);
-  result.init(indices, distances2);
-  impl_->tree->findNeighbors(result, query.data(), nanoflann::SearchParams());
-  return static_cast<int>(result.size());
-}
-
-void PointCloudIndex::Radius(const Eigen::Vector3d& query, double radius,
-                             std::vector<std::pair<int, double>>* out) const {
-  out->clear();
-  if (size() == 0) return;
-  nanoflann::RadiusResultSet<double, int> result(radius * radius, *out);
-  impl_->tree->findNeighbors(result, query.data(), nanoflann::SearchParams(32, 0.0f, false));
-}
-
-// ---------------------------------------------------------------------------------------------
 // Shared accumulation
 
 namespace {
@@ -143,6 +85,29 @@ struct CacheLineAllocator {
     return false;
   }
 };
+
+// std::allocator whose value-less construct() default-initialises, so that resize() of an int
+// buffer leaves the new entries unwritten (the gathers size their output, then fill it).
+template <typename T>
+struct DefaultInitAllocator : std::allocator<T> {
+  template <typename U>
+  struct rebind {
+    using other = DefaultInitAllocator<U>;
+  };
+  DefaultInitAllocator() = default;
+  template <typename U>
+  DefaultInitAllocator(const DefaultInitAllocator<U>&) {}  // NOLINT(runtime/explicit)
+  template <typename U>
+  void construct(U* p) {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <typename U, typename... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+};
+// Candidate indices (cloud rows).
+using IndexBuffer = std::vector<int, DefaultInitAllocator<int>>;
 
 // Integer grid coordinate of a scaled coordinate, offset to fit 21 bits (clamped).
 inline int64_t GridCoordinate(double scaled) {
@@ -171,19 +136,28 @@ void SortByKey(std::vector<std::pair<uint64_t, int>>* pairs) {
   if (differ == 0) return;  // one key: already in index order
   const int bits = 64 - __builtin_clzll(differ);
   constexpr int kDigit = 11;
+  constexpr size_t kBuckets = size_t{1} << kDigit;
+  constexpr uint64_t kMask = kBuckets - 1;
+  const int passes = (bits + kDigit - 1) / kDigit;
+  // Every pass's histogram in one read of the keys (a digit's counts do not depend on the
+  // order the earlier passes left).
+  std::vector<size_t> start(kBuckets * passes, 0);
+  for (const auto& p : *pairs) {
+    for (int pass = 0; pass < passes; ++pass) {
+      ++start[kBuckets * pass + ((p.first >> (kDigit * pass)) & kMask)];
+    }
+  }
   std::vector<std::pair<uint64_t, int>> buffer(n);
-  std::vector<size_t> start(size_t{1} << kDigit);
-  for (int shift = 0; shift < bits; shift += kDigit) {
-    const uint64_t mask = (uint64_t{1} << kDigit) - 1;
-    std::fill(start.begin(), start.end(), 0);
-    for (const auto& p : *pairs) ++start[(p.first >> shift) & mask];
+  for (int pass = 0; pass < passes; ++pass) {
+    const int shift = kDigit * pass;
+    size_t* begin = start.data() + kBuckets * pass;
     size_t sum = 0;
-    for (size_t& s : start) {
-      const size_t count = s;
-      s = sum;
+    for (size_t b = 0; b < kBuckets; ++b) {
+      const size_t count = begin[b];
+      begin[b] = sum;
       sum += count;
     }
-    for (const auto& p : *pairs) buffer[start[(p.first >> shift) & mask]++] = p;
+    for (const auto& p : *pairs) buffer[begin[(p.first >> shift) & kMask]++] = p;
     pairs->swap(buffer);
   }
 }
@@ -202,152 +176,7 @@ inline uint64_t MortonCode(int64_t x, int64_t y, int64_t z) {
   return spread(x) << 2 | spread(y) << 1 | spread(z);
 }
 
-// Writes vertex t of the targets; returns c_t.
-double Finish(const VertexSums& sums, const Eigen::Vector3d& x, int t,
-              CorrespondenceTargets* targets) {
-  if (!(sums.a > 0.0) || !std::isfinite(sums.a)) {
-    targets->weight[t] = 0.0;
-    targets->mean.row(t).setZero();
-    return 0.0;
-  }
-  targets->weight[t] = sums.a;
-  targets->mean.row(t) = (x + sums.b / sums.a).transpose();
-  return std::max(0.0, sums.c - sums.b.squaredNorm() / sums.a);
-}
-
-void ResizeTargets(int t_count, CorrespondenceTargets* targets) {
-  targets->weight.setZero(t_count);
-  targets->mean.setZero(t_count, 3);
-  targets->constant = 0.0;
-  targets->num_pairs = 0;
-}
-
-void CheckPosed(const PosedTemplateView& posed, const char* where) {
-  if (posed.vertices == nullptr || posed.normals == nullptr) {
-    throw Error(std::string(where) + ": posed template vertices and normals are required");
-  }
-  const Eigen::Index t = posed.vertices->rows();
-  if (posed.normals->rows() != t || (posed.colors != nullptr && posed.colors->rows() != t)) {
-    std::ostringstream msg;
-    msg << where << ": expected " << t << " template normals/colours (one per vertex), found "
-        << posed.normals->rows() << "/" << (posed.colors ? posed.colors->rows() : t);
-    throw Error(msg.str());
-  }
-}
-
-void CheckScan(const Scan& scan, const char* where) {
-  const Eigen::Index n = scan.points.rows();
-  std::ostringstream msg;
-  if (scan.normals.rows() != n) {
-    msg << where << ": scan.normals: expected " << n << " rows, found " << scan.normals.rows();
-  } else if (scan.colors.rows() != 0 && scan.colors.rows() != n) {
-    msg << where << ": scan.colors: expected 0 or " << n << " rows, found " << scan.colors.rows();
-  } else if (!scan.color_valid.empty() && static_cast<Eigen::Index>(scan.color_valid.size()) != n) {
-    msg << where << ": scan.color_valid: expected 0 or " << n << " entries, found "
-        << scan.color_valid.size();
-  } else {
-    return;
-  }
-  throw Error(msg.str());
-}
-
-template <typename Body>
-void ForRange(int count, int grain, bool parallel, const Body& body) {
-  if (!parallel || count <= grain) {
-    body(0, count);
-    return;
-  }
-  tbb::parallel_for(tbb::blocked_range<int>(0, count, grain),
-                    [&](const tbb::blocked_range<int>& r) { body(r.begin(), r.end()); });
-}
-
 }  // namespace
-
-// ---------------------------------------------------------------------------------------------
-// Dense E-step
-
-void DenseEStep(const Scan& scan, const PosedTemplateView& posed, const OneToManyOptions& options,
-                CorrespondenceTargets* targets, bool parallel) {
-  CheckScan(scan, "dense E-step");
-  CheckPosed(posed, "dense E-step");
-  const int t_count = static_cast<int>(posed.vertices->rows());
-  const int n = scan.size();
-  ResizeTargets(t_count, targets);
-  if (n == 0 || t_count == 0) return;
-  const bool color = options.use_color && posed.colors != nullptr && scan.colors.rows() == n;
-  // Structure of arrays over the scan.
-  Eigen::ArrayXd sx = scan.points.col(0), sy = scan.points.col(1), sz = scan.points.col(2);
-  Eigen::ArrayXd nx = scan.normals.col(0), ny = scan.normals.col(1), nz = scan.normals.col(2);
-  Eigen::ArrayXd cr, cg, cb, cvalid;
-  if (color) {
-    cr = scan.colors.col(0);
-    cg = scan.colors.col(1);
-    cb = scan.colors.col(2);
-    cvalid = Eigen::ArrayXd::Ones(n);
-    for (int s = 0; s < n && !scan.color_valid.empty(); ++s) {
-      cvalid[s] = scan.color_valid[s] ? 1.0 : 0.0;
-    }
-  }
-  const double eps = options.epsilon;
-  const double lambda = options.lambda_color;
-  // p_st for one template vertex against all scan points (into `p`), with d = v_s - x_t.
-  auto weights_for = [&](int t, Eigen::ArrayXd* p, Eigen::ArrayXd* dx, Eigen::ArrayXd* dy,
-                         Eigen::ArrayXd* dz, Eigen::ArrayXd* d2) {
-    const Eigen::RowVector3d x = posed.vertices->row(t);
-    const Eigen::RowVector3d nt = posed.normals->row(t);
-    *dx = sx - x[0];
-    *dy = sy - x[1];
-    *dz = sz - x[2];
-    *d2 = dx->square() + dy->square() + dz->square();
-    Eigen::ArrayXd denom = *d2 + eps;
-    if (color) {
-      const Eigen::RowVector3d ct = posed.colors->row(t);
-      denom +=
-          lambda * cvalid * ((cr - ct[0]).square() + (cg - ct[1]).square() + (cb - ct[2]).square());
-    }
-    *p = (nx * nt[0] + ny * nt[1] + nz * nt[2]).max(0.0) / denom;
-  };
-
-  Eigen::ArrayXd inv_scan_sum;
-  if (options.normalize_per_scan_point) {
-    // sum_t p_st per scan point, accumulated per template vertex block (thread-local arrays).
-    inv_scan_sum = tbb::parallel_reduce(
-        tbb::blocked_range<int>(0, t_count, parallel ? 64 : t_count),
-        Eigen::ArrayXd(Eigen::ArrayXd::Zero(n)),
-        [&](const tbb::blocked_range<int>& r, Eigen::ArrayXd acc) {
-          Eigen::ArrayXd p, dx, dy, dz, d2;
-          for (int t = r.begin(); t != r.end(); ++t) {
-            weights_for(t, &p, &dx, &dy, &dz, &d2);
-            acc += p;
-          }
-          return acc;
-        },
-        [](Eigen::ArrayXd a, const Eigen::ArrayXd& b) {
-          a += b;
-          return a;
-        });
-    inv_scan_sum = (inv_scan_sum > 0.0).select(inv_scan_sum.inverse(), 0.0);
-  }
-  std::vector<double> constants(t_count, 0.0);
-  std::vector<long long> pairs(t_count, 0);
-  ForRange(t_count, 64, parallel, [&](int begin, int end) {
-    Eigen::ArrayXd p, dx, dy, dz, d2;
-    for (int t = begin; t < end; ++t) {
-      weights_for(t, &p, &dx, &dy, &dz, &d2);
-      if (options.normalize_per_scan_point) p *= inv_scan_sum;
-      VertexSums sums;
-      sums.a = p.sum();
-      sums.b = Eigen::Vector3d((p * dx).sum(), (p * dy).sum(), (p * dz).sum());
-      sums.c = (p * d2).sum();
-      pairs[t] = (p > 0.0).count();
-      constants[t] = Finish(sums, posed.vertices->row(t).transpose(), t, targets);
-    }
-  });
-  for (int t = 0; t < t_count; ++t) {
-    targets->constant += constants[t];
-    targets->num_pairs += pairs[t];
-  }
-}
 
 // ---------------------------------------------------------------------------------------------
 // Truncated E-step
@@ -458,7 +287,7 @@ struct EStep::Cloud {
 
   // Appends the indices of the points with |p - x| < radius (radius <= grid_cell): those lie
   // in the query's cell and its 26 neighbours; cells farther than the radius are skipped.
-  void GridRadius(const double* x, double radius, std::vector<int>* out) const {
+  void GridRadius(const double* x, double radius, IndexBuffer* out) const {
     const double inv = 1.0 / grid_cell;
     int64_t c[3];
     double below[3], above[3];  // distance from x to its cell's lower / upper faces
@@ -545,7 +374,7 @@ struct EStep::Candidates {
     bool valid = false;
     std::vector<double> anchor;  // 3 per vertex: its position when gathered
     std::vector<int> offset;     // per vertex of the block, + 1
-    std::vector<int> index;      // cloud indices within radius + margin of the anchor
+    IndexBuffer index;           // cloud indices within radius + margin of the anchor
   };
   int t_count = -1;
   std::vector<Block> blocks;
@@ -763,6 +592,10 @@ void EStep::Compute(const PosedTemplateView& posed, double radius, Correspondenc
           fresh.anchor.resize(3 * (t1 - t0));
           fresh.offset.assign(1, 0);
           fresh.index.clear();
+          // About the lists' size (the old ones, or ~64 candidates a vertex the first time),
+          // so that the gathers rarely grow the buffer.
+          fresh.index.reserve(std::max(block->index.size() + block->index.size() / 8,
+                                       static_cast<size_t>(64 * (t1 - t0))));
           for (int t = t0; t < t1; ++t) {
             const int i = t - t0;
             if (moved[i]) {

@@ -1,6 +1,13 @@
 #include "solvers/estep_pairs.h"
 
+#include <algorithm>
+#include <cmath>
+#include <sstream>
 #include <stdexcept>
+#include <string>
+
+#include "models/error.h"
+#include "solvers/estep.h"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -351,6 +358,55 @@ void WeighCandidateListWith(PairKernel kernel, const VertexQuery& q, const doubl
 #endif
       return;
   }
+}
+
+// Writes vertex t of the targets; returns c_t.
+double Finish(const VertexSums& sums, const Eigen::Vector3d& x, int t,
+              CorrespondenceTargets* targets) {
+  if (!(sums.a > 0.0) || !std::isfinite(sums.a)) {
+    targets->weight[t] = 0.0;
+    targets->mean.row(t).setZero();
+    return 0.0;
+  }
+  targets->weight[t] = sums.a;
+  targets->mean.row(t) = (x + sums.b / sums.a).transpose();
+  return std::max(0.0, sums.c - sums.b.squaredNorm() / sums.a);
+}
+
+void ResizeTargets(int t_count, CorrespondenceTargets* targets) {
+  targets->weight.setZero(t_count);
+  targets->mean.setZero(t_count, 3);
+  targets->constant = 0.0;
+  targets->num_pairs = 0;
+}
+
+void CheckPosed(const PosedTemplateView& posed, const char* where) {
+  if (posed.vertices == nullptr || posed.normals == nullptr) {
+    throw Error(std::string(where) + ": posed template vertices and normals are required");
+  }
+  const Eigen::Index t = posed.vertices->rows();
+  if (posed.normals->rows() != t || (posed.colors != nullptr && posed.colors->rows() != t)) {
+    std::ostringstream msg;
+    msg << where << ": expected " << t << " template normals/colours (one per vertex), found "
+        << posed.normals->rows() << "/" << (posed.colors ? posed.colors->rows() : t);
+    throw Error(msg.str());
+  }
+}
+
+void CheckScan(const Scan& scan, const char* where) {
+  const Eigen::Index n = scan.points.rows();
+  std::ostringstream msg;
+  if (scan.normals.rows() != n) {
+    msg << where << ": scan.normals: expected " << n << " rows, found " << scan.normals.rows();
+  } else if (scan.colors.rows() != 0 && scan.colors.rows() != n) {
+    msg << where << ": scan.colors: expected 0 or " << n << " rows, found " << scan.colors.rows();
+  } else if (!scan.color_valid.empty() && static_cast<Eigen::Index>(scan.color_valid.size()) != n) {
+    msg << where << ": scan.color_valid: expected 0 or " << n << " entries, found "
+        << scan.color_valid.size();
+  } else {
+    return;
+  }
+  throw Error(msg.str());
 }
 
 }  // namespace estep_internal

@@ -1,12 +1,22 @@
-// Internal to the E-step (solvers/estep.cc): the pair loop of one template vertex against its
-// scan candidates, p_st of eq. 4 (energies/one_to_many_correspondence.h) accumulated into the
-// vertex's sums; scalar, SSE2 and AVX (chosen at run time) variants with bit-identical sums.
+// Internal to the E-step (solvers/estep.cc, estep_dense.cc): the pair loop of one template
+// vertex against its scan candidates, p_st of eq. 4 (energies/one_to_many_correspondence.h)
+// accumulated into the vertex's sums; scalar, SSE2 and AVX (chosen at run time) variants with
+// bit-identical sums; and the checks and target writing both E-steps share.
 #pragma once
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include <Eigen/Core>
 #include <vector>
 
+#include "energies/one_to_many_correspondence.h"
+#include "sensors/scan.h"
+
 namespace artex {
+
+struct PosedTemplateView;  // solvers/estep.h
+
 namespace estep_internal {
 
 // Values per point of the packed clouds of the pair loops: x y z nx ny nz count (unused).
@@ -58,6 +68,28 @@ bool PairKernelAvailable(PairKernel kernel);
 // std::invalid_argument for an unavailable kernel.
 void WeighCandidateListWith(PairKernel kernel, const VertexQuery& q, const double* packed,
                             const int* index, int count, VertexSums* sums);
+
+// Writes vertex t of the targets (P_t, mu_t; zero without a positive finite weight); returns
+// c_t.
+double Finish(const VertexSums& sums, const Eigen::Vector3d& x, int t,
+              CorrespondenceTargets* targets);
+// Zero targets for t_count template vertices.
+void ResizeTargets(int t_count, CorrespondenceTargets* targets);
+// Throw artex::Error (naming `where`) on a posed template without vertices or normals or with
+// mismatched rows, and on a scan with mismatched normals, colours or colour flags.
+void CheckPosed(const PosedTemplateView& posed, const char* where);
+void CheckScan(const Scan& scan, const char* where);
+
+// body(begin, end) over [0, count), on TBB workers in ranges of `grain` when parallel.
+template <typename Body>
+void ForRange(int count, int grain, bool parallel, const Body& body) {
+  if (!parallel || count <= grain) {
+    body(0, count);
+    return;
+  }
+  tbb::parallel_for(tbb::blocked_range<int>(0, count, grain),
+                    [&](const tbb::blocked_range<int>& r) { body(r.begin(), r.end()); });
+}
 
 }  // namespace estep_internal
 }  // namespace artex

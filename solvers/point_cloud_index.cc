@@ -1,0 +1,73 @@
+// PointCloudIndex (solvers/estep.h): a nanoflann kd-tree over a copied point set.
+#include <limits>
+#include <memory>
+#include <nanoflann.hpp>
+#include <utility>
+#include <vector>
+
+#include "solvers/estep.h"
+
+namespace artex {
+
+namespace {
+struct RowMajorCloud {
+  std::vector<double> xyz;  // 3 N
+  size_t kdtree_get_point_count() const { return xyz.size() / 3; }
+  double kdtree_get_pt(size_t i, size_t d) const { return xyz[3 * i + d]; }
+  template <class Box>
+  bool kdtree_get_bbox(Box&) const {
+    return false;
+  }
+};
+using KdTree =
+    nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, RowMajorCloud>,
+                                        RowMajorCloud, 3, int>;
+}  // namespace
+
+struct PointCloudIndex::Impl {
+  RowMajorCloud cloud;
+  std::unique_ptr<KdTree> tree;
+};
+
+PointCloudIndex::PointCloudIndex(const Eigen::MatrixX3d& points, int leaf_size) : impl_(new Impl) {
+  impl_->cloud.xyz.resize(3 * points.rows());
+  for (Eigen::Index i = 0; i < points.rows(); ++i) {
+    for (int d = 0; d < 3; ++d) impl_->cloud.xyz[3 * i + d] = points(i, d);
+  }
+  impl_->tree = std::make_unique<KdTree>(3, impl_->cloud,
+                                         nanoflann::KDTreeSingleIndexAdaptorParams(leaf_size));
+  if (points.rows() > 0) impl_->tree->buildIndex();
+}
+
+PointCloudIndex::~PointCloudIndex() = default;
+
+int PointCloudIndex::size() const {
+  return static_cast<int>(impl_->cloud.kdtree_get_point_count());
+}
+
+int PointCloudIndex::Nearest(const Eigen::Vector3d& query, double* distance2) const {
+  int index = -1;
+  double d2 = std::numeric_limits<double>::infinity();
+  if (size() > 0) KNearest(query, 1, &index, &d2);
+  if (distance2) *distance2 = d2;
+  return index;
+}
+
+int PointCloudIndex::KNearest(const Eigen::Vector3d& query, int k, int* indices,
+                              double* distances2) const {
+  if (size() == 0 || k <= 0) return 0;
+  nanoflann::KNNResultSet<double, int, int> result(k);
+  result.init(indices, distances2);
+  impl_->tree->findNeighbors(result, query.data(), nanoflann::SearchParams());
+  return static_cast<int>(result.size());
+}
+
+void PointCloudIndex::Radius(const Eigen::Vector3d& query, double radius,
+                             std::vector<std::pair<int, double>>* out) const {
+  out->clear();
+  if (size() == 0) return;
+  nanoflann::RadiusResultSet<double, int> result(radius * radius, *out);
+  impl_->tree->findNeighbors(result, query.data(), nanoflann::SearchParams(32, 0.0f, false));
+}
+
+}  // namespace artex
