@@ -3,8 +3,12 @@
 sequential vs pipelined (frames/s, latency median/p95, CPU utilisation, peak RSS, accuracy),
 live replay at the recording's 30 Hz (frames dropped), and peak RSS against sequence length.
 
-  bench/track_realtime.py [--artex build/experiments/artex] [--frames 60] [--long 300]
-                          [--work /tmp/artex-rt-bench] [--repeat 1] [--set key=value ...]
+  bench/track_realtime.py [--artex build/experiments/artex] [--baseline OTHER/artex]
+                          [--frames 60] [--long 300] [--work /tmp/artex-rt-bench]
+                          [--set key=value ...]
+
+--baseline: every run is also made with a second build (e.g. the previous version), the two
+alternating run by run, so the two columns of a row share the machine's load.
 
 Sequences are synthesised once into --work (artex synth --motion walk --seed 1, 640x480).
 Prints one table and writes WORK/results.json. The machine is shared: `uptime` is printed
@@ -61,6 +65,10 @@ def main():
     ap.add_argument("--work", default="/tmp/artex-rt-bench")
     ap.add_argument("--set", action="append", default=[], help="extra --set for every run")
     ap.add_argument("--no-live", action="store_true")
+    ap.add_argument("--baseline", default="", help="a second artex binary, run alternately")
+    ap.add_argument("--baseline-config", default="",
+                    help="its configuration (default: configs/default.yaml of its source tree, "
+                         "two levels above the binary's folder)")
     args = ap.parse_args()
     os.makedirs(args.work, exist_ok=True)
     seq = synth(args.artex, args.frames, os.path.join(args.work, "walk%d" % args.frames))
@@ -78,9 +86,15 @@ def main():
                          ["pipeline.live=true"]))
     before = uptime()
     results = {}
+    binaries = [("", args.artex, args.config)]
+    if args.baseline:
+        config = args.baseline_config or os.path.join(
+            os.path.dirname(os.path.abspath(args.baseline)), "..", "..", "configs", "default.yaml")
+        binaries.append(("baseline ", args.baseline, config))
     for name, s, sets in runs:
-        out = os.path.join(args.work, "run_" + re.sub(r"[^a-z0-9]+", "_", name))
-        results[name] = track(args.artex, s, out, args.config, sets + args.set)
+        for label, binary, config in binaries:
+            out = os.path.join(args.work, "run_" + re.sub(r"[^a-z0-9]+", "_", label + name))
+            results[label + name] = track(binary, s, out, config, sets + args.set)
     after = uptime()
     print("load before: " + before)
     print("load after:  " + after)

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <map>
 #include <opencv2/imgcodecs.hpp>
+#include <tbb/parallel_invoke.h>
 #include <sstream>
 
 #include "models/error.h"
@@ -337,12 +338,20 @@ bool SequenceReader::ReadFrame(int i, Frame* frame, std::string* warning) {
   frame->depth_timestamp = row.depth_timestamp;
   frame->color_timestamp = row.color_timestamp;
   const Calibration& c = m.calibration;
-  if (!ReadDepthImage(m.Path(row.depth_file), c.depth.width, c.depth.height, &frame->depth,
-                      warning)) {
-    return false;
-  }
-  return ReadColorImage(m.Path(row.color_file), c.color.width, c.color.height, &frame->color,
-                        warning);
+  // The two images are decoded concurrently (PNG decoding is most of a frame's reading).
+  std::string depth_warning, color_warning;
+  bool depth_ok = false, color_ok = false;
+  tbb::parallel_invoke(
+      [&] {
+        depth_ok = ReadDepthImage(m.Path(row.depth_file), c.depth.width, c.depth.height,
+                                  &frame->depth, &depth_warning);
+      },
+      [&] {
+        color_ok = ReadColorImage(m.Path(row.color_file), c.color.width, c.color.height,
+                                  &frame->color, &color_warning);
+      });
+  if (warning) *warning = !depth_ok ? depth_warning : color_warning;
+  return depth_ok && color_ok;
 }
 
 std::vector<cv::Mat> SequenceReader::ReadBackgroundFrames() {
