@@ -70,6 +70,16 @@ class BoundedQueue {
     return closed_;
   }
   std::size_t capacity() const { return capacity_; }
+  // Blocks while the queue is full; false once it is closed.
+  bool WaitUntilNotFull() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    not_full_.wait(lock, [&] { return closed_ || items_.size() < capacity_; });
+    return !closed_;
+  }
+  std::size_t size() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return items_.size();
+  }
 
  private:
   const std::size_t capacity_;

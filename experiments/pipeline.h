@@ -116,6 +116,7 @@ struct FrameRecord {
   bool reinitialised = false;    // fitted by the multi-hypothesis initialisation
   int gap_frames = 0;            // frames not processed since the previous processed one
   bool gap_refit = false;        // fitted by RefitFromPose after such a gap
+  bool texture_skipped = false;  // live: not textured, a newer frame was waiting
   double init_seconds = 0.0;
   std::string init_report;       // the initialisation's hypotheses and choice
   SegmentationStats segmentation;  // foreground segmentation (no background frames)

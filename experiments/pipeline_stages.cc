@@ -708,6 +708,9 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
         int frame = 0, missed = 0;
         PipelineClock::time_point at;
         while (true) {
+          // Live: a frame is read (decoded) only once the track stage has room for it; the
+          // frames that arrive meanwhile are dropped undecoded, as a sensor's would be.
+          if (options.live && !to_track.WaitUntilNotFull()) break;
           const int missed_before = missed;
           if (!clock.Next(&frame, &at, &missed)) break;
           if (first_textured) dropped_after_first += missed - missed_before;
@@ -745,10 +748,17 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
       }
       to_texture.Close();
     });
+    std::atomic<int> texture_skipped{0};
     std::thread texturer([&] {
       try {
         FrameWork work;
         while (to_texture.Pop(&work)) {
+          if (options.live && options.live_texture_skip && work.texture_frame &&
+              !work.record.skipped && first_textured && to_texture.size() > 0) {
+            work.texture_frame = false;  // a newer frame waits: texture that one
+            work.record.texture_skipped = true;
+            ++texture_skipped;
+          }
           run_texture(&work);
           if (!to_output.Push(std::move(work))) break;
         }
@@ -768,6 +778,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
     texturer.join();
     if (error) std::rethrow_exception(error);
     stats.frames_dropped = dropped;
+    stats.frames_texture_skipped = texture_skipped;
   }
   stats.wall_seconds = Since(start);
   const double cpu = CpuSeconds() - cpu_start;
@@ -807,6 +818,7 @@ void WriteRealtimeJson(const std::string& path, const RealtimeStats& s) {
   j["frames_processed"] = s.frames_processed;
   j["frames_dropped"] = s.frames_dropped;
   j["frames_dropped_after_first"] = s.frames_dropped_after_first;
+  j["frames_texture_skipped"] = s.frames_texture_skipped;
   j["wall_seconds"] = s.wall_seconds;
   j["frames_per_second"] = s.frames_per_second;
   j["steady_frames_per_second"] = s.steady_frames_per_second;

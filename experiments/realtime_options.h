@@ -36,6 +36,11 @@ struct RealtimeOptions {
   // was after frame t - 1 - this (0: after frame t-1, which makes fitting wait for texturing;
   // 1: fitting of t overlaps texturing of t-1). The same in both concurrency modes.
   int colour_delay_frames = 1;
+  // pipeline.live_texture_skip: live and pipelined, the texture stage leaves a frame
+  // untextured when a newer tracked frame is already waiting for it (the texture follows the
+  // newest pose; every tracked frame still passes, posed with the current texture), so the
+  // texturing's CPU goes to tracking when the two cores do not suffice for both at the rate.
+  bool live_texture_skip = true;
 
   bool IsValid(std::string* error) const;
 };
@@ -55,6 +60,7 @@ struct RealtimeStats {
   int frames_processed = 0;      // readable frames that went through every stage
   int frames_dropped = 0;        // live only
   int frames_dropped_after_first = 0;  // live: dropped after the first frame was textured
+  int frames_texture_skipped = 0;  // live: processed but not textured (live_texture_skip)
   double wall_seconds = 0.0;     // first read to last output
   double frames_per_second = 0.0;         // processed / wall_seconds
   double steady_frames_per_second = 0.0;  // after the first frame (its initialisation apart)

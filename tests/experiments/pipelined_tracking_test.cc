@@ -182,6 +182,13 @@ TEST(PipelinedTrackingTest, LiveModeAccountsForEveryFrame) {
     EXPECT_EQ(s.frames_offered, kFrames) << mode;
     EXPECT_EQ(static_cast<int>(r.frames.size()), s.frames_processed) << mode;
     for (size_t i = 1; i < r.frames.size(); ++i) EXPECT_LT(r.frames[i - 1].frame, r.frames[i].frame);
+    // Frames left untextured because a newer one waited: counted, never the first, never in
+    // the sequential schedule (one frame at a time).
+    int untextured = 0;
+    for (const FrameRecord& f : r.frames) untextured += f.texture_skipped;
+    EXPECT_EQ(untextured, s.frames_texture_skipped) << mode;
+    if (!r.frames.empty()) EXPECT_FALSE(r.frames[0].texture_skipped);
+    if (std::string(mode) == "sequential") EXPECT_EQ(untextured, 0);
     EXPECT_LE(s.latency_median_ms, s.latency_p95_ms);
     EXPECT_LE(s.latency_p95_ms, s.latency_max_ms);
   }
@@ -231,8 +238,8 @@ TEST(PipelinedTrackingTest, FramesAfterAGapAreRefitted) {
     std::getline(csv, header);
     std::getline(csv, first);
     std::getline(csv, second);
-    EXPECT_NE(header.find(",gap_frames,gap_refit"), std::string::npos);
-    EXPECT_EQ(second.substr(second.size() - 4), refitted ? ",3,1" : ",3,0") << second;
+    EXPECT_NE(header.find(",gap_frames,gap_refit,texture_skipped"), std::string::npos);
+    EXPECT_EQ(second.substr(second.size() - 6), refitted ? ",3,1,0" : ",3,0,0") << second;
   }
 }
 
