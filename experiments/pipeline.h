@@ -149,6 +149,8 @@ struct PipelineResult {
   std::vector<std::string> warnings;
   // The frame after which the subject's shape was calibrated (shape.mode != fixed); -1: never.
   int shape_calibrated_frame = -1;
+  // The frame of the last calibration round's swap (the calibration phase complete); -1: never.
+  int shape_final_frame = -1;
   bool glb_written = false;
   AnimatedGlbSummary glb;  // tracked.glb against artex's skinning (residuals in mm)
   RealtimeStats realtime;  // throughput, latency, drops, stage timings (realtime.json)
