@@ -115,6 +115,9 @@ struct FrameRecord {
   double mean_vertex_error_mm = 0.0;
   double max_vertex_error_mm = 0.0;
   double mean_joint_error_mm = 0.0;
+  // Per tracked joint (template index): distance to the true joint (mm; NaN: no true joint of
+  // its name). Empty without ground truth.
+  std::vector<double> joint_errors_mm;
 };
 
 struct PipelineResult {

@@ -470,7 +470,11 @@ void OutputStage::Process(FrameWork* work) {
     ours = TransformRows(truth_.to_truth_world, ours);
     truth_.subject_skinning->PosedJointCenters(truth.pose, &theirs);
     double joint = 0.0;
-    for (const auto& [a, b] : truth_.joint_pairs) joint += (ours.row(a) - theirs.row(b)).norm();
+    record.joint_errors_mm.assign(ours.rows(), std::numeric_limits<double>::quiet_NaN());
+    for (const auto& [a, b] : truth_.joint_pairs) {
+      joint += (ours.row(a) - theirs.row(b)).norm();
+      record.joint_errors_mm[a] = 1000.0 * (ours.row(a) - theirs.row(b)).norm();
+    }
     record.mean_joint_error_mm =
         truth_.joint_pairs.empty() ? 0.0 : 1000.0 * joint / truth_.joint_pairs.size();
     // A failed fit's kept pose is no measurement: it counts as lost and stays out of the

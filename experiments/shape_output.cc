@@ -104,6 +104,21 @@ void AddShapeToSummary(const std::string& summary_path, const PipelineResult& re
         joint += r.mean_joint_error_mm;
         ++n;
       }
+      // Per joint (by name): where the mean joint error comes from.
+      nlohmann::json by_joint = nlohmann::json::object();
+      for (int j = 0; j < subject.num_joints(); ++j) {
+        double sum = 0.0;
+        int m = 0;
+        for (const FrameRecord& r : result.frames) {
+          if (never || r.skipped || !r.fit.ok() || r.frame <= after) continue;
+          if (!std::isfinite(r.mean_vertex_error_mm) || j >= int(r.joint_errors_mm.size())) continue;
+          if (!std::isfinite(r.joint_errors_mm[j])) continue;
+          sum += r.joint_errors_mm[j];
+          ++m;
+        }
+        if (m > 0) by_joint[subject.joints[j].name] = sum / m;
+      }
+      shape["joint_errors_mm_after_" + suffix] = by_joint;
       shape["frames_after_" + suffix] = n;
       shape["mean_vertex_error_mm_after_" + suffix] = n ? Finite(vertex / n) : nan;
       shape["mean_joint_error_mm_after_" + suffix] = n ? Finite(joint / n) : nan;

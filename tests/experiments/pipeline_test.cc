@@ -661,6 +661,12 @@ TEST(PipelineTest, ShapeJointErrorIsScoredWithTheSubjectsJoints) {
               vertex / checked, 1e-9);
   EXPECT_NEAR(shape.at("mean_joint_error_mm_after_calibration").get<double>(), joint / checked,
               1e-9);
+  // Per joint by name: every joint has a true one here, so their mean is the mean joint error.
+  const nlohmann::json& by_joint = shape.at("joint_errors_mm_after_final_calibration");
+  ASSERT_EQ(static_cast<int>(by_joint.size()), base.num_joints());
+  double sum = 0.0;
+  for (const Joint& j : base.joints) sum += by_joint.at(j.name).get<double>();
+  EXPECT_NEAR(sum / base.num_joints(), joint / checked, 1e-9);
 }
 
 // shape.retrack: the first pass (fitting only) calibrates the subject into shape_pass/, the
