@@ -205,6 +205,7 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
       RunStages(realtime, &reader, begin, end, rate_hz, &track, &texturing, &output);
   const int shape_calibrated_frame = track.shape_calibrated_frame;
   result.shape_calibrated_frame = shape_calibrated_frame;
+  result.shape_final_frame = track.shape_final_frame;
   const std::vector<Pose>& poses = output.poses;
   const std::vector<std::string>& failures = output.failures;
   const double fit_seconds = track.fit_seconds, init_seconds = track.init_seconds;
@@ -316,6 +317,7 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
     shape_info.subject = &tmpl;
     shape_info.global_scale = poses.empty() ? 1.0 : poses.back().scale;
     shape_info.calibrated_frame = shape_calibrated_frame;
+    shape_info.final_frame = track.shape_final_frame;
     shape_info.truth = subject.get();
     AddShapeToSummary(out_dir + "/summary.json", result, shape_info);
     if (shape.enabled()) WriteTemplateGlb(out_dir + "/subject.glb", tmpl, texturer ? &texture : nullptr);
@@ -354,6 +356,7 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
       RunOnePass(sequence_dir, calibrated ? shape_dir + "/subject.glb" : template_path, second,
                  resolved_config, out_dir, progress);
   result.shape_calibrated_frame = calibration.shape_calibrated_frame;
+  result.shape_final_frame = calibration.shape_final_frame;
   result.warnings.insert(
       result.warnings.begin(),
       calibrated ? "shape.retrack: tracked twice; the second pass used the subject's template "

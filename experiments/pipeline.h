@@ -129,6 +129,9 @@ struct FrameRecord {
   double mean_vertex_error_mm = 0.0;
   double max_vertex_error_mm = 0.0;
   double mean_joint_error_mm = 0.0;
+  // Per tracked joint (template index): distance to the true joint (mm; NaN: no true joint of
+  // its name). Empty without ground truth.
+  std::vector<double> joint_errors_mm;
 };
 
 struct PipelineResult {
@@ -164,6 +167,8 @@ struct PipelineResult {
   std::vector<std::string> warnings;
   // The frame after which the subject's shape was calibrated (shape.mode != fixed); -1: never.
   int shape_calibrated_frame = -1;
+  // The frame of the last calibration round's swap (the calibration phase complete); -1: never.
+  int shape_final_frame = -1;
   bool glb_written = false;
   AnimatedGlbSummary glb;  // tracked.glb against artex's skinning (residuals in mm)
   RealtimeStats realtime;  // throughput, latency, drops, stage timings (realtime.json)

@@ -322,25 +322,7 @@ void TrackStage::Process(FrameWork* work) {
   // A lost frame's pose is not texture: it would paint the room onto the body.
   work->texture_frame = !lost_frame && (options_.texture_doubtful_frames ||
                                         record.quality.label == FitQualityLabel::kGood);
-  Pose refined;
-  if (shape_ != nullptr && tmpl_ != nullptr && shape_->enabled() && record.fit.ok() &&
-      !lost_frame &&
-      shape_->AddFrame(scan_, work->pose,
-                       !fitter_->ScaleIsFree() ||
-                           fitter_->scale_samples() >= options_.fitting.scale_estimation_frames,
-                       &refined)) {
-    *tmpl_ = shape_->SubjectTemplate();
-    fitter_->SetRestShape(*tmpl_);
-    if (options_.shape.seed_pose && refined.AllFinite() &&
-        refined.num_joints() == tmpl_->num_joints()) {
-      // The tracked pose was fitted with the previous shape (e.g. the template's feet on the
-      // subject's shins); the solve refined this frame's pose with the new one: continue
-      // from it, as after a re-initialisation (the motion history restarts).
-      fitter_->Reset(/*keep_scale=*/true);
-      fitter_->AcceptPose(scan_, refined);
-    }
-    if (shape_calibrated_frame < 0) shape_calibrated_frame = record.frame;
-  }
+  if (!lost_frame && record.fit.ok()) FeedShape(work->pose, record.frame);
   if (lost_frame) {
     // Re-initialise on the next frame with enough points; the scale estimate and the
     // texture survive (the same person), the tracked subject component does not.
@@ -505,7 +487,11 @@ void OutputStage::Process(FrameWork* work) {
     ours = TransformRows(truth_.to_truth_world, ours);
     truth_.subject_skinning->PosedJointCenters(truth.pose, &theirs);
     double joint = 0.0;
-    for (const auto& [a, b] : truth_.joint_pairs) joint += (ours.row(a) - theirs.row(b)).norm();
+    record.joint_errors_mm.assign(ours.rows(), std::numeric_limits<double>::quiet_NaN());
+    for (const auto& [a, b] : truth_.joint_pairs) {
+      joint += (ours.row(a) - theirs.row(b)).norm();
+      record.joint_errors_mm[a] = 1000.0 * (ours.row(a) - theirs.row(b)).norm();
+    }
     record.mean_joint_error_mm =
         truth_.joint_pairs.empty() ? 0.0 : 1000.0 * joint / truth_.joint_pairs.size();
     // A failed fit's kept pose is no measurement: it counts as lost and stays out of the

@@ -86,6 +86,8 @@ class TrackStage {
     tmpl_ = tmpl;
   }
   int shape_calibrated_frame = -1;  // record.frame of the first swap (-1: none)
+  // record.frame of the last calibration round's swap (shape_->calibrated() from then on).
+  int shape_final_frame = -1;
 
   // Totals over the processed frames.
   double fit_seconds = 0.0, init_seconds = 0.0, quality_seconds = 0.0;
@@ -94,6 +96,9 @@ class TrackStage {
  private:
   void Initialise(FrameRecord* record);
   void Evaluate(FrameRecord* record, Eigen::MatrixX3d* posed);
+  // An accepted frame's scan_ and pose to the shape estimator; swaps the subject's template
+  // into *tmpl_ and the fitter when it solves (experiments/track_shape.cc).
+  void FeedShape(const Pose& pose, int frame);
 
   const PipelineOptions& options_;
   const Calibration& calibration_;

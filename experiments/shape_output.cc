@@ -89,20 +89,45 @@ void AddShapeToSummary(const std::string& summary_path, const PipelineResult& re
                           {"seconds", c.seconds}};
   shape["refinements"] = est.refinements();
   shape["refine_seconds"] = est.refine_seconds();
+  shape["rounds"] = est.rounds_done();
+  shape["final_calibration_after_frame"] = info.final_frame;
   if (result.has_ground_truth) {
-    double vertex = 0.0, joint = 0.0;
-    int n = 0;
-    for (const FrameRecord& r : result.frames) {
-      if (r.skipped || !r.fit.ok() || r.frame <= info.calibrated_frame) continue;
-      if (!std::isfinite(r.mean_vertex_error_mm)) continue;
-      vertex += r.mean_vertex_error_mm;
-      joint += r.mean_joint_error_mm;
-      ++n;
-    }
+    // Mean errors over the evaluated frames after `after` (-1: all; `never`: none, NaN).
     const double nan = std::numeric_limits<double>::quiet_NaN();
-    shape["frames_after_calibration"] = n;
-    shape["mean_vertex_error_mm_after_calibration"] = n ? Finite(vertex / n) : nan;
-    shape["mean_joint_error_mm_after_calibration"] = n ? Finite(joint / n) : nan;
+    const auto add_window = [&](int after, bool never, const std::string& suffix) {
+      double vertex = 0.0, joint = 0.0;
+      int n = 0;
+      for (const FrameRecord& r : result.frames) {
+        if (never || r.skipped || !r.fit.ok() || r.frame <= after) continue;
+        if (!std::isfinite(r.mean_vertex_error_mm)) continue;
+        vertex += r.mean_vertex_error_mm;
+        joint += r.mean_joint_error_mm;
+        ++n;
+      }
+      // Per joint (by name): where the mean joint error comes from.
+      nlohmann::json by_joint = nlohmann::json::object();
+      for (int j = 0; j < subject.num_joints(); ++j) {
+        double sum = 0.0;
+        int m = 0;
+        for (const FrameRecord& r : result.frames) {
+          if (never || r.skipped || !r.fit.ok() || r.frame <= after) continue;
+          if (!std::isfinite(r.mean_vertex_error_mm) || j >= int(r.joint_errors_mm.size())) continue;
+          if (!std::isfinite(r.joint_errors_mm[j])) continue;
+          sum += r.joint_errors_mm[j];
+          ++m;
+        }
+        if (m > 0) by_joint[subject.joints[j].name] = sum / m;
+      }
+      shape["joint_errors_mm_after_" + suffix] = by_joint;
+      shape["frames_after_" + suffix] = n;
+      shape["mean_vertex_error_mm_after_" + suffix] = n ? Finite(vertex / n) : nan;
+      shape["mean_joint_error_mm_after_" + suffix] = n ? Finite(joint / n) : nan;
+    };
+    // From the first round's swap (the calibration phase still running; all frames when it
+    // never swapped, as before) ...
+    add_window(info.calibrated_frame, false, "calibration");
+    // ... and from the last round's swap (the calibration phase complete; fixed: all frames).
+    add_window(info.final_frame, est.enabled() && info.final_frame < 0, "final_calibration");
   }
   summary["shape"] = shape;
   WriteFileAtomically(summary_path, summary.dump(2) + "\n");

@@ -18,6 +18,7 @@ struct ShapeRunInfo {
   const Template* subject = nullptr;  // the template tracking ended with
   double global_scale = 1.0;          // s0 of the last tracked pose
   int calibrated_frame = -1;          // sequence frame after which the shape was swapped in
+  int final_frame = -1;               // ... after the last calibration round (phase complete)
   const Template* truth = nullptr;    // ground-truth subject (bone length errors), optional
 };
 
@@ -25,7 +26,8 @@ struct ShapeRunInfo {
 // names and values, per-joint bone length and girth factors, the subject's bone lengths (m,
 // times s0), the calibration solve (frames, iterations, cost, seconds), refinements, and with
 // ground truth the bone length errors (mm) and the mean vertex / joint errors (mm) over the
-// evaluated frames after calibration. Throws artex::Error naming the file on I/O failure.
+// evaluated frames after the first calibration round's swap (*_after_calibration) and after the
+// last round's (*_after_final_calibration: the calibration phase complete). Throws artex::Error naming the file on I/O failure.
 void AddShapeToSummary(const std::string& summary_path, const PipelineResult& result,
                        const ShapeRunInfo& info);
 

@@ -21,8 +21,12 @@
 #include <vector>
 
 #include "experiments/config.h"
+#include "experiments/pose_csv.h"
 #include "models/error.h"
+#include "models/skinning.h"
+#include "models/template_generator.h"
 #include "models/template_io.h"
+#include "sensors/sequence.h"
 #include "sensors/virtual_kinect.h"
 #include "tests/error_of.h"
 #include "tests/solvers/virtual_kinect_scans.h"
@@ -588,6 +592,90 @@ TEST(PipelineTest, ShapeCalibrationWritesTheSubjectTemplate) {
   bad.Set("shape.mode", "sculpted");
   const std::string msg = ErrorOf([&] { LoadPipelineOptions(bad); });
   EXPECT_NE(msg.find("shape.mode"), std::string::npos) << msg;
+}
+
+// The ground-truth joint error after a shape swap is scored with the subject's joint centres
+// (the shaped template the poses were fitted with), not the template's rest centres: each
+// frame's figure is recomputed here from poses.csv, subject.glb and the sequence's ground
+// truth, and the same recomputation with the template's centres differs (a template with
+// short legs and long arms, so the calibration moves its joints by centimetres). The summary's
+// windows: after the first swap and after the last round's (here the same, one round).
+TEST(PipelineTest, ShapeJointErrorIsScoredWithTheSubjectsJoints) {
+  BodyShapeOptions short_legs;
+  short_legs.resolution = 0;
+  short_legs.leg_length = 0.8;
+  short_legs.arm_length = 1.2;
+  const Template base = GenerateTemplate(short_legs);
+  const fs::path template_path = OutDir("short_legs.glb");
+  WriteTemplateGlb(template_path.string(), base);
+  const Config config = SmallShapeConfig();
+  const fs::path out = OutDir("run_shape_joints");
+  const PipelineResult r = RunPipeline(TestData().sequence, template_path.string(),
+                                       LoadPipelineOptions(config), config, out.string());
+  ASSERT_GE(r.shape_calibrated_frame, 0);
+  EXPECT_EQ(r.shape_final_frame, r.shape_calibrated_frame);  // one round
+  const Template subject = ReadTemplateGlb((out / "subject.glb").string());
+  double moved = 0.0;  // how far the calibration moved a rest joint centre (m)
+  for (int j = 0; j < base.num_joints(); ++j) {
+    moved = std::max(moved, (subject.joints[j].center - base.joints[j].center).norm());
+  }
+  ASSERT_GT(moved, 0.01);
+
+  const SequenceReader reader(TestData().sequence);
+  const Template truth = ReadTemplateGlb(reader.GroundTruthSubjectPath());
+  const Skinning truth_skinning(truth), subject_skinning(subject), base_skinning(base);
+  const auto poses = ReadPoseCsv((out / "poses.csv").string(), base.num_joints());
+  // Mean distance (mm) of the posed joints of `skinning` to the truth's, by name.
+  const auto joint_error = [&](const Skinning& skinning, const Pose& pose, const Pose& true_pose) {
+    Eigen::MatrixX3d ours, theirs;
+    skinning.PosedJointCenters(pose, &ours);
+    truth_skinning.PosedJointCenters(true_pose, &theirs);
+    double sum = 0.0;
+    int n = 0;
+    for (int j = 0; j < base.num_joints(); ++j) {
+      const int t = truth.FindJoint(base.joints[j].name);
+      if (t < 0) continue;
+      sum += (ours.row(j) - theirs.row(t)).norm();
+      ++n;
+    }
+    return 1000.0 * sum / n;
+  };
+  int checked = 0;
+  double vertex = 0.0, joint = 0.0, largest_difference = 0.0;
+  for (const FrameRecord& record : r.frames) {
+    if (record.skipped || !record.fit.ok() || record.frame <= r.shape_calibrated_frame) continue;
+    const auto row = std::find_if(poses.begin(), poses.end(),
+                                  [&](const auto& p) { return p.first == record.frame; });
+    ASSERT_NE(row, poses.end()) << record.frame;
+    const Pose true_pose = reader.ReadGroundTruth(record.frame).pose;
+    const double with_subject = joint_error(subject_skinning, row->second, true_pose);
+    const double with_base = joint_error(base_skinning, row->second, true_pose);
+    EXPECT_NEAR(record.mean_joint_error_mm, with_subject, 1e-3) << "frame " << record.frame;
+    largest_difference = std::max(largest_difference, std::abs(with_subject - with_base));
+    vertex += record.mean_vertex_error_mm;
+    joint += record.mean_joint_error_mm;
+    ++checked;
+  }
+  ASSERT_GT(checked, 0);
+  EXPECT_GT(largest_difference, 1.0);  // the template's centres would score differently
+
+  std::ifstream in(out / "summary.json");
+  const nlohmann::json shape = nlohmann::json::parse(in).at("shape");
+  EXPECT_EQ(shape.at("rounds").get<int>(), 1);
+  EXPECT_EQ(shape.at("final_calibration_after_frame").get<int>(), r.shape_final_frame);
+  EXPECT_EQ(shape.at("frames_after_final_calibration").get<int>(), checked);
+  EXPECT_NEAR(shape.at("mean_joint_error_mm_after_final_calibration").get<double>(),
+              joint / checked, 1e-9);
+  EXPECT_NEAR(shape.at("mean_vertex_error_mm_after_final_calibration").get<double>(),
+              vertex / checked, 1e-9);
+  EXPECT_NEAR(shape.at("mean_joint_error_mm_after_calibration").get<double>(), joint / checked,
+              1e-9);
+  // Per joint by name: every joint has a true one here, so their mean is the mean joint error.
+  const nlohmann::json& by_joint = shape.at("joint_errors_mm_after_final_calibration");
+  ASSERT_EQ(static_cast<int>(by_joint.size()), base.num_joints());
+  double sum = 0.0;
+  for (const Joint& j : base.joints) sum += by_joint.at(j.name).get<double>();
+  EXPECT_NEAR(sum / base.num_joints(), joint / checked, 1e-9);
 }
 
 // shape.retrack: the first pass (fitting only) calibrates the subject into shape_pass/, the

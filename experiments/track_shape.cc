@@ -1,0 +1,28 @@
+// TrackStage's part of the subject shape estimation (section shape, docs/fitting.md): feeding
+// accepted frames to the estimator and swapping the subject's template into the fitter.
+#include "experiments/pipeline_stages.h"
+
+namespace artex {
+
+void TrackStage::FeedShape(const Pose& pose, int frame) {
+  if (shape_ == nullptr || tmpl_ == nullptr || !shape_->enabled()) return;
+  const bool scale_settled = !fitter_->ScaleIsFree() ||
+                             fitter_->scale_samples() >= options_.fitting.scale_estimation_frames;
+  Pose refined;
+  if (!shape_->AddFrame(scan_, pose, scale_settled, &refined)) return;
+  *tmpl_ = shape_->SubjectTemplate();
+  fitter_->SetRestShape(*tmpl_);
+  if (options_.shape.seed_pose && refined.AllFinite() &&
+      refined.num_joints() == tmpl_->num_joints()) {
+    // The tracked pose was fitted with the previous shape (e.g. the template's feet on the
+    // subject's shins); the solve refined this frame's pose with the new one: continue
+    // from it, as after a re-initialisation (the motion history restarts).
+    fitter_->Reset(/*keep_scale=*/true);
+    fitter_->AcceptPose(scan_, refined);
+  }
+  if (shape_calibrated_frame < 0) shape_calibrated_frame = frame;
+  // The last calibration round's swap (the shape is final, or refined from here on).
+  if (shape_final_frame < 0 && shape_->calibrated()) shape_final_frame = frame;
+}
+
+}  // namespace artex
