@@ -23,10 +23,10 @@ struct RealtimeOptions {
   // Frames waiting between two stages (pipeline.queue_depth, >= 1): bounds the memory (one
   // frame ~1.2 MB of images at 640x480) and the added latency.
   int queue_depth = 2;
-  // pipeline.live: frames arrive on a clock at live_rate_hz as from a sensor; when a frame
-  // arrives while the track stage's queue is full, the oldest waiting frame is dropped
-  // (counted): nothing queues without bound and the newest frame is tracked next. Sequential:
-  // the frames that arrive while a frame is processed are dropped but the newest.
+  // pipeline.live: frames arrive on a clock at live_rate_hz as from a sensor; a frame is read
+  // only once the track stage's queue has room, the frames that arrived meanwhile are dropped
+  // undecoded (counted): nothing queues without bound and a recent frame is tracked next.
+  // Sequential: the frames that arrive while a frame is processed are dropped but the newest.
   bool live = false;
   double live_rate_hz = 0.0;  // pipeline.live_rate_hz; 0: the recording's frame rate
   // pipeline.live_queue_depth (>= 1): live, the frames waiting for the track stage (each adds
