@@ -142,6 +142,38 @@ double YawOfRotation(const Eigen::Matrix3d& rotation) {
   return std::atan2(front.x(), front.z());
 }
 
+namespace {
+
+// Fixed-point steps that move *translation so that the centroid of the vertices
+// scale * rotation * x + translation that face the camera and project into its image matches
+// scan_centroid (stops early when none is visible).
+void PlaceAtVisibleCentroid(const Eigen::MatrixX3d& x, const Eigen::MatrixX3d& xn, double scale,
+                            const Eigen::Matrix3d& rotation, const Eigen::Vector3d& scan_centroid,
+                            const PinholeCamera& camera, int iterations,
+                            Eigen::Vector3d* translation) {
+  const Eigen::Vector3d eye = camera.Center();
+  for (int it = 0; it < iterations; ++it) {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    int count = 0;
+    for (int t = 0; t < x.rows(); ++t) {
+      const Eigen::Vector3d w = scale * rotation * x.row(t).transpose() + *translation;
+      if ((rotation * xn.row(t).transpose()).dot(eye - w) <= 0.0) continue;
+      double z = 0.0;
+      const Eigen::Vector2d uv = camera.Project(w, &z);
+      if (!(z > 0.0) || uv.x() < -0.5 || uv.y() < -0.5 || uv.x() > camera.width - 0.5 ||
+          uv.y() > camera.height - 0.5) {
+        continue;
+      }
+      sum += w;
+      ++count;
+    }
+    if (count == 0) break;
+    *translation += scan_centroid - sum / count;
+  }
+}
+
+}  // namespace
+
 InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera& depth_camera,
                          const InitializerOptions& options) {
   const auto start = Clock::now();
@@ -222,25 +254,8 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
       // into the depth image matches the scan centroid (fixed point; starts from all vertices).
       pose.translation = scan_centroid - pose.scale * pose.rotation *
                                              Eigen::Vector3d(x.colwise().mean().transpose());
-      for (int it = 0; it < options.coarse_iterations; ++it) {
-        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-        int count = 0;
-        for (int t = 0; t < x.rows(); ++t) {
-          const Eigen::Vector3d w =
-              pose.scale * pose.rotation * x.row(t).transpose() + pose.translation;
-          if ((pose.rotation * xn.row(t).transpose()).dot(eye - w) <= 0.0) continue;
-          double z = 0.0;
-          const Eigen::Vector2d uv = depth_camera.Project(w, &z);
-          if (!(z > 0.0) || uv.x() < -0.5 || uv.y() < -0.5 || uv.x() > depth_camera.width - 0.5 ||
-              uv.y() > depth_camera.height - 0.5) {
-            continue;
-          }
-          sum += w;
-          ++count;
-        }
-        if (count == 0) break;
-        pose.translation += scan_centroid - sum / count;
-      }
+      PlaceAtVisibleCentroid(x, xn, pose.scale, pose.rotation, scan_centroid, depth_camera,
+                             options.coarse_iterations, &pose.translation);
       h.icp = AlignByIcp(target, pose, scan, icp);
       h.pose = h.icp.pose;
       result.hypotheses.push_back(std::move(h));
@@ -405,26 +420,9 @@ FitSummary RefitFromPose(EMFitter* fitter, const Scan& scan, const PinholeCamera
     skinning.Apply(start, &x);
     ComputeVertexNormals(x, model.triangles, &xn);
     const Eigen::Vector3d scan_centroid = scan.points.colwise().mean().transpose();
-    const Eigen::Vector3d eye = depth_camera.Center();
     Eigen::Vector3d shift = Eigen::Vector3d::Zero();
-    for (int it = 0; it < options.coarse_iterations; ++it) {
-      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-      int count = 0;
-      for (int t = 0; t < x.rows(); ++t) {
-        const Eigen::Vector3d w = x.row(t).transpose() + shift;
-        if (xn.row(t).dot(eye - w) <= 0.0) continue;
-        double z = 0.0;
-        const Eigen::Vector2d uv = depth_camera.Project(w, &z);
-        if (!(z > 0.0) || uv.x() < -0.5 || uv.y() < -0.5 || uv.x() > depth_camera.width - 0.5 ||
-            uv.y() > depth_camera.height - 0.5) {
-          continue;
-        }
-        sum += w;
-        ++count;
-      }
-      if (count == 0) break;
-      shift += scan_centroid - sum / count;
-    }
+    PlaceAtVisibleCentroid(x, xn, 1.0, Eigen::Matrix3d::Identity(), scan_centroid, depth_camera,
+                           options.coarse_iterations, &shift);
     Pose moved = start;
     moved.translation += shift;
     // The centroid is biased (the far side of the template, parts the scan lacks): a rigid ICP
