@@ -78,12 +78,13 @@ struct PipelineOptions {
   int reinitialise_after_doubtful = 10;
   // A tracking frame this many frames or more after the last processed one (frames dropped in
   // live mode, e.g. during the first frame's initialisation) is fitted by RefitFromPose
-  // (solvers/initializer.h): the last pose re-centred on the scan, the first-frame schedule.
+  // (solvers/initializer.h): the last pose or it moved onto the scan, fitted with wider radii.
   // 0: tracked as any frame (the prediction from before the gap).
   int gap_refit_frames = 3;
-  // Its E-step radii (m) and EM iterations per radius (empty: the first-frame schedule).
-  std::vector<double> gap_refit_radii = {0.08, 0.04, 0.03};
-  int gap_refit_iterations_per_stage = 4;
+  // Its options: radii and iterations_per_stage from pipeline.gap_refit_radii and
+  // .gap_refit_iterations_per_stage, coarse_iterations and quality from fitting.init and
+  // fitting.quality (LoadPipelineOptions).
+  GapRefitOptions gap_refit;
   // With ground truth: novel-view texture quality (texture/texture_quality.h) every n-th frame
   // and at the last frame; 0: off.
   int texture_quality_every = 10;

@@ -1,5 +1,4 @@
 // Configuration keys of the pipeline (docs/configuration.md lists them with their defaults).
-#include <algorithm>
 #include <cmath>
 #include <map>
 #include <sstream>
@@ -460,8 +459,8 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("reinitialise_auto_wins", &o->reinitialise_auto_wins);
   c.Get("reinitialise_auto_window", &o->reinitialise_auto_window);
   c.Get("gap_refit_frames", &o->gap_refit_frames);
-  c.Get("gap_refit_radii", &o->gap_refit_radii);
-  c.Get("gap_refit_iterations_per_stage", &o->gap_refit_iterations_per_stage);
+  c.Get("gap_refit_radii", &o->gap_refit.radii);
+  c.Get("gap_refit_iterations_per_stage", &o->gap_refit.iterations_per_stage);
   c.Get("texture_quality_every", &o->texture_quality_every);
   c.Get("texture_quality_yaws_deg", &o->held_out.yaws_deg);
   c.Get("texture_quality_height", &o->held_out.height);
@@ -556,12 +555,8 @@ bool PipelineOptions::IsValid(std::string* error) const {
         << reinitialise_after_doubtful;
   else if (gap_refit_frames < 0)
     msg << "pipeline.gap_refit_frames: expected >= 0 (0: off), found " << gap_refit_frames;
-  else if (gap_refit_iterations_per_stage < 1)
-    msg << "pipeline.gap_refit_iterations_per_stage: expected >= 1, found "
-        << gap_refit_iterations_per_stage;
-  else if (std::any_of(gap_refit_radii.begin(), gap_refit_radii.end(),
-                       [](double r) { return !(r > 0.0) || !std::isfinite(r); }))
-    msg << "pipeline.gap_refit_radii: expected finite radii > 0 (m)";
+  else if (!gap_refit.IsValid(&inner))
+    msg << "pipeline.gap_refit_" << inner;
   else if (reinitialise_auto_wins < 1 || reinitialise_auto_window < reinitialise_auto_wins)
     msg << "pipeline.reinitialise_auto_wins/window: expected 1 <= wins <= window, found "
         << reinitialise_auto_wins << " / " << reinitialise_auto_window;
@@ -634,6 +629,8 @@ PipelineOptions LoadPipelineOptions(const Config& config) {
   BindInitializer(config.Section("fitting").Section("init"), &o.initializer);
   BindQuality(config.Section("fitting").Section("quality"), &o.quality);
   o.initializer.quality = o.quality;  // the initialiser ranks and labels with the same options
+  o.gap_refit.coarse_iterations = o.initializer.coarse_iterations;  // and the gap refit too
+  o.gap_refit.quality = o.quality;
   BindTexture(config.Section("texture"), &o.texturing);
   BindPipeline(config.Section("pipeline"), &o);
   BindStream(config.Section("stream"), &o.stream);

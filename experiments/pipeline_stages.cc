@@ -92,7 +92,6 @@ std::string FailedFitReason(int frame, const FitSummary& fit, int min_scan_point
   return why;
 }
 
-
 }  // namespace
 
 const std::map<std::string, PipelineConcurrency>& PipelineConcurrencyNames() {
@@ -218,12 +217,8 @@ void TrackStage::Process(FrameWork* work) {
   } else if (options_.gap_refit_frames > 0 && record.gap_frames >= options_.gap_refit_frames &&
              fitter_->tracking() && enough_points) {
     // Frames were dropped (live): the subject may have moved beyond the tracking radii.
-    GapRefitOptions refit;
-    refit.coarse_iterations = options_.initializer.coarse_iterations;
-    refit.radii = options_.gap_refit_radii;
-    refit.iterations_per_stage = options_.gap_refit_iterations_per_stage;
-    refit.quality = options_.quality;
-    record.fit = RefitFromPose(fitter_, scan_, calibration_.depth, fitter_->pose(), refit);
+    record.fit =
+        RefitFromPose(fitter_, scan_, calibration_.depth, fitter_->pose(), options_.gap_refit);
     record.gap_refit = true;
     fit_seconds += record.fit.total_seconds;
     ++tracked_frames;
@@ -469,8 +464,9 @@ void OutputStage::Process(FrameWork* work) {
     double joint = 0.0;
     record.joint_errors_mm.assign(ours.rows(), std::numeric_limits<double>::quiet_NaN());
     for (const auto& [a, b] : truth_.joint_pairs) {
-      joint += (ours.row(a) - theirs.row(b)).norm();
-      record.joint_errors_mm[a] = 1000.0 * (ours.row(a) - theirs.row(b)).norm();
+      const double d = (ours.row(a) - theirs.row(b)).norm();
+      joint += d;
+      record.joint_errors_mm[a] = 1000.0 * d;
     }
     record.mean_joint_error_mm =
         truth_.joint_pairs.empty() ? 0.0 : 1000.0 * joint / truth_.joint_pairs.size();
