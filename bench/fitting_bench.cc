@@ -10,7 +10,8 @@
 //                 noise, the subject facing away); counters: chosen yaw, ICP / EM / quality ms.
 //   BM_FitQuality: EvaluateFitQuality of the fitted (posed) template on that frame.
 // Variants side by side: truncated-radius E-step + Gauss-Newton (default options), the same
-// with other E-step candidate margins (BM_TrackCandidateMargin/<mm>), Ceres LM backend, dense
+// with other E-step candidate margins (BM_TrackCandidateMargin/<mm>) and work budgets
+// (BM_TrackBudget/<fitted vertices>/<voxel %>), Ceres LM backend, dense
 // exact E-step (single frame only: it takes seconds per EM iteration). For one core run under
 // `taskset -c 0` (oneTBB follows the affinity mask).
 // Counters: cpu_ms (process CPU per frame, all threads; wall times are unreliable on a shared
@@ -284,6 +285,28 @@ BENCHMARK(BM_TrackCandidateMargin)
     ->Arg(7)
     ->Arg(10)
     ->Arg(15);
+
+// The default with another work budget: at most state.range(0) fitted template vertices and
+// a scan voxel cell of state.range(1) % of the radius. The candidate gathers, weighing and
+// skinning scale with the fitted vertices, the candidates per vertex with the cube of the
+// voxel cell; configs/experiments/fit_budget.yaml measures the accuracy of each on the
+// virtual Kinect.
+void BM_TrackBudget(benchmark::State& state) {
+  EMFitterOptions options;
+  options.max_fit_vertices = static_cast<int>(state.range(0));
+  options.estep.voxel_fraction = 0.01 * static_cast<double>(state.range(1));
+  RunSequence(state, options, false);
+}
+BENCHMARK(BM_TrackBudget)
+    ->Unit(benchmark::kMillisecond)
+    ->UseManualTime()
+    ->Args({3000, 25})
+    ->Args({3000, 35})
+    ->Args({2000, 25})
+    ->Args({2000, 35})
+    ->Args({1500, 25})
+    ->Args({1500, 35})
+    ->Args({1000, 35});
 
 void BM_TrackCeresLm(benchmark::State& state) { RunSequence(state, CeresOptions(), false); }
 BENCHMARK(BM_TrackCeresLm)->Unit(benchmark::kMillisecond)->UseManualTime();
