@@ -56,6 +56,9 @@ std::string Sanitize(const std::string& s) {
 std::string DefaultSequenceName(const YAML::Node& synth) {
   std::string name = synth["motion"] ? synth["motion"].as<std::string>() : "walk";
   if (synth["bvh"]) name = fs::path(synth["bvh"].as<std::string>()).stem().string();
+  if (synth["subject_template"]) {
+    name += "_" + fs::path(synth["subject_template"].as<std::string>()).stem().string();
+  }
   if (synth["frames"]) name += "_f" + synth["frames"].as<std::string>();
   if (synth["seed"]) name += "_s" + synth["seed"].as<std::string>();
   if (synth["noise"]) name += "_" + synth["noise"].as<std::string>();
@@ -180,6 +183,10 @@ Experiment ParseExperimentYaml(const std::string& yaml, const std::string& sourc
         if (!synth.IsMap()) throw Error(where + ".synth: expected a mapping of synthesis options");
         YAML::Node spec = YAML::Clone(synth);
         if (spec["bvh"]) spec["bvh"] = ResolvePath(spec["bvh"].as<std::string>(), base_dir);
+        if (spec["subject_template"]) {
+          spec["subject_template"] =
+              ResolvePath(spec["subject_template"].as<std::string>(), base_dir);
+        }
         seq.synthetic = true;
         seq.synth_yaml = Emit(spec);
         SynthSpecFromConfig(Config::FromString(seq.synth_yaml, where + ".synth"));

@@ -73,6 +73,7 @@ SynthSpec SynthSpecFromConfig(const Config& c) {
   c.Get("subject_resolution", &o.subject_shape.resolution);
   c.Get("subject_height", &o.subject_shape.height);
   c.Get("subject_girth", &o.subject_shape.girth);
+  c.Get("subject_template", &o.subject_template);
   c.Get("yaw_deg", &o.subject_yaw_deg);
   int depth_width = kDefaultDepthWidth, depth_height = kDefaultDepthHeight;
   c.Get("depth_width", &depth_width);
@@ -188,7 +189,8 @@ std::vector<std::string> SynthSpecKeys() {
   return {"motion", "bvh", "frames", "seed", "noise", "frame_rate", "amplitude", "period_s", "ramp_s",
           "speed", "frame_step",
           "background_frames", "color_width", "color_height", "texture_size",
-          "subject_resolution", "subject_height", "subject_girth", "yaw_deg", "depth_width",
+          "subject_resolution", "subject_height", "subject_girth", "subject_template", "yaw_deg",
+          "depth_width",
           "depth_height", "disparity_noise_px", "random_dropout", "color_noise",
           "outlier_fraction", "outlier_range_m", "condition", "camera_pitch_deg",
           "camera_roll_deg", "world_frame", "boxes", "second_person"};

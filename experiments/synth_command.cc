@@ -40,6 +40,7 @@ struct SynthCliOptions {
   int resolution = 1;
   bool no_glb = false;
   BodyShapeOptions shape = DefaultSubjectShape();
+  std::string subject_template;  // "" = the generated body
   double yaw_deg = 0.0;
   // Conditions (docs/synthesis.md "Conditions"); explicit flags override a --condition.
   std::vector<std::string> conditions;
@@ -206,6 +207,7 @@ void Run(const SynthCliOptions& cli, const CLI::App& app) {
   options.texture.size = cli.texture_size;
   options.subject_shape = cli.shape;
   options.subject_shape.resolution = cli.resolution;
+  options.subject_template = cli.subject_template;
   options.background_frames = cli.background_frames;
   options.write_subject_glb = !cli.no_glb;
   // Conditions first (in the given order), then explicit flags.
@@ -362,6 +364,10 @@ void RegisterSynthCommand(CLI::App* app) {
   sub->add_option("--subject-leg-length", cli->shape.leg_length, "Leg length factor")
       ->capture_default_str()
       ->check(CLI::Range(0.8, 1.2));
+  sub->add_option("--subject-template", cli->subject_template,
+                  "Subject body from a template file (.glb with UVs and the default 17 joints, "
+                  "e.g. from `artex template import-makehuman`) instead of the generated body "
+                  "(the --subject-height ... shape flags are then not used)");
   sub->add_option("--subject-yaw,--yaw", cli->yaw_deg,
                   "Subject rotation about +Y (degrees; 180: facing away from the camera)")
       ->capture_default_str()

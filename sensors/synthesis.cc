@@ -144,11 +144,39 @@ VirtualKinectOptions ResolveKinectOptions(const SynthOptions& options) {
 // ---------------------------------------------------------------------------------------------
 // Sequence synthesis
 
+Template LoadSubjectTemplate(const std::string& path) {
+  const std::string what = "subject template '" + path + "': ";
+  Template t;
+  try {
+    t = ReadTemplateGlb(path);
+  } catch (const Error& e) {
+    throw Error(what + e.what());
+  }
+  if (!t.has_uvs()) {
+    throw Error(what + "expected a UV atlas (the true texture is generated over it), found " +
+                Str(t.uv_triangles.rows()) + " UV triangles for " + Str(t.num_triangles()) +
+                " triangles");
+  }
+  std::string missing;
+  for (int j = 0; j < kDefaultNumJoints; ++j) {
+    const std::string name = DefaultJointNames()[j];
+    if (t.FindJoint(name) < 0) missing += (missing.empty() ? "" : ", ") + name;
+  }
+  if (!missing.empty()) {
+    std::string found;
+    for (const Joint& j : t.joints) found += (found.empty() ? "" : ", ") + j.name;
+    throw Error(what + "expected the joints of the default rig (the motions drive them), missing " +
+                missing + "; found " + found);
+  }
+  return t;
+}
+
 SynthSubject PrepareSynthSubject(const SynthOptions& options) {
   std::string why;
   if (!options.IsValid(&why)) throw Error("synthesis options: " + why);
   SynthSubject s;
-  s.subject = GenerateTemplate(options.subject_shape);
+  s.subject = options.subject_template.empty() ? GenerateTemplate(options.subject_shape)
+                                               : LoadSubjectTemplate(options.subject_template);
   s.texture_bgr = GenerateSubjectTexture(s.subject, options.texture);
   if (!options.bvh_path.empty()) {
     BvhRetargetOptions retarget;

@@ -257,6 +257,13 @@ struct SynthOptions {
   // applied to it (ResolveKinectOptions).
   VirtualKinectOptions kinect;
   BodyShapeOptions subject_shape = DefaultSubjectShape();
+  // Non-empty: the subject is this template file (.glb, e.g. from `artex template
+  // import-makehuman`) instead of the body generated from subject_shape (which is then not
+  // used; kUpperBody's framing still reads subject_shape.height). The file must hold a valid
+  // template with a UV atlas and the 17 joint names of DefaultJointNames() (the motions and
+  // the BVH retargeting drive them); its texture, if any, is ignored: the true texture is
+  // generated over its UVs from `texture` as for the generated body (LoadSubjectTemplate).
+  std::string subject_template;
   SubjectTextureOptions texture;
   MotionOptions motion;
   // Non-empty: the motion is read from this BVH file and retargeted (sensors/bvh.h);
@@ -315,8 +322,13 @@ struct SynthSubject {
   std::vector<ScenePerson> others;
   std::vector<std::vector<Pose>> other_poses;
 };
-// Throws artex::Error on invalid options, an unknown/unreadable BVH file or a failing
-// generator.
+// Reads a subject template file for SynthOptions::subject_template. Throws artex::Error naming
+// `path` and what is wrong: unreadable or not an artex template GLB, no UV atlas, or missing
+// joint names of DefaultJointNames() (listed).
+Template LoadSubjectTemplate(const std::string& path);
+
+// Throws artex::Error on invalid options, an unknown/unreadable BVH file or subject template
+// file, or a failing generator.
 SynthSubject PrepareSynthSubject(const SynthOptions& options);
 
 // Writes a complete artex sequence to out_folder (created if missing). Throws artex::Error on

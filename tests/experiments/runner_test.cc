@@ -164,6 +164,16 @@ TEST(ExperimentParseTest, SynthConditionKeys) {
   EXPECT_NE(msg.find("depth_roll_deg"), std::string::npos) << msg;
 }
 
+TEST(ExperimentParseTest, SynthSubjectTemplateIsResolvedAgainstTheExperimentFile) {
+  const Experiment e = ParseExperiment(
+      "sequences:\n  - {synth: {motion: walk, frames: 2, subject_template: bodies/mh.glb}}\n",
+      "exp.yaml", "/data/exp");
+  ASSERT_EQ(e.sequences.size(), 1u);
+  EXPECT_NE(e.sequences[0].synth_yaml.find("/data/exp/bodies/mh.glb"), std::string::npos)
+      << e.sequences[0].synth_yaml;
+  EXPECT_EQ(e.sequences[0].name, "walk_mh_f2") << e.sequences[0].name;
+}
+
 TEST(ExperimentParseTest, StructuralErrors) {
   EXPECT_NE(ErrorOf([] { Parse("grids: {texture.lambda: [0]}\n"); }).find("valid keys"), std::string::npos);
   EXPECT_NE(ErrorOf([] {
