@@ -25,42 +25,57 @@ libdeflate_decompressor* ThreadDecompressor() {
   return d.get();
 }
 
-// Reverses the PNG filter of one row in place (filter types 0-4, bpp bytes per pixel);
+// Reverses the PNG filter of one row in place (filter types 0-4, BPP bytes per pixel);
 // prior: the previous reconstructed row (nullptr for the first row). False: unknown filter.
-bool Unfilter(int filter, unsigned char* row, const unsigned char* prior, std::size_t length,
-              int bpp) {
+// The left neighbours are carried in registers: reading back the byte just written would
+// chain every byte on a store-to-load forwarding.
+template <int BPP>
+bool Unfilter(int filter, unsigned char* __restrict row, const unsigned char* __restrict prior,
+              std::size_t length) {
+  unsigned char left[BPP];
   switch (filter) {
     case 0:
       return true;
     case 1:  // Sub
-      for (std::size_t i = bpp; i < length; ++i) row[i] = static_cast<unsigned char>(row[i] + row[i - bpp]);
+      for (int j = 0; j < BPP; ++j) left[j] = row[j];
+      for (std::size_t i = BPP; i < length; i += BPP) {
+        for (int j = 0; j < BPP; ++j) {
+          left[j] = static_cast<unsigned char>(row[i + j] + left[j]);
+          row[i + j] = left[j];
+        }
+      }
       return true;
     case 2:  // Up
       if (prior)
         for (std::size_t i = 0; i < length; ++i) row[i] = static_cast<unsigned char>(row[i] + prior[i]);
       return true;
     case 3:  // Average
-      if (prior) {
-        for (int i = 0; i < bpp; ++i) row[i] = static_cast<unsigned char>(row[i] + (prior[i] >> 1));
-        for (std::size_t i = bpp; i < length; ++i)
-          row[i] = static_cast<unsigned char>(row[i] + ((row[i - bpp] + prior[i]) >> 1));
-      } else {
-        for (std::size_t i = bpp; i < length; ++i)
-          row[i] = static_cast<unsigned char>(row[i] + (row[i - bpp] >> 1));
+      for (int j = 0; j < BPP; ++j) {
+        left[j] = static_cast<unsigned char>(row[j] + (prior ? prior[j] >> 1 : 0));
+        row[j] = left[j];
+      }
+      for (std::size_t i = BPP; i < length; i += BPP) {
+        for (int j = 0; j < BPP; ++j) {
+          const int up = prior ? prior[i + j] : 0;
+          left[j] = static_cast<unsigned char>(row[i + j] + ((left[j] + up) >> 1));
+          row[i + j] = left[j];
+        }
       }
       return true;
     case 4:  // Paeth
-      if (prior) {
-        for (int i = 0; i < bpp; ++i) row[i] = static_cast<unsigned char>(row[i] + prior[i]);
-        for (std::size_t i = bpp; i < length; ++i) {
-          const int a = row[i - bpp], b = prior[i], c = prior[i - bpp];
+      if (!prior) return Unfilter<BPP>(1, row, prior, length);  // a zero prior row: Sub
+      for (int j = 0; j < BPP; ++j) {
+        left[j] = static_cast<unsigned char>(row[j] + prior[j]);
+        row[j] = left[j];
+      }
+      for (std::size_t i = BPP; i < length; i += BPP) {
+        for (int j = 0; j < BPP; ++j) {
+          const int a = left[j], b = prior[i + j], c = prior[i + j - BPP];
           const int pa = std::abs(b - c), pb = std::abs(a - c), pc = std::abs(a + b - 2 * c);
           const int predictor = (pa <= pb && pa <= pc) ? a : (pb <= pc ? b : c);
-          row[i] = static_cast<unsigned char>(row[i] + predictor);
+          left[j] = static_cast<unsigned char>(row[i + j] + predictor);
+          row[i + j] = left[j];
         }
-      } else {  // with a zero prior row Paeth predicts the left neighbour (Sub)
-        for (std::size_t i = bpp; i < length; ++i)
-          row[i] = static_cast<unsigned char>(row[i] + row[i - bpp]);
       }
       return true;
     default:
@@ -128,7 +143,9 @@ bool DecodeFramePng(const unsigned char* data, std::size_t size, cv::Mat* image)
   for (uint32_t y = 0; y < height; ++y) {
     unsigned char* line = raw.data() + y * (stride + 1);
     unsigned char* row = line + 1;
-    if (!Unfilter(line[0], row, prior, stride, bpp)) return false;
+    if (!(bpp == 3 ? Unfilter<3>(line[0], row, prior, stride)
+                   : Unfilter<2>(line[0], row, prior, stride)))
+      return false;
     prior = row;
     unsigned char* o = out.ptr<unsigned char>(static_cast<int>(y));
     if (bpp == 3) {  // RGB -> BGR

@@ -4,6 +4,7 @@
 #include "sensors/png_decode.h"
 
 #include <gtest/gtest.h>
+#include <zlib.h>
 
 #include <cstdio>
 #include <filesystem>
@@ -74,6 +75,86 @@ TEST(PngDecodeTest, SameImageAsOpenCvForColourAndDepth) {
         ExpectSame(fast, cv::imdecode(png, cv::IMREAD_UNCHANGED | cv::IMREAD_ANYDEPTH));
         ExpectSame(fast, m);
       }
+    }
+  }
+}
+
+// A PNG written here with the given filter type per row (PNG filters 0-4 applied by hand), so
+// that every filter type is decoded whatever OpenCV's encoder would choose.
+std::vector<unsigned char> PngWithFilters(const cv::Mat& m, const std::vector<int>& filters) {
+  const int bpp = m.depth() == CV_16U ? 2 : 3;
+  const std::size_t stride = static_cast<std::size_t>(m.cols) * bpp;
+  std::vector<unsigned char> raw, previous(stride, 0), line(stride);
+  for (int y = 0; y < m.rows; ++y) {
+    for (int x = 0; x < m.cols; ++x) {  // the PNG sample order: RGB, big-endian
+      if (bpp == 3) {
+        const cv::Vec3b p = m.at<cv::Vec3b>(y, x);
+        line[3 * x] = p[2];
+        line[3 * x + 1] = p[1];
+        line[3 * x + 2] = p[0];
+      } else {
+        const uint16_t v = m.at<uint16_t>(y, x);
+        line[2 * x] = static_cast<unsigned char>(v >> 8);
+        line[2 * x + 1] = static_cast<unsigned char>(v & 0xff);
+      }
+    }
+    const int filter = filters[y % filters.size()];
+    raw.push_back(static_cast<unsigned char>(filter));
+    for (std::size_t i = 0; i < stride; ++i) {
+      const int a = i >= static_cast<std::size_t>(bpp) ? line[i - bpp] : 0, b = previous[i],
+                c = i >= static_cast<std::size_t>(bpp) ? previous[i - bpp] : 0;
+      int predictor = 0;
+      if (filter == 1) predictor = a;
+      if (filter == 2) predictor = b;
+      if (filter == 3) predictor = (a + b) / 2;
+      if (filter == 4) {
+        const int pa = std::abs(b - c), pb = std::abs(a - c), pc = std::abs(a + b - 2 * c);
+        predictor = (pa <= pb && pa <= pc) ? a : (pb <= pc ? b : c);
+      }
+      raw.push_back(static_cast<unsigned char>(line[i] - predictor));
+    }
+    previous = line;
+  }
+  uLongf size = compressBound(raw.size());
+  std::vector<unsigned char> z(size);
+  EXPECT_EQ(compress2(z.data(), &size, raw.data(), raw.size(), 6), Z_OK);
+  z.resize(size);
+  std::vector<unsigned char> png = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  const auto chunk = [&](const char* type, const std::vector<unsigned char>& body) {
+    const uint32_t n = static_cast<uint32_t>(body.size());
+    for (int k = 3; k >= 0; --k) png.push_back(static_cast<unsigned char>(n >> (8 * k)));
+    const std::size_t start = png.size();
+    png.insert(png.end(), type, type + 4);
+    png.insert(png.end(), body.begin(), body.end());
+    const uint32_t crc = static_cast<uint32_t>(crc32(0, png.data() + start, n + 4));
+    for (int k = 3; k >= 0; --k) png.push_back(static_cast<unsigned char>(crc >> (8 * k)));
+  };
+  std::vector<unsigned char> header;
+  for (const uint32_t v : {static_cast<uint32_t>(m.cols), static_cast<uint32_t>(m.rows)})
+    for (int k = 3; k >= 0; --k) header.push_back(static_cast<unsigned char>(v >> (8 * k)));
+  header.insert(header.end(), {static_cast<unsigned char>(bpp == 3 ? 8 : 16),
+                               static_cast<unsigned char>(bpp == 3 ? 2 : 0), 0, 0, 0});
+  chunk("IHDR", header);
+  // The image data split over two IDAT chunks.
+  const std::size_t half = z.size() / 2;
+  chunk("IDAT", std::vector<unsigned char>(z.begin(), z.begin() + half));
+  chunk("IDAT", std::vector<unsigned char>(z.begin() + half, z.end()));
+  chunk("IEND", {});
+  return png;
+}
+
+TEST(PngDecodeTest, EveryFilterType) {
+  const std::vector<std::vector<int>> patterns = {{0}, {1}, {2}, {3}, {4}, {4, 3, 2, 1, 0},
+                                                  {2, 4, 1, 3}};
+  unsigned seed = 100;
+  for (const int type : {CV_8UC3, CV_16UC1}) {
+    for (const auto& filters : patterns) {
+      const cv::Mat m = TestImage(23, 37, type, seed++);
+      const std::vector<unsigned char> png = PngWithFilters(m, filters);
+      cv::Mat fast;
+      ASSERT_TRUE(DecodeFramePng(png.data(), png.size(), &fast)) << "filter " << filters[0];
+      ExpectSame(fast, m);
+      ExpectSame(fast, cv::imdecode(png, cv::IMREAD_UNCHANGED | cv::IMREAD_ANYDEPTH));
     }
   }
 }
