@@ -115,7 +115,10 @@ bool DecodeFramePng(const unsigned char* data, std::size_t size, cv::Mat* image)
       } else {
         return false;
       }
-      if (width == 0 || height == 0 || uint64_t{width} * height > (uint64_t{1} << 28)) return false;
+      // libpng's default limits (1000000 per side); larger images are left to OpenCV's errors.
+      if (width == 0 || height == 0 || width > 1000000 || height > 1000000 ||
+          uint64_t{width} * height > (uint64_t{1} << 28))
+        return false;
       header = true;
     } else if (is_idat) {
       if (idat_done) return false;  // IDAT chunks must be consecutive
