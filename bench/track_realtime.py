@@ -115,6 +115,11 @@ def main():
     for name, r in results.items():
         print("  %-32s %s" % (name, ", ".join("%.1f" % s["ms_per_frame"]
                                               for s in r["realtime"]["stages"])))
+    print("stage CPU ms/frame (read, track, texture, output; sequential: the process's, "
+          "pipelined: the stage thread's without oneTBB workers):")
+    for name, r in results.items():
+        print("  %-32s %s" % (name, ", ".join("%.1f" % s.get("cpu_ms_per_frame", float("nan"))
+                                              for s in r["realtime"]["stages"])))
     with open(os.path.join(args.work, "results.json"), "w") as f:
         json.dump({"uptime_before": before, "uptime_after": after, "runs": results}, f, indent=2)
 

@@ -1,6 +1,7 @@
 // The schedules of the pipeline's stages (experiments/pipeline_stages.h): sequential or one
 // thread per stage with bounded queues, the live frame clock, and the realtime record.
 #include <sys/resource.h>
+#include <time.h>
 
 #include <algorithm>
 #include <atomic>
@@ -30,6 +31,12 @@ double CpuSeconds() {
   getrusage(RUSAGE_SELF, &usage);
   return usage.ru_utime.tv_sec + 1e-6 * usage.ru_utime.tv_usec + usage.ru_stime.tv_sec +
          1e-6 * usage.ru_stime.tv_usec;
+}
+
+double ThreadCpuSeconds() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return t.tv_sec + 1e-9 * t.tv_nsec;
 }
 
 double Percentile(std::vector<double> values, double q) {
@@ -90,20 +97,26 @@ class FrameClock {
   PipelineClock::time_point start_;
 };
 
+// Busy wall time and CPU time of a stage: the whole process's CPU in the sequential schedule
+// (one stage at a time, with the oneTBB workers it uses), the stage thread's when pipelined.
 struct StageClock {
-  double busy = 0.0;
+  double busy = 0.0, cpu = 0.0;
   int frames = 0;
+  bool whole_process = false;
+  double Cpu() const { return whole_process ? CpuSeconds() : ThreadCpuSeconds(); }
   template <class F>
   auto Time(F&& f) {
     const auto t = PipelineClock::now();
     struct Done {
       StageClock* c;
       PipelineClock::time_point t;
+      double cpu;
       ~Done() {
         c->busy += Since(t);
+        c->cpu += c->Cpu() - cpu;
         ++c->frames;
       }
-    } done{this, t};
+    } done{this, t, Cpu()};
     return f();
   }
 };
@@ -128,6 +141,8 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
   stats.rate_hz = options.live ? rate_hz : 0.0;
   FrameClock clock(options.live, rate_hz, begin, end);
   StageClock read_clock, track_clock, texture_clock, output_clock;
+  for (StageClock* c : {&read_clock, &track_clock, &texture_clock, &output_clock})
+    c->whole_process = options.concurrency == PipelineConcurrency::kSequential;
   std::vector<double> latencies;  // ms, processed frames
   double first_done = -1.0;       // s since start: the first frame textured
   std::atomic<bool> first_textured{false};
@@ -294,6 +309,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
     t.name = name;
     t.frames = c.frames;
     t.busy_seconds = c.busy;
+    t.cpu_seconds = c.cpu;
     return t;
   };
   stats.stages = {stage("read", read_clock), stage("track", track_clock),
@@ -326,7 +342,9 @@ void WriteRealtimeJson(const std::string& path, const RealtimeStats& s) {
     stages.push_back({{"name", t.name},
                       {"frames", t.frames},
                       {"busy_seconds", t.busy_seconds},
-                      {"ms_per_frame", t.frames ? 1000.0 * t.busy_seconds / t.frames : 0.0}});
+                      {"ms_per_frame", t.frames ? 1000.0 * t.busy_seconds / t.frames : 0.0},
+                      {"cpu_seconds", t.cpu_seconds},
+                      {"cpu_ms_per_frame", t.frames ? 1000.0 * t.cpu_seconds / t.frames : 0.0}});
   }
   j["stages"] = stages;
   WriteFileAtomically(path, j.dump(2) + "\n");

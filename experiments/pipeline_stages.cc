@@ -5,11 +5,11 @@
 #include <cstdio>
 #include <exception>
 #include <limits>
-#include <nanoflann.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include "experiments/atomic_output.h"
 #include "experiments/bounded_queue.h"
+#include "experiments/surface_error.h"
 #include "models/error.h"
 #include "models/mesh_export.h"
 #include "models/normals.h"
@@ -20,45 +20,6 @@ namespace {
 
 double Since(PipelineClock::time_point t) {
   return std::chrono::duration<double>(PipelineClock::now() - t).count();
-}
-
-// nanoflann adaptor over an N x 3 matrix.
-struct PointCloud {
-  const Eigen::MatrixX3d* points;
-  size_t kdtree_get_point_count() const { return static_cast<size_t>(points->rows()); }
-  double kdtree_get_pt(size_t i, size_t d) const {
-    return (*points)(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(d));
-  }
-  template <class Box>
-  bool kdtree_get_bbox(Box&) const {
-    return false;
-  }
-};
-using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointCloud>,
-                                                   PointCloud, 3>;
-
-// Distance of every tracked vertex to the ground-truth surface: to the nearest subject vertex,
-// refined to the distance to that vertex's tangent plane (never more than the vertex distance).
-void SurfaceErrors(const Eigen::MatrixX3d& tracked, const Eigen::MatrixX3d& truth,
-                   const Eigen::MatrixX3d& truth_normals, double* mean, double* max) {
-  PointCloud cloud{&truth};
-  KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
-  tree.buildIndex();
-  double sum = 0.0, worst = 0.0;
-  for (Eigen::Index t = 0; t < tracked.rows(); ++t) {
-    const Eigen::Vector3d p = tracked.row(t);
-    unsigned int index = 0;
-    double d2 = 0.0;
-    tree.knnSearch(p.data(), 1, &index, &d2);
-    const Eigen::Vector3d q = truth.row(static_cast<Eigen::Index>(index));
-    const Eigen::Vector3d n = truth_normals.row(static_cast<Eigen::Index>(index));
-    const double plane = n.squaredNorm() > 0.5 ? std::abs(n.dot(p - q)) : std::sqrt(d2);
-    const double d = std::min(std::sqrt(d2), plane);
-    sum += d;
-    worst = std::max(worst, d);
-  }
-  *mean = tracked.rows() ? sum / tracked.rows() : 0.0;
-  *max = worst;
 }
 
 // Bytes to send the texels that changed in the last frame: their bounding box of the atlas

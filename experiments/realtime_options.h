@@ -49,6 +49,10 @@ struct StageTiming {
   std::string name;
   int frames = 0;
   double busy_seconds = 0.0;  // wall time spent working (waits on queues excluded)
+  // CPU time while it worked: sequential, the process's (the stage and the oneTBB workers
+  // it uses); pipelined, the stage thread's only (the workers' share is not included). With
+  // cores shared, busy_seconds includes waiting for a core and this does not.
+  double cpu_seconds = 0.0;
 };
 
 // What the frame loop measured (realtime.json).

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "models/error.h"
+#include "sensors/png_decode.h"
 #include "sensors/sequence.h"
 
 namespace artex {
@@ -18,12 +19,27 @@ std::string SizeText(int width, int height) {
   return std::to_string(width) + "x" + std::to_string(height);
 }
 
+// The file's bytes (false: unreadable).
+bool ReadBytes(const std::string& path, std::vector<unsigned char>* bytes) {
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  if (!in) return false;
+  const std::streamoff size = in.tellg();
+  if (size < 0) return false;
+  bytes->resize(static_cast<std::size_t>(size));
+  in.seekg(0);
+  return static_cast<bool>(in.read(reinterpret_cast<char*>(bytes->data()), size));
+}
+
 bool ReadImage(const std::string& path, int flags, cv::Mat* image, std::string* warning) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) {
     if (warning) *warning = path + ": missing frame file";
     return false;
   }
+  // 8-bit RGB and 16-bit greyscale PNGs (what recorders write) by the fast decoder; it gives
+  // OpenCV's image for them and declines everything else, which OpenCV then decodes.
+  std::vector<unsigned char> bytes;
+  if (ReadBytes(path, &bytes) && DecodeFramePng(bytes.data(), bytes.size(), image)) return true;
   try {
     *image = cv::imread(path, flags);
   } catch (const cv::Exception& e) {
