@@ -187,8 +187,12 @@ TEST(PipelinedTrackingTest, LiveModeAccountsForEveryFrame) {
     int untextured = 0;
     for (const FrameRecord& f : r.frames) untextured += f.texture_skipped;
     EXPECT_EQ(untextured, s.frames_texture_skipped) << mode;
-    if (!r.frames.empty()) EXPECT_FALSE(r.frames[0].texture_skipped);
-    if (std::string(mode) == "sequential") EXPECT_EQ(untextured, 0);
+    if (!r.frames.empty()) {
+      EXPECT_FALSE(r.frames[0].texture_skipped);
+    }
+    if (std::string(mode) == "sequential") {
+      EXPECT_EQ(untextured, 0);
+    }
     EXPECT_LE(s.latency_median_ms, s.latency_p95_ms);
     EXPECT_LE(s.latency_p95_ms, s.latency_max_ms);
   }
