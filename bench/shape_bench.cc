@@ -1,4 +1,4 @@
-// Subject shape (docs/fitting.md "Subject shape"): tracking speed with the subject's template
+// Subject shape (docs/shape.md): tracking speed with the subject's template
 // against the template as generated, and the cost of one calibration solve.
 //   BM_TrackBase:    EMFitter tracking frames on the default template (resolution 1), scans of
 //                    that template; time per tracking frame.

@@ -1,4 +1,4 @@
-// TrackStage's part of the subject shape estimation (section shape, docs/fitting.md): feeding
+// TrackStage's part of the subject shape estimation (section shape, docs/shape.md): feeding
 // accepted frames to the estimator and swapping the subject's template into the fitter.
 #include "experiments/pipeline_stages.h"
 

@@ -1,4 +1,4 @@
-// Subject shape model on top of a rigged template (docs/fitting.md "Subject shape"): per-bone
+// Subject shape model on top of a rigged template (docs/shape.md): per-bone
 // lengths and per-segment girth change the rest pose (joint centres and rest vertices), the
 // posed vertex stays the template's LBS + SLERP skinning (models/skinning.h) of that modified
 // rest geometry, so the template's rig, skinning constants, triangles and UVs are kept.

@@ -1,4 +1,4 @@
-// Subject shape estimation while tracking (docs/fitting.md "Subject shape"): the template's
+// Subject shape estimation while tracking (docs/shape.md): the template's
 // shape parameters (models/shape.h) are estimated jointly with the poses of a calibration
 // phase, the first `calibration_frames` accepted frames (every `calibration_stride`-th, for
 // several poses), by Gauss-Newton over the same one-to-many correspondence energy the tracker

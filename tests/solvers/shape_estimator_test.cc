@@ -99,7 +99,7 @@ TEST(ShapeEstimatorTest, RecoversKnownShapeFromNoiseFreeScans) {
 
 // A subject whose shanks are 35 % longer than the template's (at s0): the template's feet sit
 // on the subject's shins and the scan's feet lie beyond every E-step radius, so the
-// template-to-scan energy alone leaves the shank short (the far subject B of docs/fitting.md).
+// template-to-scan energy alone leaves the shank short (the far subject B of docs/shape.md).
 // The scan-to-model term (every scan point pulls its nearest template vertex) recovers it.
 TEST(ShapeEstimatorTest, ScanToModelTermRecoversLongShanks) {
   const Template& t = CoarseTemplate();
