@@ -13,6 +13,7 @@
 #include "models/skinning.h"
 #include "sensors/preprocess.h"
 #include "sensors/virtual_kinect.h"
+#include "tests/sensors/small_synth.h"
 
 namespace artex {
 namespace {
@@ -20,17 +21,7 @@ namespace {
 namespace fs = std::filesystem;
 constexpr double kDeg = 3.14159265358979323846 / 180.0;
 
-SynthOptions SmallOptions() {
-  SynthOptions o;
-  o.subject_shape.resolution = 0;
-  o.texture.size = 256;
-  o.kinect.color_width = 200;
-  o.kinect.color_height = 254;
-  o.motion.type = MotionType::kWalk;
-  o.motion.frames = 3;
-  o.background_frames = 0;
-  return o;
-}
+SynthOptions SmallOptions() { return testing_util::SmallSynthOptions(3, 0); }
 
 const SynthSubject& SmallSubject() {
   static const SynthSubject subject = PrepareSynthSubject(SmallOptions());

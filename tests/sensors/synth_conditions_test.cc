@@ -19,6 +19,7 @@
 #include "models/skinning.h"
 #include "sensors/sequence.h"
 #include "sensors/virtual_kinect.h"
+#include "tests/sensors/small_synth.h"
 
 namespace artex {
 namespace {
@@ -27,14 +28,7 @@ namespace fs = std::filesystem;
 constexpr double kPi = 3.14159265358979323846;
 
 SynthOptions SmallOptions() {
-  SynthOptions o;
-  o.subject_shape.resolution = 0;
-  o.texture.size = 256;
-  o.kinect.color_width = 200;
-  o.kinect.color_height = 254;
-  o.motion.type = MotionType::kWalk;
-  o.motion.frames = 2;
-  o.background_frames = 2;
+  SynthOptions o = testing_util::SmallSynthOptions(2, 2);
   o.second_person.shape.resolution = 0;
   o.second_person.texture.size = 256;
   return o;

@@ -18,6 +18,7 @@
 #include "models/template_io.h"
 #include "sensors/sequence.h"
 #include "sensors/virtual_kinect.h"
+#include "tests/sensors/small_synth.h"
 
 namespace artex {
 namespace {
@@ -32,18 +33,7 @@ fs::path TempDir(const std::string& name) {
   return dir;
 }
 
-// Small, fast settings (as tests/sensors/virtual_kinect_test.cc).
-SynthOptions SmallOptions() {
-  SynthOptions o;
-  o.subject_shape.resolution = 0;
-  o.texture.size = 256;
-  o.kinect.color_width = 200;
-  o.kinect.color_height = 254;
-  o.motion.type = MotionType::kWalk;
-  o.motion.frames = 3;
-  o.background_frames = 0;
-  return o;
-}
+SynthOptions SmallOptions() { return testing_util::SmallSynthOptions(3, 0); }
 
 // The message of the artex::Error thrown by PrepareSynthSubject with subject_template = path.
 std::string PrepareError(const std::string& path) {

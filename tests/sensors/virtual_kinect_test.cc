@@ -14,24 +14,14 @@
 #include "models/error.h"
 #include "models/skinning.h"
 #include "sensors/sequence.h"
+#include "tests/sensors/small_synth.h"
 
 namespace artex {
 namespace {
 
 namespace fs = std::filesystem;
 
-// Small, fast settings: coarse subject, small texture and colour image.
-SynthOptions SmallOptions() {
-  SynthOptions o;
-  o.subject_shape.resolution = 0;
-  o.texture.size = 256;
-  o.kinect.color_width = 200;
-  o.kinect.color_height = 254;
-  o.motion.type = MotionType::kWalk;
-  o.motion.frames = 3;
-  o.background_frames = 2;
-  return o;
-}
+SynthOptions SmallOptions() { return testing_util::SmallSynthOptions(3, 2); }
 
 fs::path TempDir(const std::string& name) {
   const fs::path dir =
