@@ -135,6 +135,9 @@ bool DecodeFramePng(const unsigned char* data, std::size_t size, cv::Mat* image)
   }
   if (compressed.empty()) return false;
   const std::size_t stride = std::size_t{width} * bpp;
+  // Deflate expands by at most 1032:1: a header claiming more than that from the data it
+  // carries cannot decode, and is declined before its buffer is allocated.
+  if (std::size_t{height} * (stride + 1) / 1032 > compressed.size()) return false;
   std::vector<unsigned char> raw(std::size_t{height} * (stride + 1));
   libdeflate_decompressor* d = ThreadDecompressor();
   if (!d) return false;

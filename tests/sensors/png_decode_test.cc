@@ -3,6 +3,8 @@
 // files, which ReadColorImage / ReadDepthImage then hand to OpenCV as before.
 #include "sensors/png_decode.h"
 
+#include <sys/resource.h>
+
 #include <gtest/gtest.h>
 #include <zlib.h>
 
@@ -186,6 +188,28 @@ TEST(PngDecodeTest, DeclinesOtherLayoutsAndDamagedFiles) {
     return b;
   }();
   EXPECT_FALSE(DecodeFramePng(jpeg.data(), jpeg.size(), &out));
+}
+
+// Peak resident memory of this process (MB).
+double PeakRssMb() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return static_cast<double>(usage.ru_maxrss) / 1024.0;
+}
+
+TEST(PngDecodeTest, HeaderClaimingMoreThanItsDataIsDeclinedWithoutItsBuffer) {
+  // A valid 23 x 37 file whose header claims 16000 x 16000 pixels (768 MB of rows): declined
+  // before the rows are allocated (deflate cannot expand its few hundred bytes that far).
+  std::vector<unsigned char> png = PngWithFilters(TestImage(23, 37, CV_8UC3, 9), {0});
+  for (const std::size_t at : {std::size_t{16}, std::size_t{20}}) {  // IHDR width, height
+    for (int k = 0; k < 4; ++k) png[at + k] = static_cast<unsigned char>(16000u >> (24 - 8 * k));
+  }
+  const uint32_t crc = static_cast<uint32_t>(crc32(0, png.data() + 12, 17));  // type + body
+  for (int k = 0; k < 4; ++k) png[29 + k] = static_cast<unsigned char>(crc >> (24 - 8 * k));
+  const double before = PeakRssMb();
+  cv::Mat out;
+  EXPECT_FALSE(DecodeFramePng(png.data(), png.size(), &out));
+  EXPECT_LT(PeakRssMb() - before, 100.0) << "the claimed rows were allocated";
 }
 
 TEST(PngDecodeTest, ReadersGiveOpenCvsImage) {
