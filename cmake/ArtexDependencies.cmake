@@ -12,6 +12,8 @@ find_package(TBB 2021 REQUIRED)
 find_package(TinyGLTF REQUIRED CONFIG)
 find_package(PkgConfig REQUIRED)
 pkg_check_modules(MAXFLOW REQUIRED IMPORTED_TARGET maxflow)
+# PNG frames are inflated by libdeflate (libdeflate-dev; sensors/png_decode.h).
+pkg_check_modules(ARTEX_LIBDEFLATE REQUIRED IMPORTED_TARGET libdeflate)
 if(ARTEX_BUILD_TESTS)
   find_package(GTest 1.12 REQUIRED CONFIG)
 endif()

@@ -182,10 +182,10 @@ Experiment ParseExperimentYaml(const std::string& yaml, const std::string& sourc
         const YAML::Node synth = s["synth"];
         if (!synth.IsMap()) throw Error(where + ".synth: expected a mapping of synthesis options");
         YAML::Node spec = YAML::Clone(synth);
-        if (spec["bvh"]) spec["bvh"] = ResolvePath(spec["bvh"].as<std::string>(), base_dir);
-        if (spec["subject_template"]) {
-          spec["subject_template"] =
-              ResolvePath(spec["subject_template"].as<std::string>(), base_dir);
+        for (const char* file_key : {"bvh", "subject_template"}) {  // relative to this file
+          if (spec[file_key]) {
+            spec[file_key] = ResolvePath(spec[file_key].as<std::string>(), base_dir);
+          }
         }
         seq.synthetic = true;
         seq.synth_yaml = Emit(spec);

@@ -37,11 +37,13 @@ bool ReadImage(const std::string& path, int flags, cv::Mat* image, std::string* 
     return false;
   }
   // 8-bit RGB and 16-bit greyscale PNGs (what recorders write) by the fast decoder; it gives
-  // OpenCV's image for them and declines everything else, which OpenCV then decodes.
+  // OpenCV's image for them (read unchanged, as both callers do) and declines everything
+  // else, which OpenCV then decodes from the same bytes.
   std::vector<unsigned char> bytes;
-  if (ReadBytes(path, &bytes) && DecodeFramePng(bytes.data(), bytes.size(), image)) return true;
+  if (!ReadBytes(path, &bytes)) bytes.clear();
+  if (DecodeFramePng(bytes.data(), bytes.size(), image)) return true;
   try {
-    *image = cv::imread(path, flags);
+    *image = cv::imdecode(bytes, flags);
   } catch (const cv::Exception& e) {
     image->release();
   }

@@ -199,8 +199,9 @@ TEST_F(StreamServerTest, SlowViewerIsBoundedAndResumesAtAKeyframe) {
   EXPECT_EQ(frames[0] % kInterval, 0u);
   for (std::size_t i = 1; i < frames.size(); ++i) {
     EXPECT_GT(frames[i], frames[i - 1]);
-    if (frames[i] != frames[i - 1] + 1)
+    if (frames[i] != frames[i - 1] + 1) {
       EXPECT_EQ(frames[i] % kInterval, 0u) << "after " << frames[i - 1];
+    }
   }
   // It ends with the latest record: the backlog was dropped, not the present.
   EXPECT_EQ(frames.back(), static_cast<uint32_t>(kRecords - 1));
