@@ -1,6 +1,7 @@
 #include "sensors/image_io.h"
 
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
@@ -42,6 +43,13 @@ bool ReadImage(const std::string& path, int flags, cv::Mat* image, std::string* 
   std::vector<unsigned char> bytes;
   if (!ReadBytes(path, &bytes)) bytes.clear();
   if (DecodeFramePng(bytes.data(), bytes.size(), image)) return true;
+  // Frames are PNG or JPEG: other bytes never reach OpenCV's other decoders (its DICOM reader
+  // aborts the process on some damaged files, found by the image fuzzer).
+  static const unsigned char kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  static const unsigned char kJpeg[3] = {0xff, 0xd8, 0xff};
+  const bool png = bytes.size() >= 8 && std::memcmp(bytes.data(), kPng, 8) == 0;
+  const bool jpeg = bytes.size() >= 3 && std::memcmp(bytes.data(), kJpeg, 3) == 0;
+  if (!png && !jpeg) bytes.clear();
   try {
     *image = cv::imdecode(bytes, flags);
   } catch (const cv::Exception& e) {
