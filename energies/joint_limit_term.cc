@@ -4,6 +4,7 @@
 #include <sstream>
 
 #include "models/error.h"
+#include "models/numeric.h"
 #include "models/so3.h"
 
 namespace artex {
@@ -60,7 +61,6 @@ constexpr AnatomicalEntry kAnatomical[] = {
     {"l_wrist", {-90, -90, -90}, {90, 90, 90}},
 };
 
-constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
 
 }  // namespace
 

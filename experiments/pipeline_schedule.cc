@@ -18,13 +18,10 @@
 #include "experiments/pipeline_stages.h"
 #include "models/error.h"
 #include "models/mesh_export.h"
+#include "models/numeric.h"
 
 namespace artex {
 namespace {
-
-double Since(PipelineClock::time_point t) {
-  return std::chrono::duration<double>(PipelineClock::now() - t).count();
-}
 
 double CpuSeconds() {
   rusage usage{};
@@ -70,7 +67,7 @@ class FrameClock {
     }
     if (next_ >= end_) return false;
     if (live_) {
-      const double now = Since(start_);
+      const double now = SecondsSince(start_);
       const int due = begin_ + static_cast<int>(std::floor(now / period_));
       if (due > next_) {  // late: only the newest frame that has arrived is read
         const int to = std::min(due, end_);
@@ -112,7 +109,7 @@ struct StageClock {
       PipelineClock::time_point t;
       double cpu;
       ~Done() {
-        c->busy += Since(t);
+        c->busy += SecondsSince(t);
         c->cpu += c->Cpu() - cpu;
         ++c->frames;
       }
@@ -175,7 +172,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
     ++stats.frames_processed;
     latencies.push_back(
         1000.0 * std::chrono::duration<double>(work->textured - work->captured).count());
-    if (first_done < 0) first_done = Since(start);
+    if (first_done < 0) first_done = SecondsSince(start);
   };
   int dropped_after_first = 0;
 
@@ -290,7 +287,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
     stats.frames_dropped = dropped;
     stats.frames_texture_skipped = texture_skipped;
   }
-  stats.wall_seconds = Since(start);
+  stats.wall_seconds = SecondsSince(start);
   const double cpu = CpuSeconds() - cpu_start;
   stats.frames_dropped_after_first = dropped_after_first;
   stats.frames_offered = stats.frames_processed + stats.frames_dropped + skipped;

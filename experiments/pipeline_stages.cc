@@ -12,15 +12,12 @@
 #include "experiments/surface_error.h"
 #include "models/error.h"
 #include "models/mesh_export.h"
+#include "models/numeric.h"
 #include "models/normals.h"
 #include "solvers/particle_predictor.h"
 
 namespace artex {
 namespace {
-
-double Since(PipelineClock::time_point t) {
-  return std::chrono::duration<double>(PipelineClock::now() - t).count();
-}
 
 // Bytes to send the texels that changed in the last frame: their bounding box of the atlas
 // as a JPEG (quality 90); 0 when nothing changed.
@@ -162,7 +159,7 @@ void TrackStage::Process(FrameWork* work) {
   const auto t_pre = PipelineClock::now();
   PreprocessStats stats;
   preprocessor_->Process(frame, &scan_, &stats);
-  record.preprocess_seconds = Since(t_pre);
+  record.preprocess_seconds = SecondsSince(t_pre);
   record.scan_points = scan_.size();
   record.segmentation = stats.segmentation;
   if (options_.export_foreground) work->foreground = preprocessor_->foreground_mask().clone();
@@ -465,7 +462,7 @@ void OutputStage::Process(FrameWork* work) {
     PipelineProgress p;
     p.done = i - begin_ + 1;
     p.total = end_ - begin_;
-    p.frames_per_second = static_cast<double>(result.frames.size()) / std::max(1e-9, Since(start_));
+    p.frames_per_second = static_cast<double>(result.frames.size()) / std::max(1e-9, SecondsSince(start_));
     p.last = &result.frames.back();
     progress_(p);
   }

@@ -20,13 +20,6 @@
 namespace artex {
 namespace {
 
-std::string ToString(double x) {
-  std::ostringstream s;
-  s.precision(9);
-  s << x;
-  return s.str();
-}
-
 // ------------------------------------------------------------------------------------------
 // OBJ parsing helpers.
 
@@ -124,7 +117,7 @@ void ConvertLbsWeights(const std::vector<Joint>& joints, const VertexJointWeight
                        Eigen::VectorXd* lbs_weight, Eigen::VectorXd* slerp_tau) {
   if (!(options.min_weight >= 0.0 && options.min_weight < 1.0)) {
     throw Error("LbsConversionOptions.min_weight: expected a value in [0, 1), found " +
-                ToString(options.min_weight));
+                ErrorNumber(options.min_weight));
   }
   const int num_joints = static_cast<int>(joints.size());
   const int n = static_cast<int>(weights.size());
@@ -142,7 +135,7 @@ void ConvertLbsWeights(const std::vector<Joint>& joints, const VertexJointWeight
       }
       if (!std::isfinite(jw.weight) || jw.weight < 0.0) {
         throw Error("skin weights of vertex " + std::to_string(v) +
-                    ": expected finite non-negative weights, found " + ToString(jw.weight));
+                    ": expected finite non-negative weights, found " + ErrorNumber(jw.weight));
       }
       if (w[jw.joint] == 0.0 && jw.weight > 0.0) used.push_back(jw.joint);
       w[jw.joint] += jw.weight;
@@ -456,7 +449,7 @@ Template ImportMakeHuman(const std::string& folder, const MakeHumanImportOptions
   namespace fs = std::filesystem;
   if (!(options.unit_to_metres > 0.0) || !std::isfinite(options.unit_to_metres)) {
     throw Error("MakeHumanImportOptions.unit_to_metres: expected a positive number, found " +
-                ToString(options.unit_to_metres));
+                ErrorNumber(options.unit_to_metres));
   }
   if (!fs::is_directory(folder)) throw Error(folder + ": no such folder");
   const std::string obj_path = (fs::path(folder) / options.obj_file).string();
@@ -655,7 +648,7 @@ Template ImportMakeHuman(const std::string& folder, const MakeHumanImportOptions
                     std::to_string(obj.positions.size()) + " vertices");
       }
       if (!std::isfinite(w) || w < 0.0) {
-        throw Error(weights_path + ": weights." + it.key() + ": invalid weight " + ToString(w));
+        throw Error(weights_path + ": weights." + it.key() + ": invalid weight " + ErrorNumber(w));
       }
       const int v = template_of_obj[index];
       if (v < 0 || w == 0.0) continue;  // helper geometry

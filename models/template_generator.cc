@@ -20,13 +20,12 @@
 #include <tbb/parallel_for.h>
 
 #include "models/error.h"
+#include "models/numeric.h"
 
 namespace artex {
 namespace {
 
 using Vec3 = Eigen::Vector3d;
-constexpr double kInf = std::numeric_limits<double>::infinity();
-constexpr double kPi = 3.14159265358979323846;
 // Lengths of SkinningBands are given for this stature and scaled with the height.
 constexpr double kReferenceStature = 1.75;
 // Lower bound of the loft field's ratio to the true distance (its cross-section distance is an

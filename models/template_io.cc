@@ -55,13 +55,6 @@ constexpr uint32_t kChunkBin = 0x004E4942;      // "BIN\0"
   throw Error(where + ": " + what);
 }
 
-std::string ToString(double x) {
-  std::ostringstream s;
-  s.precision(9);
-  s << x;
-  return s.str();
-}
-
 // ------------------------------------------------------------------------------------------
 // Writing.
 
@@ -473,7 +466,7 @@ tinygltf::Model BuildModel(const Template& tmpl, const std::vector<Pose>& poses,
   if (!poses.empty()) {
     if (!(frame_rate > 0.0) || !std::isfinite(frame_rate)) {
       throw Error("frame_rate: expected a positive finite rate (Hz), found " +
-                  ToString(frame_rate));
+                  ErrorNumber(frame_rate));
     }
     const int num_frames = static_cast<int>(poses.size());
     for (int f = 0; f < num_frames; ++f) {
@@ -485,7 +478,7 @@ tinygltf::Model BuildModel(const Template& tmpl, const std::vector<Pose>& poses,
       }
       if (!pose.AllFinite()) throw Error(what + ": found a non-finite entry");
       if (!(pose.scale > 0.0)) throw Error(what + ": expected a positive scale, found " +
-                                           ToString(pose.scale));
+                                           ErrorNumber(pose.scale));
     }
     std::vector<float> times(num_frames);
     for (int f = 0; f < num_frames; ++f) times[f] = static_cast<float>(f / frame_rate);
@@ -859,7 +852,7 @@ int ToIndex(double value, int lo, int hi, const std::string& what, size_t vertex
   if (rounded != value || rounded < lo || rounded > hi) {
     Fail(path, what + ": vertex " + std::to_string(vertex) + ": expected an integer in [" +
                    std::to_string(lo) + ", " + std::to_string(hi) + "], found " +
-                   ToString(value));
+                   ErrorNumber(value));
   }
   return static_cast<int>(rounded);
 }
@@ -1030,7 +1023,7 @@ std::vector<int> ReadIndices(const tinygltf::Model& model, const tinygltf::Primi
     for (size_t i = 0; i < values.count; ++i) {
       const double x = values.values[i];
       if (!(x >= 0.0 && x < static_cast<double>(num_vertices))) {
-        Fail(path, what + " indices: entry " + std::to_string(i) + " = " + ToString(x) +
+        Fail(path, what + " indices: entry " + std::to_string(i) + " = " + ErrorNumber(x) +
                        " outside [0, " + std::to_string(num_vertices) + ")");
       }
       indices.push_back(static_cast<int>(x));
@@ -1072,7 +1065,7 @@ std::vector<std::vector<JointWeight>> ReadSkinWeights(const tinygltf::Model& mod
         const double w = weights.at(v, c);
         if (w < 0.0) {
           Fail(path, what + " attribute " + weights_name + ": vertex " + std::to_string(v) +
-                         " has a negative weight " + ToString(w));
+                         " has a negative weight " + ErrorNumber(w));
         }
         sums[v] += w;
         if (w == 0.0) continue;
@@ -1085,7 +1078,7 @@ std::vector<std::vector<JointWeight>> ReadSkinWeights(const tinygltf::Model& mod
   for (size_t v = 0; v < count; ++v) {
     if (std::abs(sums[v] - 1.0) > tolerance) {
       Fail(path, what + ": skin weights (WEIGHTS_n) of vertex " + std::to_string(v) +
-                     " sum to " + ToString(sums[v]) + ", expected 1");
+                     " sum to " + ErrorNumber(sums[v]) + ", expected 1");
     }
   }
   return out;
@@ -1246,11 +1239,11 @@ Template ParseArtexTemplate(const tinygltf::Model& model, const std::string& pat
     const double w = lbs.values[i], t = tau.values[i];
     if (w < -tol || w > 1.0 + tol) {
       Fail(path, what + " attribute " + kLbsAttribute + ": vertex " + std::to_string(i) +
-                     ": expected a weight in [0, 1], found " + ToString(w));
+                     ": expected a weight in [0, 1], found " + ErrorNumber(w));
     }
     if (t < -tol || t > 1.0 + tol) {
       Fail(path, what + " attribute " + kTauAttribute + ": vertex " + std::to_string(i) +
-                     ": expected a value in [0, 1], found " + ToString(t));
+                     ": expected a value in [0, 1], found " + ErrorNumber(t));
     }
     tmpl.lbs_weight[v] = std::clamp(w, 0.0, 1.0);
     tmpl.slerp_tau[v] = std::clamp(t, 0.0, 1.0);

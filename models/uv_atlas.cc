@@ -18,14 +18,13 @@
 #include <Eigen/SparseLU>
 
 #include "models/error.h"
+#include "models/numeric.h"
 
 namespace artex {
 namespace {
 
 using Vec2 = Eigen::Vector2d;
 using Vec3 = Eigen::Vector3d;
-constexpr double kInf = std::numeric_limits<double>::infinity();
-constexpr double kPi = 3.14159265358979323846;
 
 double Cross2(const Vec2& a, const Vec2& b, const Vec2& c) {
   return (b.x() - a.x()) * (c.y() - a.y()) - (b.y() - a.y()) * (c.x() - a.x());

@@ -10,12 +10,12 @@
 
 #include "models/error.h"
 #include "models/file_context.h"
+#include "models/numeric.h"
 #include "sensors/yaml_checks.h"
 
 namespace artex {
 namespace {
 
-constexpr double kDegToRad = M_PI / 180.0;
 // Bones shorter than this (BVH units or metres) have no usable direction.
 constexpr double kMinBoneLength = 1e-9;
 

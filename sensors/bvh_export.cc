@@ -9,11 +9,11 @@
 
 #include "models/error.h"
 #include "models/mesh_export.h"
+#include "models/numeric.h"
 
 namespace artex {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 
 int AxisIndex(char c) { return c - 'X'; }
 

@@ -8,12 +8,12 @@
 #include <sstream>
 
 #include "models/error.h"
+#include "models/numeric.h"
 #include "models/so3.h"
 
 namespace artex {
 namespace {
 
-constexpr double kDegToRad = M_PI / 180.0;
 
 // The default joint names in index order (models/template_generator.h).
 constexpr int kNumMotionJoints = 17;

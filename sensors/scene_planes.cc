@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "models/error.h"
+#include "models/numeric.h"
 #include "sensors/scene_segmentation.h"
 #include "sensors/scene_segmentation_internal.h"
 
@@ -17,7 +18,6 @@ namespace {
 
 using scene_internal::CheckDepth;
 
-constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
 
 double Quantile(std::vector<double>* values, double q) {
   if (values->empty()) return 0.0;

@@ -15,11 +15,11 @@
 #include <vector>
 
 #include "models/error.h"
+#include "models/numeric.h"
 
 namespace artex {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 
 // Pattern geometry relative to body landmarks (fractions of the measured extents); these
 // define the look of the garments, not tunable physics.

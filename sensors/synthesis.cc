@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "models/error.h"
+#include "models/numeric.h"
 #include "models/tsan_annotations.h"
 #include "models/skinning.h"
 #include "models/template_io.h"
@@ -20,8 +21,6 @@
 namespace artex {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDegToRad = kPi / 180.0;
 
 using option_text::Fail;
 using option_text::Str;

@@ -15,6 +15,7 @@
 
 #include "models/error.h"
 #include "models/normals.h"
+#include "models/numeric.h"
 #include "models/skinning.h"
 #include "models/template_io.h"
 #include "render/rasterizer.h"
@@ -24,8 +25,6 @@
 namespace artex {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDegToRad = kPi / 180.0;
 
 using synth_random::kStreamBackgroundDepth;
 using synth_random::kStreamColor;

@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "models/error.h"
+#include "models/numeric.h"
 #include "sensors/option_text.h"
 #include "sensors/synth_random.h"
 
@@ -17,8 +18,6 @@ using synth_random::Hash01;
 using synth_random::kStreamBoxes;
 using synth_random::kStreamScene;
 
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDegToRad = kPi / 180.0;
 constexpr int kMaxBoxes = 32;
 
 double Frac(double x) { return x - std::floor(x); }

@@ -1,4 +1,5 @@
 #include "solvers/ceres_lm.h"
+#include "models/numeric.h"
 
 #include <chrono>
 #include <cmath>
@@ -9,10 +10,6 @@
 namespace artex {
 
 namespace {
-
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 // All terms stacked into one residual block over the P-dim tangent offset.
 class StackedCostFunction : public ceres::CostFunction {

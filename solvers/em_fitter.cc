@@ -9,6 +9,7 @@
 #include "energies/pose_smoothness_term.h"
 #include "models/error.h"
 #include "models/normals.h"
+#include "models/numeric.h"
 #include "solvers/fit_vertex_subset.h"
 
 namespace artex {
@@ -16,10 +17,6 @@ namespace artex {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double SecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
 // sqrt(w) (s - s_ref): holds the global scale near its estimate (ScaleMode::kEstimateThenPrior).
 class ScalePriorTerm : public FittingTerm {
  public:

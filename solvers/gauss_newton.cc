@@ -1,4 +1,5 @@
 #include "solvers/gauss_newton.h"
+#include "models/numeric.h"
 
 #include <chrono>
 #include <cmath>
@@ -8,9 +9,6 @@
 namespace artex {
 
 namespace {
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 }  // namespace
 
 GaussNewtonSolver::GaussNewtonSolver(const FitSolverOptions& options) : options_(options) {}

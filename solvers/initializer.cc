@@ -10,6 +10,7 @@
 
 #include "models/error.h"
 #include "models/normals.h"
+#include "models/numeric.h"
 #include "models/so3.h"
 
 namespace artex {
@@ -17,11 +18,6 @@ namespace artex {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double SecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
-constexpr double kDegToRad = M_PI / 180.0;
-
 int FindJoint(const Template& model, const char* name) {
   for (int j = 0; j < model.num_joints(); ++j) {
     if (model.joints[j].name == name) return j;

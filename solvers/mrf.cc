@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "models/error.h"
+#include "models/numeric.h"
 #include "solvers/alpha_beta_swap.h"
 #include "solvers/alpha_expansion.h"
 #include "solvers/icm.h"
@@ -15,7 +16,6 @@
 namespace artex {
 namespace {
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
 
 std::int64_t NowNs() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(

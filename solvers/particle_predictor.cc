@@ -4,6 +4,7 @@
 #include <chrono>
 #include <random>
 
+#include "models/numeric.h"
 #include "models/so3.h"
 
 namespace artex {
@@ -11,10 +12,6 @@ namespace artex {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double SecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
 // One fit of the frame from `guess` (FitCandidate: at most max_iterations EM iterations, 0: the
 // whole tracking schedule), discarded from the fitter: the fitted pose, its data-term
 // information and its quality (of a fit that passed the robustness checks).

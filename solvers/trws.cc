@@ -1,4 +1,5 @@
 #include "solvers/trws.h"
+#include "models/numeric.h"
 
 #include <algorithm>
 #include <cmath>
@@ -8,7 +9,6 @@
 namespace artex {
 namespace {
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
 
 // Message storage: for edge e = (s, t), the message into s (K_s values) then into t (K_t).
 struct Messages {

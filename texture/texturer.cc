@@ -12,14 +12,12 @@
 #include <sstream>
 
 #include "models/error.h"
+#include "models/numeric.h"
 #include "render/rasterizer.h"
 #include "sensors/subject_texture.h"
 
 namespace artex {
 namespace {
-double SecondsSince(std::chrono::steady_clock::time_point t) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
-}
 }  // namespace
 
 bool TexturingOptions::IsValid(std::string* error) const {

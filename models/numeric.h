@@ -1,0 +1,19 @@
+// Numeric constants and the elapsed-time helper shared by artex's sources: one definition each
+// (the sanitizer tiers compile several sources of a library as one, where copies would clash).
+#pragma once
+
+#include <chrono>
+#include <limits>
+
+namespace artex {
+
+inline constexpr double kPi = 3.14159265358979323846;
+inline constexpr double kDegToRad = kPi / 180.0;
+inline constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// Seconds of steady-clock time since `start`.
+inline double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+}  // namespace artex
