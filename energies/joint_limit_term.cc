@@ -61,7 +61,6 @@ constexpr AnatomicalEntry kAnatomical[] = {
     {"l_wrist", {-90, -90, -90}, {90, 90, 90}},
 };
 
-
 }  // namespace
 
 bool AnatomicalJointBox(const std::string& joint_name, JointBox* box) {

@@ -12,8 +12,8 @@
 #include "experiments/surface_error.h"
 #include "models/error.h"
 #include "models/mesh_export.h"
-#include "models/numeric.h"
 #include "models/normals.h"
+#include "models/numeric.h"
 #include "solvers/particle_predictor.h"
 
 namespace artex {

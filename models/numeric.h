@@ -3,6 +3,7 @@
 #pragma once
 
 #include <chrono>
+#include <cmath>
 #include <limits>
 
 namespace artex {
@@ -10,6 +11,9 @@ namespace artex {
 inline constexpr double kPi = 3.14159265358979323846;
 inline constexpr double kDegToRad = kPi / 180.0;
 inline constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// The fractional part of x, in [0, 1) (x - floor(x)).
+inline double Frac(double x) { return x - std::floor(x); }
 
 // Seconds of steady-clock time since `start`.
 inline double SecondsSince(std::chrono::steady_clock::time_point start) {

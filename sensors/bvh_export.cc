@@ -14,7 +14,6 @@
 namespace artex {
 namespace {
 
-
 int AxisIndex(char c) { return c - 'X'; }
 
 // Angles (rad) a with R = Rot(axis0, a0) Rot(axis1, a1) Rot(axis2, a2), the solution of the

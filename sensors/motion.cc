@@ -14,7 +14,6 @@
 namespace artex {
 namespace {
 
-
 // The default joint names in index order (models/template_generator.h).
 constexpr int kNumMotionJoints = 17;
 constexpr std::array<const char*, kNumMotionJoints> kJointNames = {

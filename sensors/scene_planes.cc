@@ -18,7 +18,6 @@ namespace {
 
 using scene_internal::CheckDepth;
 
-
 double Quantile(std::vector<double>* values, double q) {
   if (values->empty()) return 0.0;
   const size_t k = static_cast<size_t>(q * static_cast<double>(values->size() - 1));

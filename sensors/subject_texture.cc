@@ -20,7 +20,6 @@
 namespace artex {
 namespace {
 
-
 // Pattern geometry relative to body landmarks (fractions of the measured extents); these
 // define the look of the garments, not tunable physics.
 constexpr double kPanelBottom = 0.50, kPanelTop = 0.85;  // chest panel: waist -> shoulder
@@ -40,7 +39,6 @@ uint64_t SplitMix(uint64_t x) {
 double Hash01(uint64_t a, uint64_t b, uint64_t c) {
   return (SplitMix(SplitMix(SplitMix(a) ^ b) ^ c) >> 11) * (1.0 / 9007199254740992.0);
 }
-double Frac(double x) { return x - std::floor(x); }
 
 enum class Part { kShirt, kSleeve, kForearm, kHand, kHead, kNeck, kTrousers, kFoot };
 

@@ -21,7 +21,6 @@
 namespace artex {
 namespace {
 
-
 using option_text::Fail;
 using option_text::Str;
 

@@ -25,7 +25,6 @@
 namespace artex {
 namespace {
 
-
 using synth_random::kStreamBackgroundDepth;
 using synth_random::kStreamColor;
 using synth_random::kStreamColorWalk;

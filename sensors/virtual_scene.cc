@@ -20,8 +20,6 @@ using synth_random::kStreamScene;
 
 constexpr int kMaxBoxes = 32;
 
-double Frac(double x) { return x - std::floor(x); }
-
 using option_text::Fail;
 using option_text::Str;
 

@@ -1,11 +1,12 @@
 #include "solvers/ceres_lm.h"
-#include "models/numeric.h"
 
 #include <chrono>
 #include <cmath>
 #include <mutex>
 
 #include <ceres/ceres.h>
+
+#include "models/numeric.h"
 
 namespace artex {
 

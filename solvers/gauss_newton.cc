@@ -1,15 +1,13 @@
 #include "solvers/gauss_newton.h"
-#include "models/numeric.h"
 
 #include <chrono>
 #include <cmath>
 
 #include <Eigen/Cholesky>
 
-namespace artex {
+#include "models/numeric.h"
 
-namespace {
-}  // namespace
+namespace artex {
 
 GaussNewtonSolver::GaussNewtonSolver(const FitSolverOptions& options) : options_(options) {}
 

@@ -16,7 +16,6 @@
 namespace artex {
 namespace {
 
-
 std::int64_t NowNs() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
              std::chrono::steady_clock::now().time_since_epoch())

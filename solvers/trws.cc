@@ -1,14 +1,14 @@
 #include "solvers/trws.h"
-#include "models/numeric.h"
 
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
 
+#include "models/numeric.h"
+
 namespace artex {
 namespace {
-
 
 // Message storage: for edge e = (s, t), the message into s (K_s values) then into t (K_t).
 struct Messages {

@@ -17,8 +17,6 @@
 #include "sensors/subject_texture.h"
 
 namespace artex {
-namespace {
-}  // namespace
 
 bool TexturingOptions::IsValid(std::string* error) const {
   if (!selection.IsValid(error) || !mrf.IsValid(error) || !pool.IsValid(error) ||

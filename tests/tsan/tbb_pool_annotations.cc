@@ -22,9 +22,8 @@
 #include <oneapi/tbb/detail/_task.h>
 
 #include <atomic>
-#include <cstdint>
-
 #include <cstddef>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 
