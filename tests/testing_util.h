@@ -10,8 +10,11 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
 #include <sstream>
 #include <string>
+#include <system_error>
+#include <vector>
 
 #include "models/template.h"
 #include "models/template_generator.h"
@@ -19,12 +22,41 @@
 namespace artex {
 namespace testing_util {
 
+// The folders FreshTempDir made, removed when the process (a test suite or a benchmark) ends
+// normally. They are kept when it crashed, and when ARTEX_KEEP_TEST_DIRS is set (for a look at
+// what a failing test left). Only the process that made them removes them (a forked child
+// that exits normally would otherwise remove its parent's folders).
+class TempDirCleanup {
+ public:
+  ~TempDirCleanup() {
+    if (::getpid() != owner_ || std::getenv("ARTEX_KEEP_TEST_DIRS") != nullptr) return;
+    std::error_code ignored;
+    for (const auto& dir : dirs_) std::filesystem::remove_all(dir, ignored);
+  }
+
+  void Add(const std::filesystem::path& dir) {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    dirs_.push_back(dir);
+  }
+
+ private:
+  pid_t owner_ = ::getpid();
+  std::mutex mutex_;
+  std::vector<std::filesystem::path> dirs_;
+};
+
+inline TempDirCleanup& TempDirs() {
+  static TempDirCleanup cleanup;
+  return cleanup;
+}
+
 // The empty folder artex_<name>_<pid> in the system's temporary directory (removed first when
-// a previous run left it).
+// a previous run left it; removed again when the test process ends, see TempDirCleanup).
 inline std::filesystem::path FreshTempDir(const std::string& name) {
   namespace fs = std::filesystem;
   const fs::path dir =
       fs::temp_directory_path() / ("artex_" + name + "_" + std::to_string(::getpid()));
+  TempDirs().Add(dir);
   fs::remove_all(dir);
   fs::create_directories(dir);
   return dir;

@@ -7,7 +7,6 @@
 // condition: a 30-frame walk with default noise and a subject shaped unlike the template, tracked
 // with the built-in defaults (texturing off): upright, mean vertex error <= 20 mm, no lost frame.
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -29,6 +28,7 @@
 #include "sensors/sequence.h"
 #include "sensors/synth_conditions.h"
 #include "sensors/virtual_kinect.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
@@ -100,13 +100,7 @@ double SeenSurfaceErrorMm(const Eigen::MatrixX3d& truth, const PinholeCamera& ca
 class ConditionsTrackingTest : public ::testing::TestWithParam<Condition> {
  protected:
   static fs::path Root() {
-    static const fs::path root = [] {
-      const fs::path r =
-          fs::temp_directory_path() / ("artex_conditions_" + std::to_string(::getpid()));
-      fs::remove_all(r);
-      fs::create_directories(r);
-      return r;
-    }();
+    static const fs::path root = testing_util::FreshTempDir("conditions");
     return root;
   }
 };
