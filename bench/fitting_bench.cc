@@ -306,6 +306,7 @@ BENCHMARK(BM_TrackBudget)
     ->Args({2000, 35})
     ->Args({1500, 25})
     ->Args({1500, 35})
+    ->Args({1000, 25})
     ->Args({1000, 35});
 
 void BM_TrackCeresLm(benchmark::State& state) { RunSequence(state, CeresOptions(), false); }

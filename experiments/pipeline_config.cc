@@ -265,8 +265,9 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
                "parameter_tolerance", "normalize_data_term", "tikhonov", "temporal",
                "smoothness", "joint_limits", "scale_mode", "scale_estimation_frames",
                "scale_max_radius", "scale_prior_weight", "icp_first_frame",
-               "constant_velocity_prediction", "max_fit_vertices", "min_scan_points",
-               "max_mean_motion", "max_scale_change", "ceres_max_iterations", "solver_threads",
+               "constant_velocity_prediction", "max_fit_vertices", "tracking_max_fit_vertices",
+               "min_scan_points", "max_mean_motion", "max_scale_change", "ceres_max_iterations",
+               "solver_threads",
                "candidate_margin", "normal_refresh_iterations", "tracking_tikhonov",
                "fit_vertex_selection", "scale_estimator", "scale_sample_max_distance",
                "scale_sample_min_pair_fraction", "icp_init", "init", "quality", "prediction",
@@ -333,6 +334,7 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   c.Get("icp_first_frame", &o->icp_first_frame);
   BindPrediction(c, &o->prediction);
   c.Get("max_fit_vertices", &o->max_fit_vertices);
+  c.Get("tracking_max_fit_vertices", &o->tracking_max_fit_vertices);
   c.Get("min_scan_points", &o->min_scan_points);
   c.Get("max_mean_motion", &o->max_mean_motion);
   c.Get("max_scale_change", &o->max_scale_change);

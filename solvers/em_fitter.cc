@@ -145,6 +145,9 @@ bool EMFitterOptions::IsValid(std::string* error) const {
         << normal_refresh_iterations;
   } else if (max_fit_vertices < 0) {
     msg << "max_fit_vertices: expected >= 0 (0: all), found " << max_fit_vertices;
+  } else if (tracking_max_fit_vertices < 0) {
+    msg << "tracking_max_fit_vertices: expected >= 0 (0: max_fit_vertices), found "
+        << tracking_max_fit_vertices;
   } else if (min_scan_points < 0) {
     msg << "min_scan_points: expected >= 0, found " << min_scan_points;
   } else if (!(max_mean_motion > 0.0) || !(max_scale_change > 0.0)) {
@@ -208,36 +211,16 @@ EMFitter::EMFitter(const Template& tmpl, const EMFitterOptions& options) : optio
     throw Error("fitting options: joint_limits." + error);
   }
   skinning_ = std::make_unique<Skinning>(tmpl);
-  fit_skinning_ = skinning_.get();
-  const int v = tmpl.num_vertices();
-  if (options.max_fit_vertices > 0 && v > options.max_fit_vertices) {
-    if (options.fit_vertex_selection == FitVertexSelection::kStride) {
-      const int stride = (v + options.max_fit_vertices - 1) / options.max_fit_vertices;
-      for (int i = 0; i < v; i += stride) fit_vertices_.push_back(i);
-    } else {
-      fit_vertices_ = VoxelVertexSubset(tmpl.vertices, options.max_fit_vertices);
-    }
-    // Skinning constants are per vertex, so the subset skins exactly like the full template.
-    Template subset;
-    const int n = static_cast<int>(fit_vertices_.size());
-    subset.vertices.resize(n, 3);
-    subset.vertex_joint.resize(n);
-    subset.lbs_weight.resize(n);
-    subset.slerp_tau.resize(n);
-    for (int i = 0; i < n; ++i) {
-      subset.vertices.row(i) = tmpl.vertices.row(fit_vertices_[i]);
-      subset.vertex_joint[i] = tmpl.vertex_joint[fit_vertices_[i]];
-      subset.lbs_weight[i] = tmpl.lbs_weight[fit_vertices_[i]];
-      subset.slerp_tau[i] = tmpl.slerp_tau[fit_vertices_[i]];
-    }
-    subset.triangles.resize(1, 3);
-    subset.triangles << 0, std::min(1, n - 1), std::min(2, n - 1);  // unused placeholder
-    subset.joints = tmpl.joints;
-    subset_skinning_ = std::make_unique<Skinning>(subset);
-    fit_skinning_ = subset_skinning_.get();
-  } else {
-    for (int i = 0; i < v; ++i) fit_vertices_.push_back(i);
+  subsets_[0] = MakeFitSubset(tmpl, options.max_fit_vertices);
+  int tracking = options.tracking_max_fit_vertices;
+  if (options.max_fit_vertices > 0 && (tracking == 0 || tracking > options.max_fit_vertices)) {
+    tracking = options.max_fit_vertices;
   }
+  if (tracking != options.max_fit_vertices && tracking < tmpl.num_vertices()) {
+    subsets_[1] = MakeFitSubset(tmpl, tracking);
+  }
+  fit_skinning_ = subsets_[0].skinning ? subsets_[0].skinning.get() : skinning_.get();
+  fit_vertices_ = &subsets_[0].vertices;
   solver_ = FitSolver::Create(options.solver);
   predictor_ = PosePredictor::Create(options.prediction);
   initial_pose_ = Pose::Identity(tmpl.num_joints());
@@ -245,6 +228,39 @@ EMFitter::EMFitter(const Template& tmpl, const EMFitterOptions& options) : optio
 }
 
 EMFitter::~EMFitter() = default;
+
+EMFitter::FitSubset EMFitter::MakeFitSubset(const Template& tmpl, int max_vertices) const {
+  FitSubset result;
+  const int v = tmpl.num_vertices();
+  if (max_vertices <= 0 || v <= max_vertices) {
+    for (int i = 0; i < v; ++i) result.vertices.push_back(i);
+    return result;
+  }
+  if (options_.fit_vertex_selection == FitVertexSelection::kStride) {
+    const int stride = (v + max_vertices - 1) / max_vertices;
+    for (int i = 0; i < v; i += stride) result.vertices.push_back(i);
+  } else {
+    result.vertices = VoxelVertexSubset(tmpl.vertices, max_vertices);
+  }
+  Template subset;
+  const int n = static_cast<int>(result.vertices.size());
+  subset.vertices.resize(n, 3);
+  subset.vertex_joint.resize(n);
+  subset.lbs_weight.resize(n);
+  subset.slerp_tau.resize(n);
+  for (int i = 0; i < n; ++i) {
+    const int t = result.vertices[i];
+    subset.vertices.row(i) = tmpl.vertices.row(t);
+    subset.vertex_joint[i] = tmpl.vertex_joint[t];
+    subset.lbs_weight[i] = tmpl.lbs_weight[t];
+    subset.slerp_tau[i] = tmpl.slerp_tau[t];
+  }
+  subset.triangles.resize(1, 3);
+  subset.triangles << 0, std::min(1, n - 1), std::min(2, n - 1);  // unused placeholder
+  subset.joints = tmpl.joints;
+  result.skinning = std::make_unique<Skinning>(subset);
+  return result;
+}
 
 void EMFitter::SetInitialPose(const Pose& pose) {
   if (pose.num_joints() != skinning_->model().num_joints() || !pose.AllFinite()) {
@@ -275,12 +291,13 @@ void EMFitter::SetRestShape(const Template& shaped) {
   Eigen::MatrixX3d centers(shaped.num_joints(), 3);
   for (int j = 0; j < shaped.num_joints(); ++j) centers.row(j) = shaped.joints[j].center.transpose();
   skinning_->SetRestGeometry(shaped.vertices, centers);
-  if (subset_skinning_) {
-    Eigen::MatrixX3d subset(static_cast<int>(fit_vertices_.size()), 3);
-    for (size_t i = 0; i < fit_vertices_.size(); ++i) {
-      subset.row(static_cast<int>(i)) = shaped.vertices.row(fit_vertices_[i]);
+  for (FitSubset& fit : subsets_) {
+    if (!fit.skinning) continue;
+    Eigen::MatrixX3d subset(static_cast<int>(fit.vertices.size()), 3);
+    for (size_t i = 0; i < fit.vertices.size(); ++i) {
+      subset.row(static_cast<int>(i)) = shaped.vertices.row(fit.vertices[i]);
     }
-    subset_skinning_->SetRestGeometry(subset, centers);
+    fit.skinning->SetRestGeometry(subset, centers);
   }
 }
 
@@ -395,10 +412,14 @@ void EMFitter::BeginFrame(const Scan& scan, const Pose& initial_guess) {
   if (radius_mode) st.radii = st.first_frame ? options_.first_frame_radii : options_.tracking_radii;
   st.iterations_per_stage = st.first_frame ? options_.first_frame_iterations_per_stage
                                            : options_.tracking_iterations_per_stage;
-  if (radius_mode && !next_radii_.empty()) {
+  const bool scheduled = radius_mode && !next_radii_.empty();
+  if (scheduled) {
     st.radii = next_radii_;
     st.iterations_per_stage = next_iterations_per_stage_;
   }
+  const FitSubset& fit = subsets_[!st.first_frame && !scheduled && subsets_[1].skinning ? 1 : 0];
+  fit_skinning_ = fit.skinning ? fit.skinning.get() : skinning_.get();
+  fit_vertices_ = &fit.vertices;
   next_radii_.clear();
   st.max_iterations = st.first_frame ? 2 * options_.max_iterations : options_.max_iterations;
   if (!radius_mode) st.iterations_per_stage = st.max_iterations;
@@ -434,7 +455,8 @@ EMIterationInfo EMFitter::Iterate() {
   const bool refresh_normals = st.normals_pose_stage != st.stage ||
                                (options_.normal_refresh_iterations > 0 &&
                                 st.normals_age + 1 >= options_.normal_refresh_iterations);
-  const int n_fit = static_cast<int>(fit_vertices_.size());
+  const std::vector<int>& fit_vertices = *fit_vertices_;
+  const int n_fit = static_cast<int>(fit_vertices.size());
   if (refresh_normals) {
     if (st.summary.iterations == 0 && st.initial_posed.rows() == model.num_vertices()) {
       st.full_posed = st.initial_posed;  // BeginFrame posed the initial guess, pose_ still is it
@@ -446,8 +468,8 @@ EMIterationInfo EMFitter::Iterate() {
       st.posed.resize(n_fit, 3);
       st.normals.resize(n_fit, 3);
       for (int i = 0; i < n_fit; ++i) {
-        st.posed.row(i) = st.full_posed.row(fit_vertices_[i]);
-        st.normals.row(i) = st.full_normals.row(fit_vertices_[i]);
+        st.posed.row(i) = st.full_posed.row(fit_vertices[i]);
+        st.normals.row(i) = st.full_normals.row(fit_vertices[i]);
       }
     }
     st.normals_pose_stage = st.stage;
@@ -458,7 +480,7 @@ EMIterationInfo EMFitter::Iterate() {
   }
   if (subset && colored) {
     st.colors.resize(n_fit, 3);
-    for (int i = 0; i < n_fit; ++i) st.colors.row(i) = template_colors_.row(fit_vertices_[i]);
+    for (int i = 0; i < n_fit; ++i) st.colors.row(i) = template_colors_.row(fit_vertices[i]);
   }
   st.summary.skinning_seconds += SecondsSince(start);
 

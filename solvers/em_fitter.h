@@ -138,9 +138,15 @@ struct EMFitterOptions {
   // velocity (the default), Kalman filter, or particle (multi-hypothesis, TrackFrame).
   PredictionOptions prediction;
 
-  // Fit on a uniform subset (index stride) of at most this many template vertices (0: all).
+  // Fit on a subset (fit_vertex_selection) of at most this many template vertices (0: all).
   // E-step, Jacobians and normal equations scale with it; normals use the full mesh.
   int max_fit_vertices = 3000;
+  // Tracking frames (the tracking schedule after an accepted pose) fit on a subset of at most
+  // this many (and at most max_fit_vertices; 0: max_fit_vertices alone). First frames, the
+  // initialiser's hypotheses and refits after a gap (SetNextFrameSchedule) keep
+  // max_fit_vertices: on the real recordings the initialisation needs the denser subset, the
+  // tracking does not (docs/realtime.md, "The fitting's work budget").
+  int tracking_max_fit_vertices = 1000;
   FitVertexSelection fit_vertex_selection = FitVertexSelection::kVoxel;
   // Template normals (for n_s . n'_t of eq. 4) are recomputed on the whole posed mesh at the
   // first EM iteration of every stage and, when > 0, every this many iterations (1: every
@@ -215,8 +221,11 @@ class EMFitter {
 
   const EMFitterOptions& options() const { return options_; }
   const Skinning& skinning() const { return *skinning_; }
-  // Template vertex indices the fit uses (all, or the max_fit_vertices subset).
-  const std::vector<int>& fit_vertices() const { return fit_vertices_; }
+  // Template vertex indices the fit uses (all, or the max_fit_vertices subset); tracking: those
+  // of tracking frames (the tracking_max_fit_vertices subset).
+  const std::vector<int>& fit_vertices(bool tracking = false) const {
+    return subsets_[tracking && subsets_[1].skinning ? 1 : 0].vertices;
+  }
 
   // Fits the next frame and returns its summary; pose() is the result (the previous pose when
   // the frame failed). The first frame starts from initial_pose() (rest pose unless set),
@@ -300,11 +309,20 @@ class EMFitter {
   void Commit(const Scan& scan, const Pose& pose, bool scale_was_free,
               const Eigen::MatrixXd& information);
 
+  // The template vertices a frame fits: their indices and, when a proper subset, their own
+  // skinning (skinning constants are per vertex, so the subset skins exactly like the template).
+  struct FitSubset {
+    std::vector<int> vertices;
+    std::unique_ptr<Skinning> skinning;  // null: the whole template (skinning_)
+  };
+  FitSubset MakeFitSubset(const Template& tmpl, int max_vertices) const;
+
   EMFitterOptions options_;
   std::unique_ptr<Skinning> skinning_;
-  std::unique_ptr<Skinning> subset_skinning_;  // the fitted vertex subset (when subsampled)
-  const Skinning* fit_skinning_ = nullptr;     // skinning_ or subset_skinning_
-  std::vector<int> fit_vertices_;              // template indices of the fitted vertices
+  FitSubset subsets_[2];  // [0]: max_fit_vertices; [1]: tracking frames (null skinning: use [0])
+  // The frame's subset (BeginFrame): skinning_ or a subset's, and its template indices.
+  const Skinning* fit_skinning_ = nullptr;
+  const std::vector<int>* fit_vertices_ = nullptr;
   std::unique_ptr<FitSolver> solver_;
   Eigen::MatrixX3d template_colors_;
   Pose initial_pose_;

@@ -83,6 +83,45 @@ TEST_F(FittingTest, GaussNewtonRecoversGroundTruth) {
   EXPECT_EQ(static_cast<int>(summary.trace.size()), summary.iterations);
 }
 
+TEST_F(FittingTest, TrackingFramesFitTheTrackingSubset) {
+  // tracking_max_fit_vertices: first frames fit max_fit_vertices' subset, tracking frames the
+  // smaller one. A fitter with both budgets fits its first frame like a fitter with the large
+  // budget alone and a tracking frame (from the same accepted pose) like one with the small
+  // budget alone, bit for bit; the large budget alone tracks differently.
+  EMFitterOptions both = DefaultOptions(), large = DefaultOptions(), small = DefaultOptions();
+  both.max_fit_vertices = 250;
+  both.tracking_max_fit_vertices = 100;
+  large.max_fit_vertices = 250;
+  large.tracking_max_fit_vertices = 0;  // max_fit_vertices
+  small.max_fit_vertices = 100;
+  small.tracking_max_fit_vertices = 400;  // capped by max_fit_vertices
+  EMFitter a(model_, both), b(model_, large), c(model_, small);
+  EXPECT_EQ(a.fit_vertices(), b.fit_vertices());
+  EXPECT_EQ(a.fit_vertices(true), c.fit_vertices());
+  EXPECT_EQ(c.fit_vertices(true), c.fit_vertices());
+  EXPECT_EQ(b.fit_vertices(true), b.fit_vertices());
+  EXPECT_LE(static_cast<int>(a.fit_vertices(true).size()), 100);
+  EXPECT_GT(a.fit_vertices().size(), a.fit_vertices(true).size());
+
+  a.SetInitialPose(start_);
+  b.SetInitialPose(start_);
+  const FitSummary first_a = a.FitFrame(scan_), first_b = b.FitFrame(scan_);
+  EXPECT_EQ(first_a.iterations, first_b.iterations);
+  EXPECT_TRUE(a.pose().ToVector() == b.pose().ToVector());
+
+  c.AcceptPose(scan_, a.pose());
+  b.Reset();
+  b.AcceptPose(scan_, a.pose());
+  ASSERT_TRUE(a.tracking() && b.tracking() && c.tracking());
+  const FitSummary track_a = a.FitFrame(scan_), track_b = b.FitFrame(scan_),
+                   track_c = c.FitFrame(scan_);
+  EXPECT_TRUE(track_a.ok());
+  EXPECT_EQ(track_a.iterations, track_c.iterations);
+  EXPECT_TRUE(a.pose().ToVector() == c.pose().ToVector());
+  EXPECT_FALSE(a.pose().ToVector() == b.pose().ToVector());
+  EXPECT_LT(MeanVertexError(skinning_, a.pose(), truth_), 0.01);
+}
+
 TEST_F(FittingTest, CandidateListsDoNotChangeTheFit) {
   // The E-step's per-frame candidate lists are exact: the same EM trajectory as a kd-tree
   // search per E-step, on a first frame and on a tracking frame.
