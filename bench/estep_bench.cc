@@ -1,8 +1,9 @@
 // The parts of one EM iteration of the tracking fit, separately (bench/fitting_bench.cc times
-// whole frames). Fixture as fitting_bench's: the default template (resolution 1) with its
-// 3000 fitted vertices (EMFitterOptions().max_fit_vertices), posed by a random pose (joints
-// ~0.25 rad), and a front scan of that surface of ~20k points with 4 mm noise along the ray;
-// the E-step sees the template posed ~1 cm off (another random pose about the first).
+// whole frames). Fixture as fitting_bench's: the default template (resolution 1) with the
+// 2000 fitted vertices of a tracking frame (EMFitterOptions().tracking_max_fit_vertices),
+// posed by a random pose (joints ~0.25 rad), and a front scan of that surface of ~20k points
+// with 4 mm noise along the ray; the E-step sees the template posed ~1 cm off (another random
+// pose about the first).
 //   BM_EStepVoxelCloud:  EStep construction + the voxel-subsampled cloud of the first tracking
 //                        radius (a Compute with no template vertices builds only the cloud)
 //   BM_EStepFirst:       EStep construction + the first E-step at that radius: cloud, candidate
@@ -61,7 +62,7 @@ Fixture& GetFixture() {
     f->estep = options.estep;
     f->radius = options.tracking_radii.front();
     const EMFitter fitter(f->model, options);
-    const std::vector<int>& fit = fitter.fit_vertices();
+    const std::vector<int>& fit = fitter.fit_vertices(true);  // a tracking frame's subset
     const int n = static_cast<int>(fit.size());
     f->subset.vertices.resize(n, 3);
     f->subset.vertex_joint.resize(n);

@@ -18,8 +18,11 @@
 // machine), wall_ratio / cpu_ratio to the default of the same kind, EM iterations, E-/M-step
 // ms, kd-tree queries and scan candidates visited per frame, error_mm (mean per-vertex error
 // against the true pose, i.e. including tangential sliding), and for the dense variant the mean
-// per-vertex difference to the default fit (mm). With ARTEX_BENCH_DUMP_POSES set, BM_Track*
-// print every tracked pose parameter as hexadecimal floats to stderr.
+// per-vertex difference to the default fit (mm). BM_Track* split cpu_ms: scale_cpu_ms per
+// tracking frame that still samples the scale (the first scale_estimation_frames accepted
+// frames: a similarity ICP each; scale_frames of the 11), steady_cpu_ms per frame after (the
+// cost of a long sequence). With ARTEX_BENCH_DUMP_POSES set, BM_Track* print every tracked
+// pose parameter as hexadecimal floats to stderr.
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
 
@@ -137,6 +140,10 @@ struct Totals {
   double iterations = 0.0, estep = 0.0, mstep = 0.0, queries = 0.0, visited = 0.0;
   double error = 0.0, max_error = 0.0, first_error = 0.0;
   int frames = 0;
+  // Process CPU (s) and frames of the tracking frames that still sample the scale
+  // (scale_estimation_frames, a similarity ICP each) and of those after.
+  double scale_cpu = 0.0, steady_cpu = 0.0;
+  int scale_frames = 0, steady_frames = 0;
 
   void Add(const FitSummary& s) {
     iterations += s.iterations;
@@ -171,6 +178,13 @@ void Report(benchmark::State& state, const Totals& totals, double cpu_seconds, d
   state.counters["error_mm"] = 1e3 * totals.error / frames;
   if (totals.max_error > 0.0) state.counters["max_error_mm"] = 1e3 * totals.max_error;
   if (totals.first_error > 0.0) state.counters["first_frame_error_mm"] = 1e3 * totals.first_error;
+  if (totals.scale_frames > 0) {
+    state.counters["scale_cpu_ms"] = 1e3 * totals.scale_cpu / totals.scale_frames;
+    state.counters["scale_frames"] = totals.scale_frames / state.iterations();
+  }
+  if (totals.steady_frames > 0) {
+    state.counters["steady_cpu_ms"] = 1e3 * totals.steady_cpu / totals.steady_frames;
+  }
   state.counters["template_vertices"] = f.model.num_vertices();
   state.SetLabel(f.template_name);
 }
@@ -232,7 +246,12 @@ void RunSequence(benchmark::State& state, EMFitterOptions options, bool is_defau
     const double cpu_start = ProcessCpuSeconds();
     const auto wall_start = std::chrono::steady_clock::now();
     for (int frame = 1; frame < kSequenceFrames; ++frame) {
+      const bool sampling_scale = fitter.ScaleIsFree();
+      const double frame_cpu_start = ProcessCpuSeconds();
       const FitSummary s = TrackFrame(&fitter, f.sequence_scans[frame]);
+      const double frame_cpu = ProcessCpuSeconds() - frame_cpu_start;
+      (sampling_scale ? totals.scale_cpu : totals.steady_cpu) += frame_cpu;
+      ++(sampling_scale ? totals.scale_frames : totals.steady_frames);
       totals.Add(s);
       const double error =
           testing_util::MeanVertexError(*f.skinning, fitter.pose(), f.sequence_truth[frame]);
@@ -286,14 +305,15 @@ BENCHMARK(BM_TrackCandidateMargin)
     ->Arg(10)
     ->Arg(15);
 
-// The default with another work budget: at most state.range(0) fitted template vertices and
-// a scan voxel cell of state.range(1) % of the radius. The candidate gathers, weighing and
-// skinning scale with the fitted vertices, the candidates per vertex with the cube of the
-// voxel cell; configs/experiments/fit_budget.yaml measures the accuracy of each on the
-// virtual Kinect.
+// The default with another work budget: at most state.range(0) fitted template vertices (in
+// every frame, first and tracking) and a scan voxel cell of state.range(1) % of the radius.
+// The candidate gathers, weighing and skinning scale with the fitted vertices, the candidates
+// per vertex with the cube of the voxel cell; configs/experiments/fit_budget.yaml measures
+// the accuracy of each on the virtual Kinect.
 void BM_TrackBudget(benchmark::State& state) {
   EMFitterOptions options;
   options.max_fit_vertices = static_cast<int>(state.range(0));
+  options.tracking_max_fit_vertices = 0;  // the same budget in every frame
   options.estep.voxel_fraction = 0.01 * static_cast<double>(state.range(1));
   RunSequence(state, options, false);
 }

@@ -270,9 +270,10 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
                "solver_threads",
                "candidate_margin", "normal_refresh_iterations", "tracking_tikhonov",
                "fit_vertex_selection", "scale_estimator", "scale_sample_max_distance",
-               "scale_sample_min_pair_fraction", "icp_init", "init", "quality", "prediction",
-               "kalman", "particle", "temporal_prior_on_prediction", "silhouette",
-               "unobserved_joints", "upright", "out_of_view"});
+               "scale_sample_min_pair_fraction", "scale_sample_max_scan_points", "icp_init",
+               "init", "quality", "prediction", "kalman", "particle",
+               "temporal_prior_on_prediction", "silhouette", "unobserved_joints", "upright",
+               "out_of_view"});
   c.GetEnum("correspondence", CorrespondenceModelNames(), &o->correspondence);
   c.GetEnum("solver", FitSolverTypeNames(), &o->solver.type);
   c.GetEnum("estep",
@@ -347,6 +348,7 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   c.GetEnum("scale_estimator", ScaleEstimatorNames(), &o->scale_estimator);
   c.Get("scale_sample_max_distance", &o->scale_sample_max_distance);
   c.Get("scale_sample_min_pair_fraction", &o->scale_sample_min_pair_fraction);
+  c.Get("scale_sample_max_scan_points", &o->scale_sample_max_scan_points);
   BindIcpInit(c.Section("icp_init"), &o->icp);
 }
 

@@ -145,6 +145,9 @@ bool EMFitterOptions::IsValid(std::string* error) const {
         << normal_refresh_iterations;
   } else if (max_fit_vertices < 0) {
     msg << "max_fit_vertices: expected >= 0 (0: all), found " << max_fit_vertices;
+  } else if (scale_sample_max_scan_points != 0 && scale_sample_max_scan_points < 3) {
+    msg << "scale_sample_max_scan_points: expected 0 (icp_init.max_scan_points) or >= 3, found "
+        << scale_sample_max_scan_points;
   } else if (tracking_max_fit_vertices < 0) {
     msg << "tracking_max_fit_vertices: expected >= 0 (0: max_fit_vertices), found "
         << tracking_max_fit_vertices;
@@ -688,6 +691,9 @@ void EMFitter::Commit(const Scan& scan, const Pose& pose, bool scale_was_free,
         icp.coarse_alignment = false;
         icp.estimate_scale = true;
         icp.max_distance = options_.scale_sample_max_distance;
+        if (options_.scale_sample_max_scan_points > 0) {
+          icp.max_scan_points = options_.scale_sample_max_scan_points;
+        }
         const IcpInitResult aligned = AlignByIcp(*skinning_, pose, scan, icp);
         sample = aligned.pose.AllFinite() &&
                  aligned.num_pairs >= std::min(options_.min_scan_points, aligned.num_samples) &&

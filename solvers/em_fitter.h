@@ -127,6 +127,9 @@ struct EMFitterOptions {
   // kIcp: a frame whose fitted template explains (pairs within scale_sample_max_distance) fewer
   // than this fraction of the scan is no scale sample (the scale stays being estimated).
   double scale_sample_min_pair_fraction = 0.7;
+  // kIcp: the scale sample's ICP pairs a fixed-stride subsample of at most this many scan
+  // points (0: icp.max_scan_points, the first frame's pre-alignment budget).
+  int scale_sample_max_scan_points = 1500;
   // Radius E-step: the scale is held during stages with a radius above this (m); at wide radii
   // mu_t lies inside curved surfaces (chord means), which biases a free scale downwards.
   double scale_max_radius = 0.05;
@@ -146,7 +149,7 @@ struct EMFitterOptions {
   // initialiser's hypotheses and refits after a gap (SetNextFrameSchedule) keep
   // max_fit_vertices: on the real recordings the initialisation needs the denser subset, the
   // tracking does not (docs/realtime.md, "The fitting's work budget").
-  int tracking_max_fit_vertices = 1000;
+  int tracking_max_fit_vertices = 2000;
   FitVertexSelection fit_vertex_selection = FitVertexSelection::kVoxel;
   // Template normals (for n_s . n'_t of eq. 4) are recomputed on the whole posed mesh at the
   // first EM iteration of every stage and, when > 0, every this many iterations (1: every

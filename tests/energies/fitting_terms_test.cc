@@ -445,7 +445,9 @@ TEST_F(FittingTermsTest, UnobservedJointsArePulledTowardsTheReference) {
   for (int i = 0; i < p_; ++i) {
     const bool listed = i >= JointParameterIndex(1) && i < JointParameterIndex(1) + 3;
     const bool listed3 = i >= JointParameterIndex(3) && i < JointParameterIndex(3) + 3;
-    if (!listed && !listed3) EXPECT_EQ(r[i], 0.0) << i;
+    if (!listed && !listed3) {
+      EXPECT_EQ(r[i], 0.0) << i;
+    }
   }
   EXPECT_GT(r.segment<3>(JointParameterIndex(1)).norm(), 0.0);
   UnobservedJointOptions o;

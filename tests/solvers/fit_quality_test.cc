@@ -154,7 +154,9 @@ TEST(FitQualityTest, ALegRaisedIntoEmptySpaceIsAnUnsupportedPart) {
   const int l_hip = f.tmpl.FindJoint("l_hip");
   const int l_ankle = f.tmpl.FindJoint("l_ankle");
   for (Eigen::Index v = 0; v < parts.size(); ++v) {
-    if (f.tmpl.vertex_joint[v] == l_ankle) EXPECT_EQ(parts[v], -1);  // part_ignore: the feet
+    if (f.tmpl.vertex_joint[v] == l_ankle) {
+      EXPECT_EQ(parts[v], -1);  // part_ignore: the feet
+    }
   }
   const auto quality = [&](const Pose& pose, int frame) {
     Eigen::MatrixX3d posed;
