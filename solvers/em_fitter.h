@@ -148,7 +148,7 @@ struct EMFitterOptions {
   // this many (and at most max_fit_vertices; 0: max_fit_vertices alone). First frames, the
   // initialiser's hypotheses and refits after a gap (SetNextFrameSchedule) keep
   // max_fit_vertices: on the real recordings the initialisation needs the denser subset, the
-  // tracking does not (docs/realtime.md, "The fitting's work budget").
+  // tracking does not (docs/realtime.md, "Tracking frames on a smaller subset").
   int tracking_max_fit_vertices = 2000;
   FitVertexSelection fit_vertex_selection = FitVertexSelection::kVoxel;
   // Template normals (for n_s . n'_t of eq. 4) are recomputed on the whole posed mesh at the

@@ -37,6 +37,10 @@ class PoseEncoder {
 
  private:
   friend class PoseDecoder;
+  // Rotation vectors (global and per joint) whose quantised angle exceeds pi get their largest
+  // component rounded towards zero until it does not (the sender's twist branch).
+  void KeepRotationsWithinPi(std::vector<int32_t>* q) const;
+
   int num_joints_;
   PoseCodecOptions options_;
   std::vector<int32_t> previous_, before_;  // quantised values of the last two frames

@@ -548,6 +548,14 @@ TEST(FitOptionsTest, InvalidOptionsThrow) {
   options = EMFitterOptions();
   options.estep.candidate_margin = std::nan("");
   EXPECT_THROW(EMFitter(model, options), Error);
+  options = EMFitterOptions();
+  options.tracking_max_fit_vertices = -1;
+  EXPECT_THROW(EMFitter(model, options), Error);
+  options = EMFitterOptions();
+  options.scale_sample_max_scan_points = 2;  // 0 (icp_init's) or >= 3
+  EXPECT_THROW(EMFitter(model, options), Error);
+  options.scale_sample_max_scan_points = 0;
+  EXPECT_NO_THROW(EMFitter(model, options));
   FitSolverOptions solver;
   solver.num_threads = 0;
   EXPECT_THROW(FitSolver::Create(solver), Error);

@@ -87,7 +87,8 @@ inline SynthOptions SmallSequenceOptions(int frames) {
 }
 
 // A sequence synthesised from `options` into root/sequence and the coarse tracking template
-// (CoarseTemplate()) in root/template.glb, root = FreshTempDir(name); removed with the object.
+// (CoarseTemplate()) in root/template.glb, root = FreshTempDir(name); removed with the object
+// (kept with ARTEX_KEEP_TEST_DIRS, as FreshTempDir's folders).
 class SequenceFixture {
  public:
   SequenceFixture(const std::string& name, const SynthOptions& options)
@@ -98,6 +99,7 @@ class SequenceFixture {
     WriteTemplateGlb(template_path, CoarseTemplate());
   }
   ~SequenceFixture() {
+    if (std::getenv("ARTEX_KEEP_TEST_DIRS") != nullptr) return;
     std::error_code ec;
     std::filesystem::remove_all(root, ec);
   }

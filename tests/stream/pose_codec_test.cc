@@ -8,6 +8,7 @@
 #include <random>
 
 #include "models/error.h"
+#include "models/numeric.h"
 #include "models/so3.h"
 #include "stream/bit_io.h"
 
@@ -89,6 +90,40 @@ TEST(PoseCodecTest, RoundTripWithinHalfAStep) {
   const double bits_per_parameter = 8.0 * delta_bytes / (87.0 * (7 + 3 * joints));
   std::printf("delta frames: %.2f bits per parameter\n", bits_per_parameter);
   EXPECT_LT(bits_per_parameter, 6.0);
+}
+
+TEST(PoseCodecTest, RotationsNearPiKeepTheirAxis) {
+  // An ankle twisted by just under 180 degrees (a tracked pose seen in a test run): rounding
+  // each component to the nearest step made the angle exceed pi, and the decoded rotation
+  // vector pointed the other way (the same rotation, the other skinning twist branch). The
+  // decoded vector must point the sender's way, within a step and a half of it.
+  const int joints = 1;
+  PoseCodecOptions o;
+  PoseEncoder enc(joints, o);
+  PoseDecoder dec(joints, o);
+  Pose pose = Pose::Identity(joints);
+  const Eigen::Vector3d axis = Eigen::Vector3d(-0.17356, 0.71109, -3.05513).normalized();
+  int flipped_without = 0;
+  for (int k = 1; k <= 200; ++k) {  // k = 0, exactly pi, is ambiguous for the sender too
+    const double angle = kPi - 1e-7 * k;
+    const Eigen::Vector3d r = angle * axis;
+    pose.joint_rotations[0] = ExpSO3(r);
+    const Eigen::Vector3d logged = pose.ToVector().segment<3>(JointParameterIndex(0));
+    // What plain rounding gives: angle above pi for some k.
+    Eigen::Vector3d rounded;
+    for (int d = 0; d < 3; ++d) {
+      rounded[d] = o.rotation_step * std::round(logged[d] / o.rotation_step);
+    }
+    flipped_without += rounded.norm() > kPi;
+    const std::vector<uint8_t> bytes = enc.Encode(pose, true);
+    Pose decoded;
+    std::string why;
+    ASSERT_TRUE(dec.Decode(bytes.data(), bytes.size(), true, &decoded, &why)) << why;
+    const Eigen::Vector3d b = decoded.ToVector().segment<3>(JointParameterIndex(0));
+    EXPECT_GT(b.dot(logged), 0.0) << "k " << k << ": the decoded axis flipped";
+    EXPECT_LE((b - logged).cwiseAbs().maxCoeff(), 1.5 * o.rotation_step) << "k " << k;
+  }
+  EXPECT_GT(flipped_without, 0);  // the case the encoder guards against occurs here
 }
 
 TEST(PoseCodecTest, DeltaNeedsAKeyframe) {
