@@ -7,6 +7,7 @@
 #include <string>
 
 #include "models/error.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
@@ -14,10 +15,7 @@ namespace {
 namespace fs = std::filesystem;
 
 std::string TempFolder(const std::string& name) {
-  const fs::path p = fs::path(::testing::TempDir()) / ("artex_calibration_test_" + name);
-  fs::remove_all(p);
-  fs::create_directories(p);
-  return p.string();
+  return testing_util::FreshTempDir("calibration_test_" + name).string();
 }
 
 Calibration MakeRig() {

@@ -12,6 +12,7 @@
 
 #include "models/error.h"
 #include "tests/error_of.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
@@ -19,10 +20,7 @@ namespace {
 namespace fs = std::filesystem;
 
 std::string Folder(const std::string& name) {
-  const fs::path p = fs::path(::testing::TempDir()) / ("artex_frame_source_test_" + name);
-  fs::remove_all(p);
-  fs::create_directories(p);
-  return p.string();
+  return testing_util::FreshTempDir("frame_source_test_" + name).string();
 }
 
 Calibration SmallCalibration() {

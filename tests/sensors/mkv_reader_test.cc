@@ -14,6 +14,7 @@
 #include "sensors/frame_source.h"
 #include "sensors/sequence.h"
 #include "tests/error_of.h"
+#include "tests/testing_util.h"
 
 extern "C" {
 #include <libavcodec/avcodec.h>
@@ -119,10 +120,7 @@ void WriteMkv(const std::string& path, bool with_depth) {
 }
 
 std::string Folder(const std::string& name) {
-  const fs::path p = fs::path(::testing::TempDir()) / ("artex_mkv_test_" + name);
-  fs::remove_all(p);
-  fs::create_directories(p);
-  return p.string();
+  return testing_util::FreshTempDir("mkv_test_" + name).string();
 }
 
 Calibration SmallCalibration() {

@@ -11,6 +11,7 @@
 
 #include "models/error.h"
 #include "models/so3.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
@@ -22,10 +23,7 @@ constexpr int kFrames = 3;
 constexpr int kBackground = 4;
 
 std::string TempFolder(const std::string& name) {
-  const fs::path p = fs::path(::testing::TempDir()) / ("artex_sequence_test_" + name);
-  fs::remove_all(p);
-  fs::create_directories(p);
-  return p.string();
+  return testing_util::FreshTempDir("sequence_test_" + name).string();
 }
 
 Calibration SmallRig() {

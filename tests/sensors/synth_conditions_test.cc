@@ -20,6 +20,7 @@
 #include "sensors/sequence.h"
 #include "sensors/virtual_kinect.h"
 #include "tests/sensors/small_synth.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
@@ -35,9 +36,8 @@ SynthOptions SmallOptions() {
 }
 
 fs::path TempDir(const std::string& name) {
-  const fs::path dir =
-      fs::temp_directory_path() / ("artex_sc_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
+  const fs::path dir = testing_util::FreshTempDir("sc_" + name);
+  fs::remove_all(dir);  // absent: the writers create it
   return dir;
 }
 

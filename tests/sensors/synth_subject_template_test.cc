@@ -19,6 +19,7 @@
 #include "sensors/sequence.h"
 #include "sensors/virtual_kinect.h"
 #include "tests/sensors/small_synth.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
@@ -26,11 +27,7 @@ namespace {
 namespace fs = std::filesystem;
 
 fs::path TempDir(const std::string& name) {
-  const fs::path dir =
-      fs::temp_directory_path() / ("artex_subject_tmpl_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
+  return testing_util::FreshTempDir("subject_tmpl_" + name);
 }
 
 SynthOptions SmallOptions() { return testing_util::SmallSynthOptions(3, 0); }

@@ -11,6 +11,7 @@
 
 #include "models/error.h"
 #include "tests/error_of.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
@@ -23,8 +24,7 @@ constexpr int kFrames = 6;
 constexpr double kStart = 1305031102.175304;
 
 std::string TempFolder(const std::string& name) {
-  const fs::path p = fs::path(::testing::TempDir()) / ("artex_tum_test_" + name);
-  fs::remove_all(p);
+  const fs::path p = testing_util::FreshTempDir("tum_test_" + name);
   fs::create_directories(p / "rgb");
   fs::create_directories(p / "depth");
   return p.string();

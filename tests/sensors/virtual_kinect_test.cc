@@ -15,6 +15,7 @@
 #include "models/skinning.h"
 #include "sensors/sequence.h"
 #include "tests/sensors/small_synth.h"
+#include "tests/testing_util.h"
 
 namespace artex {
 namespace {
@@ -24,9 +25,8 @@ namespace fs = std::filesystem;
 SynthOptions SmallOptions() { return testing_util::SmallSynthOptions(3, 2); }
 
 fs::path TempDir(const std::string& name) {
-  const fs::path dir =
-      fs::temp_directory_path() / ("artex_vk_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
+  const fs::path dir = testing_util::FreshTempDir("vk_" + name);
+  fs::remove_all(dir);  // absent: the writers create it
   return dir;
 }
 
