@@ -65,6 +65,11 @@ struct PipelineOptions {
   double lost_threshold_mm = 50.0;  // a frame is lost when its mean vertex error exceeds this
   // Texture doubtful frames too (lost frames never are).
   bool texture_doubtful_frames = true;
+  // A frame is textured only when it comes this many frames or more after the last textured
+  // one (by the recording's frame numbers; 1: every good or doubtful frame). The others pass
+  // with their pose and the texture as it stands: the atlas of a 30 Hz recording changes
+  // little from one frame to the next (docs/realtime.md, "Texturing every n-th frame").
+  int texture_every = 1;
   ReinitialiseOn reinitialise_on = ReinitialiseOn::kAuto;
   // kAuto: every doubtful frame is re-initialised too while a re-initialisation replaced the
   // tracked fit in at least `wins` of the last `window` tracked frames. In a recording that
@@ -118,6 +123,7 @@ struct FrameRecord {
   int gap_frames = 0;            // frames not processed since the previous processed one
   bool gap_refit = false;        // fitted by RefitFromPose after such a gap
   bool texture_skipped = false;  // live: not textured, a newer frame was waiting
+  bool texture_not_due = false;  // not textured: too soon after the last (pipeline.texture_every)
   double init_seconds = 0.0;
   std::string init_report;       // the initialisation's hypotheses and choice
   SegmentationStats segmentation;  // foreground segmentation (no background frames)

@@ -438,7 +438,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.CheckKeys({"texture", "colour_term", "first_frame", "max_frames", "export_meshes",
                "export_foreground", "export_glb", "glb_exact", "glb_exact_max_frames", "export_bvh",
                "export_textured_mesh", "mesh_up_axis", "lost_threshold_mm",
-               "texture_doubtful_frames", "reinitialise_on", "reinitialise_after_doubtful",
+               "texture_doubtful_frames", "texture_every", "reinitialise_on", "reinitialise_after_doubtful",
                "reinitialise_auto_wins", "reinitialise_auto_window", "gap_refit_frames",
                "gap_refit_radii", "gap_refit_iterations_per_stage",
                "texture_quality_every", "texture_quality_yaws_deg", "texture_quality_height",
@@ -458,6 +458,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.GetEnum("mesh_up_axis", UpAxisNames(), &o->mesh_up_axis);
   c.Get("lost_threshold_mm", &o->lost_threshold_mm);
   c.Get("texture_doubtful_frames", &o->texture_doubtful_frames);
+  c.Get("texture_every", &o->texture_every);
   c.GetEnum("reinitialise_on", ReinitialiseOnNames(), &o->reinitialise_on);
   c.Get("reinitialise_after_doubtful", &o->reinitialise_after_doubtful);
   c.Get("reinitialise_auto_wins", &o->reinitialise_auto_wins);
@@ -568,6 +569,8 @@ bool PipelineOptions::IsValid(std::string* error) const {
     msg << "pipeline.lost_threshold_mm: expected > 0, found " << lost_threshold_mm;
   else if (glb_exact_max_frames < 0)
     msg << "pipeline.glb_exact_max_frames: expected >= 0, found " << glb_exact_max_frames;
+  else if (texture_every < 1)
+    msg << "pipeline.texture_every: expected >= 1, found " << texture_every;
   else if (texture_quality_every < 0)
     msg << "pipeline.texture_quality_every: expected >= 0, found " << texture_quality_every;
   if (msg.str().empty()) return true;

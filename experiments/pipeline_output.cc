@@ -64,7 +64,7 @@ void WriteFramesCsv(const std::string& path, const PipelineResult& result) {
                 "seam_edges,changed_triangles,seam_rms_before,seam_rms_after,"
                 "mean_vertex_error_mm,max_vertex_error_mm,mean_joint_error_mm,novel_view_psnr_db,"
                 "novel_view_ssim,texture_coverage,silhouette_violations,unobserved_joints,unsupported_parts,"
-                "out_of_view_joints,gap_frames,gap_refit,texture_skipped\n";
+                "out_of_view_joints,gap_frames,gap_refit,texture_skipped,texture_not_due\n";
   for (const FrameRecord& r : result.frames) {
     frames_csv << r.frame << "," << r.skipped << "," << r.scan_points << ","
                << r.segmentation.subject_pixels << "," << r.segmentation.tracked << ","
@@ -90,7 +90,8 @@ void WriteFramesCsv(const std::string& path, const PipelineResult& result) {
                << (r.fit.trace.empty() ? 0 : r.fit.trace.back().silhouette_violations) << ","
                << (r.fit.trace.empty() ? 0 : r.fit.trace.back().unobserved_joints) << ","
                << r.quality.unsupported_parts << "," << r.fit.out_of_view_joints << ","
-               << r.gap_frames << "," << r.gap_refit << "," << r.texture_skipped << "\n";
+               << r.gap_frames << "," << r.gap_refit << "," << r.texture_skipped << ","
+               << r.texture_not_due << "\n";
   }
   WriteFileAtomically(path, frames_csv.str());
 }

@@ -287,6 +287,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
     stats.frames_dropped = dropped;
     stats.frames_texture_skipped = texture_skipped;
   }
+  stats.frames_texture_not_due = texture->frames_not_due;
   stats.wall_seconds = SecondsSince(start);
   const double cpu = CpuSeconds() - cpu_start;
   stats.frames_dropped_after_first = dropped_after_first;
@@ -327,6 +328,7 @@ void WriteRealtimeJson(const std::string& path, const RealtimeStats& s) {
   j["frames_dropped"] = s.frames_dropped;
   j["frames_dropped_after_first"] = s.frames_dropped_after_first;
   j["frames_texture_skipped"] = s.frames_texture_skipped;
+  j["frames_texture_not_due"] = s.frames_texture_not_due;
   j["wall_seconds"] = s.wall_seconds;
   j["frames_per_second"] = s.frames_per_second;
   j["steady_frames_per_second"] = s.steady_frames_per_second;

@@ -289,7 +289,14 @@ bool TextureStage::Process(FrameWork* work, Eigen::MatrixX3d* colours) {
   FrameRecord& record = work->record;
   bool changed = false;
   if (options_.stream_estimate) stream_bytes += sizeof(float) * work->pose.num_parameters();
+  if (texturer_ && work->texture_frame && last_textured_ >= 0 &&
+      i - last_textured_ < options_.texture_every) {
+    work->texture_frame = false;  // not due yet: the texture stays as it is
+    record.texture_not_due = true;
+    ++frames_not_due;
+  }
   if (texturer_ && work->texture_frame) {
+    last_textured_ = i;
     record.texture = texturer_->AddFrame(i, work->frame.color, calibration_.color, work->posed);
     texture_seconds += record.texture.seconds_total;
     if (options_.stream_estimate) stream_bytes += TextureUpdateBytes(*texturer_);

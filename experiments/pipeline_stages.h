@@ -129,6 +129,7 @@ class TextureStage {
 
   double texture_seconds = 0.0;
   std::size_t stream_bytes = 0;  // pose + texture updates
+  int frames_not_due = 0;        // left untextured by pipeline.texture_every
 
  private:
   const PipelineOptions& options_;
@@ -137,6 +138,7 @@ class TextureStage {
   FrameSinks* sinks_;
   bool evaluate_texture_;
   int begin_, end_;
+  int last_textured_ = -1;  // frame number of the last textured frame (-1: none yet)
 };
 
 // What the output stage needs of the ground truth (absent: subject == nullptr).

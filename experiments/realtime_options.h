@@ -65,6 +65,7 @@ struct RealtimeStats {
   int frames_dropped = 0;        // live only
   int frames_dropped_after_first = 0;  // live: dropped after the first frame was textured
   int frames_texture_skipped = 0;  // live: processed but not textured (live_texture_skip)
+  int frames_texture_not_due = 0;  // not textured: too soon after the last (texture_every)
   double wall_seconds = 0.0;     // first read to last output
   double frames_per_second = 0.0;         // processed / wall_seconds
   double steady_frames_per_second = 0.0;  // after the first frame (its initialisation apart)

@@ -232,12 +232,14 @@ void RegisterTrackCommand(CLI::App* app) {
     }
     const RealtimeStats& rt = result.realtime;
     std::printf(
-        "%s%s: %d frames processed, %d dropped (%d after the first textured), %d not textured; "
+        "%s%s: %d frames processed, %d dropped (%d after the first textured), %d not textured "
+        "(%d by texture_every); "
         "%.1f frames/s (%.1f after the first frame), latency median %.0f ms, p95 %.0f ms, "
         "CPU %.0f%%\n",
         rt.concurrency == PipelineConcurrency::kPipelined ? "pipelined" : "sequential",
         rt.live ? " live" : "", rt.frames_processed, rt.frames_dropped,
-        rt.frames_dropped_after_first, rt.frames_texture_skipped, rt.frames_per_second,
+        rt.frames_dropped_after_first, rt.frames_texture_skipped + rt.frames_texture_not_due,
+        rt.frames_texture_not_due, rt.frames_per_second,
         rt.steady_frames_per_second, rt.latency_median_ms, rt.latency_p95_ms,
         100.0 * rt.cpu_utilisation);
     std::printf("results in %s\n", args->out.c_str());

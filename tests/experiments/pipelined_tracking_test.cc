@@ -178,6 +178,30 @@ TEST(PipelinedTrackingTest, SameAsSequentialWithLostFrames) {
             ReadFileBytes(TestData().root / "lost_pip" / "poses.csv"));
 }
 
+TEST(PipelinedTrackingTest, TexturesEveryNthFrameWithTextureEvery) {
+  // Every frame good or doubtful (none lost): frames 0, 2, 4 are textured, 1, 3, 5 are not due.
+  Config config = BaseConfig();
+  config.Set("pipeline.texture_every", "2");
+  ExpectSameRuns(config, "every2");
+  const PipelineResult run = RunWith(config, "pipelined", "every2_check");
+  ASSERT_EQ(run.frames.size(), static_cast<size_t>(kFrames));
+  int pooled = 0;
+  for (const FrameRecord& f : run.frames) {
+    ASSERT_NE(f.quality.label, FitQualityLabel::kLost) << f.frame;
+    const bool due = f.frame % 2 == 0;
+    EXPECT_EQ(f.texture_not_due, !due) << f.frame;
+    EXPECT_EQ(f.texture.image_added, due) << f.frame;
+    pooled += f.texture.image_added;
+    if (due) EXPECT_EQ(f.texture.pool_size, pooled) << f.frame;
+  }
+  EXPECT_EQ(run.realtime.frames_texture_not_due, kFrames / 2);
+  // The texture of every 2nd frame is not that of every frame.
+  const PipelineResult every = RunWith(BaseConfig(), "pipelined", "every1_check");
+  EXPECT_NE(ReadFileBytes(TestData().root / "every1_check" / "texture.png"),
+            ReadFileBytes(TestData().root / "every2_check" / "texture.png"));
+  EXPECT_EQ(every.realtime.frames_texture_not_due, 0);
+}
+
 TEST(PipelinedTrackingTest, LiveModeAccountsForEveryFrame) {
   // A clock far faster than tracking: frames are dropped, never queued without bound.
   Config config = BaseConfig();
@@ -254,8 +278,9 @@ TEST(PipelinedTrackingTest, FramesAfterAGapAreRefitted) {
     std::getline(csv, header);
     std::getline(csv, first);
     std::getline(csv, second);
-    EXPECT_NE(header.find(",gap_frames,gap_refit,texture_skipped"), std::string::npos);
-    EXPECT_EQ(second.substr(second.size() - 6), refitted ? ",3,1,0" : ",3,0,0") << second;
+    EXPECT_NE(header.find(",gap_frames,gap_refit,texture_skipped,texture_not_due"),
+              std::string::npos);
+    EXPECT_EQ(second.substr(second.size() - 8), refitted ? ",3,1,0,0" : ",3,0,0,0") << second;
   }
 }
 
@@ -266,6 +291,7 @@ TEST(PipelinedTrackingTest, RejectsInvalidOptions) {
                                                         {"pipeline.live_rate_hz", "-1"},
                                                         {"pipeline.colour_delay_frames", "-1"},
                                                         {"pipeline.gap_refit_frames", "-1"},
+                                                        {"pipeline.texture_every", "0"},
                                                         {"pipeline.gap_refit_radii", "[0.05, 0]"},
                                                         {"pipeline.gap_refit_iterations_per_stage", "0"}}) {
     Config config = BaseConfig();
