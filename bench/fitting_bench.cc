@@ -11,7 +11,8 @@
 //   BM_FitQuality: EvaluateFitQuality of the fitted (posed) template on that frame.
 // Variants side by side: truncated-radius E-step + Gauss-Newton (default options), the same
 // with other E-step candidate margins (BM_TrackCandidateMargin/<mm>) and work budgets
-// (BM_TrackBudget/<fitted vertices>/<voxel %>), Ceres LM backend, dense
+// (BM_TrackBudget/<fitted vertices>/<voxel %>), a cloud and gather per tracking radius or one
+// per frame (BM_TrackSharedCloud/<0|1>), Ceres LM backend, dense
 // exact E-step (single frame only: it takes seconds per EM iteration). For one core run under
 // `taskset -c 0` (oneTBB follows the affinity mask).
 // Counters: cpu_ms (process CPU per frame, all threads; wall times are unreliable on a shared
@@ -328,6 +329,15 @@ BENCHMARK(BM_TrackBudget)
     ->Args({1500, 35})
     ->Args({1000, 25})
     ->Args({1000, 35});
+
+// A voxel cloud and a candidate gather per tracking radius (the previous default,
+// fitting.tracking_shared_cloud false) against one of each per tracking frame.
+void BM_TrackSharedCloud(benchmark::State& state) {
+  EMFitterOptions options;
+  options.tracking_shared_cloud = state.range(0) != 0;
+  RunSequence(state, options, false);
+}
+BENCHMARK(BM_TrackSharedCloud)->Unit(benchmark::kMillisecond)->UseManualTime()->Arg(0)->Arg(1);
 
 void BM_TrackCeresLm(benchmark::State& state) { RunSequence(state, CeresOptions(), false); }
 BENCHMARK(BM_TrackCeresLm)->Unit(benchmark::kMillisecond)->UseManualTime();

@@ -266,6 +266,7 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
                "smoothness", "joint_limits", "scale_mode", "scale_estimation_frames",
                "scale_max_radius", "scale_prior_weight", "icp_first_frame",
                "constant_velocity_prediction", "max_fit_vertices", "tracking_max_fit_vertices",
+               "tracking_shared_cloud",
                "min_scan_points", "max_mean_motion", "max_scale_change", "ceres_max_iterations",
                "solver_threads", "candidate_margin", "normal_refresh_iterations",
                "tracking_tikhonov",
@@ -336,6 +337,7 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   BindPrediction(c, &o->prediction);
   c.Get("max_fit_vertices", &o->max_fit_vertices);
   c.Get("tracking_max_fit_vertices", &o->tracking_max_fit_vertices);
+  c.Get("tracking_shared_cloud", &o->tracking_shared_cloud);
   c.Get("min_scan_points", &o->min_scan_points);
   c.Get("max_mean_motion", &o->max_mean_motion);
   c.Get("max_scale_change", &o->max_scale_change);

@@ -390,9 +390,6 @@ void EMFitter::BeginFrame(const Scan& scan, const Pose& initial_guess) {
     st.done = true;
     return;
   }
-  const auto estep_start = Clock::now();
-  st.estep = std::make_unique<EStep>(scan, options_.estep);
-  st.summary.estep_seconds += SecondsSince(estep_start);
   const auto skin_start = Clock::now();
   skinning_->Apply(initial_guess, &st.initial_posed);
   st.summary.skinning_seconds += SecondsSince(skin_start);
@@ -420,7 +417,18 @@ void EMFitter::BeginFrame(const Scan& scan, const Pose& initial_guess) {
     st.radii = next_radii_;
     st.iterations_per_stage = next_iterations_per_stage_;
   }
-  const FitSubset& fit = subsets_[!st.first_frame && !scheduled && subsets_[1].skinning ? 1 : 0];
+  const bool tracking = !st.first_frame && !scheduled;
+  const FitSubset& fit = subsets_[tracking && subsets_[1].skinning ? 1 : 0];
+  // Tracking frames: one cloud and one gather for every tracking radius.
+  EStepOptions estep_options = options_.estep;
+  if (tracking && radius_mode && options_.tracking_shared_cloud && !st.radii.empty()) {
+    const double widest = *std::max_element(st.radii.begin(), st.radii.end());
+    estep_options.voxel_cell = widest * estep_options.voxel_fraction;
+    estep_options.list_radius = widest;
+  }
+  const auto estep_start = Clock::now();
+  st.estep = std::make_unique<EStep>(scan, estep_options);
+  st.summary.estep_seconds += SecondsSince(estep_start);
   fit_skinning_ = fit.skinning ? fit.skinning.get() : skinning_.get();
   fit_vertices_ = &fit.vertices;
   next_radii_.clear();

@@ -50,6 +50,12 @@ bool EStepOptions::IsValid(std::string* error) const {
     msg << "voxel_fraction: expected a value in [0, 1], found " << voxel_fraction;
   } else if (!(std::isfinite(candidate_margin) && candidate_margin >= 0.0)) {
     msg << "candidate_margin: expected a finite value >= 0 (m), found " << candidate_margin;
+  } else if (!(std::isfinite(voxel_cell) && voxel_cell >= 0.0)) {
+    msg << "voxel_cell: expected a finite value >= 0 (m; 0: radius * voxel_fraction), found "
+        << voxel_cell;
+  } else if (!(std::isfinite(list_radius) && list_radius >= 0.0)) {
+    msg << "list_radius: expected a finite value >= 0 (m; 0: lists per radius), found "
+        << list_radius;
   } else if (kdtree_leaf_size < 1) {
     msg << "kdtree_leaf_size: expected >= 1, found " << kdtree_leaf_size;
   } else if (grain_size < 1) {
@@ -374,7 +380,7 @@ struct EStep::Candidates {
     bool valid = false;
     std::vector<double> anchor;  // 3 per vertex: its position when gathered
     std::vector<int> offset;     // per vertex of the block, + 1
-    IndexBuffer index;           // cloud indices within radius + margin of the anchor
+    IndexBuffer index;           // cloud indices within gather radius + margin of the anchor
   };
   int t_count = -1;
   std::vector<Block> blocks;
@@ -408,10 +414,21 @@ const EStep::Cloud& EStep::FullCloud() const {
 
 EStep::~EStep() = default;
 
-const EStep::Cloud& EStep::CloudForRadius(double radius) {
-  const double cell = radius * options_.voxel_fraction;
-  if (options_.mode != EStepMode::kRadius || !(cell > 0.0)) return FullCloud();
-  auto it = subsampled_.find(cell);
+double EStep::GatherRadius(double radius) const {
+  return options_.list_radius >= radius ? options_.list_radius : radius;
+}
+
+const EStep::Cloud& EStep::CloudForRadius(double radius, double gather_radius,
+                                          std::pair<double, double>* cloud_key) {
+  double cell = radius * options_.voxel_fraction;
+  if (options_.voxel_cell > 0.0 && cell > 0.0) cell = options_.voxel_cell;
+  if (options_.mode != EStepMode::kRadius || !(cell > 0.0)) {
+    if (cloud_key) *cloud_key = {0.0, gather_radius};
+    return FullCloud();
+  }
+  const std::pair<double, double> key(cell, gather_radius);
+  if (cloud_key) *cloud_key = key;
+  auto it = subsampled_.find(key);
   if (it != subsampled_.end()) return *it->second;
   // Voxel grid: mean position, summed then normalised normal, mean valid colour, count. Cells
   // are numbered in Morton (Z-curve) order of their grid coordinates, so that cells close in
@@ -459,9 +476,9 @@ const EStep::Cloud& EStep::CloudForRadius(double radius) {
     if (has_color && color_count[c] > 0.0) cloud->colors.row(c) /= color_count[c];
   }
   if (options_.candidate_margin > 0.0) {
-    // Candidate lists: gathers within radius + margin on a grid of that cell size. The cells
-    // are reordered by grid cell (stable: Morton order within a cell).
-    const double grid = radius + options_.candidate_margin;
+    // Candidate lists: gathers within gather_radius + margin on a grid of that cell size. The
+    // cells are reordered by grid cell (stable: Morton order within a cell).
+    const double grid = gather_radius + options_.candidate_margin;
     const double inv_grid = 1.0 / grid;
     std::vector<std::pair<uint64_t, int>> by_cell(m);
     for (int c = 0; c < m; ++c) {
@@ -506,7 +523,7 @@ const EStep::Cloud& EStep::CloudForRadius(double radius) {
   }
   cloud->Pack();
   const Cloud& result = *cloud;
-  subsampled_.emplace(cell, std::move(cloud));
+  subsampled_.emplace(key, std::move(cloud));
   return result;
 }
 
@@ -523,7 +540,9 @@ void EStep::Compute(const PosedTemplateView& posed, double radius, Correspondenc
     throw Error(msg.str());
   }
   ResizeTargets(t_count, targets);
-  const Cloud& cloud = CloudForRadius(radius);
+  const double gather = GatherRadius(radius);
+  std::pair<double, double> cloud_key;
+  const Cloud& cloud = CloudForRadius(radius, gather, &cloud_key);
   const int m = static_cast<int>(cloud.points.rows());
   if (m == 0 || t_count == 0) return;
   const OneToManyOptions& w = options_.weights;
@@ -537,7 +556,7 @@ void EStep::Compute(const PosedTemplateView& posed, double radius, Correspondenc
   Candidates* candidates = nullptr;
   const double margin = options_.candidate_margin;
   if (!knn && margin > 0.0) {
-    std::unique_ptr<Candidates>& slot = candidates_[radius];
+    std::unique_ptr<Candidates>& slot = candidates_[cloud_key];
     if (!slot) slot = std::make_unique<Candidates>();
     if (slot->t_count != t_count) {
       slot->t_count = t_count;
@@ -578,14 +597,15 @@ void EStep::Compute(const PosedTemplateView& posed, double radius, Correspondenc
       Candidates::Block* block = candidates ? &candidates->blocks[chunk] : nullptr;
       if (block) {
         // Gather again the vertices that left their margin (all, the first time); the others
-        // keep their lists.
+        // keep their lists. Lists of a wider gather radius leave this radius a wider margin.
+        const double keep = gather > radius ? gather + margin - radius : margin;
         bool any = !block->valid;
         std::vector<char> moved(t1 - t0, block->valid ? 0 : 1);
         for (int t = t0; t < t1 && block->valid; ++t) {
           const double* a = block->anchor.data() + 3 * (t - t0);
           const double dx = (*posed.vertices)(t, 0) - a[0], dy = (*posed.vertices)(t, 1) - a[1],
                        dz = (*posed.vertices)(t, 2) - a[2];
-          moved[t - t0] = dx * dx + dy * dy + dz * dz > margin * margin;
+          moved[t - t0] = dx * dx + dy * dy + dz * dz > keep * keep;
           any = any || moved[t - t0];
         }
         if (any) {
@@ -602,9 +622,9 @@ void EStep::Compute(const PosedTemplateView& posed, double radius, Correspondenc
               const Eigen::Vector3d x = posed.vertices->row(t).transpose();
               for (int d = 0; d < 3; ++d) fresh.anchor[3 * i + d] = x[d];
               if (cloud.grid_cell > 0.0) {
-                cloud.GridRadius(x.data(), radius + margin, &fresh.index);
+                cloud.GridRadius(x.data(), gather + margin, &fresh.index);
               } else {
-                cloud.index->Radius(x, radius + margin, &found);
+                cloud.index->Radius(x, gather + margin, &found);
                 for (const auto& entry : found) fresh.index.push_back(entry.first);
               }
               ++queries[chunk];

@@ -40,6 +40,14 @@ struct EStepOptions {
   // (the template moves little within a frame, so that is rare). 0: a kd-tree radius search
   // per vertex and E-step.
   double candidate_margin = 0.01;
+  // kRadius, voxel_fraction > 0: the subsampled scan's cell (m) for every radius, so that one
+  // cloud serves E-steps of several radii (0: radius * voxel_fraction, a cloud per radius).
+  double voxel_cell = 0.0;
+  // kRadius with candidate lists: lists gathered within list_radius + candidate_margin serve
+  // every E-step of a radius up to list_radius (m), so that one gather serves several radii; a
+  // vertex keeps its list while it stays within list_radius + candidate_margin - radius of
+  // where it was gathered. 0 (or a radius above it): lists per radius, as above.
+  double list_radius = 0.0;
   int kdtree_leaf_size = 10;  // nanoflann leaf size
   bool parallel = true;       // TBB over template vertices
   int grain_size = 256;       // template vertices per TBB task
@@ -107,15 +115,21 @@ class EStep {
  private:
   struct Cloud;       // a (possibly subsampled) scan with multiplicities and its kd-tree
   struct Candidates;  // per-radius candidate lists (candidate_margin > 0)
-  const Cloud& CloudForRadius(double radius);
+  // The cloud of E-steps at `radius`, gathered within gather_radius + candidate_margin; *key
+  // (optional) is set to the cloud's key (voxel size, gather radius).
+  const Cloud& CloudForRadius(double radius, double gather_radius,
+                              std::pair<double, double>* key = nullptr);
+  double GatherRadius(double radius) const;  // list_radius when it covers radius, else radius
   const Cloud& FullCloud() const;  // the whole scan; its kd-tree is built on first use
 
   Scan scan_;
   EStepOptions options_;
   std::unique_ptr<Cloud> full_;
   mutable std::once_flag full_index_once_;
-  std::map<double, std::unique_ptr<Cloud>> subsampled_;       // keyed by voxel size
-  std::map<double, std::unique_ptr<Candidates>> candidates_;  // keyed by radius
+  // Keyed by voxel size and gather radius.
+  std::map<std::pair<double, double>, std::unique_ptr<Cloud>> subsampled_;
+  // Keyed by the cloud (its voxel size and gather radius): lists index their cloud's points.
+  std::map<std::pair<double, double>, std::unique_ptr<Candidates>> candidates_;
   long long neighbor_queries_ = 0;
   long long candidates_visited_ = 0;
 };

@@ -192,7 +192,9 @@ TEST(PipelinedTrackingTest, TexturesEveryNthFrameWithTextureEvery) {
     EXPECT_EQ(f.texture_not_due, !due) << f.frame;
     EXPECT_EQ(f.texture.image_added, due) << f.frame;
     pooled += f.texture.image_added;
-    if (due) EXPECT_EQ(f.texture.pool_size, pooled) << f.frame;
+    if (due) {
+      EXPECT_EQ(f.texture.pool_size, pooled) << f.frame;
+    }
   }
   EXPECT_EQ(run.realtime.frames_texture_not_due, kFrames / 2);
   // The texture of every 2nd frame is not that of every frame.

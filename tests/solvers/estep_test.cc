@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <random>
 
 #include "models/error.h"
@@ -212,6 +213,68 @@ TEST(EStepTest, CandidateListsEqualAFreshRadiusSearch) {
   }
 }
 
+TEST(EStepTest, SharedCloudAndListsEqualAFreshSearchOfThatCloud) {
+  // One cloud (voxel_cell) and lists gathered at list_radius serve the narrower radii: the same
+  // targets as a kd-tree search of that cloud per E-step, for moves inside the margin, inside
+  // the wider margin the narrower radius gets (list_radius + margin - radius), and beyond it.
+  // Without voxel_cell every radius has its own cloud, and so its own lists.
+  const PointSets sets = MakePointSets(600, 150, 19);
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> g(0.0, 1.0);
+  for (double cell : {0.02, 0.0}) {
+    for (bool normalize : {false, true}) {
+      for (bool color : {false, true}) {
+        EStepOptions shared_options;
+        shared_options.voxel_fraction = 0.25;
+        shared_options.voxel_cell = cell;
+        shared_options.list_radius = 0.08;
+        shared_options.candidate_margin = 0.02;
+        shared_options.grain_size = 16;
+        shared_options.weights.normalize_per_scan_point = normalize;
+        shared_options.weights.lambda_color = 0.01;
+        EStepOptions fresh_options = shared_options;
+        fresh_options.candidate_margin = 0.0;
+        fresh_options.list_radius = 0.0;
+        EStep shared(sets.scan, shared_options), fresh(sets.scan, fresh_options);
+        PointSets moved = sets;
+        long long queries = 0;
+        for (double step : {0.0, 0.003, 0.015, 0.003, 0.05, 0.003}) {
+          for (int i = 0; i < moved.vertices.size(); ++i)
+            moved.vertices.data()[i] += step * g(rng);
+          for (double radius : {0.08, 0.05, 0.05}) {
+            if (radius < 0.08) {
+              // ~1 cm a move, ~1.5 cm after both: some vertices beyond the margin, none
+              // beyond the 5 cm the narrower radius leaves (0.08 + 0.02 - 0.05).
+              for (int i = 0; i < moved.vertices.size(); ++i)
+                moved.vertices.data()[i] += 0.006 * g(rng);
+            }
+            CorrespondenceTargets a, b;
+            shared.Compute(View(moved, color), radius, &a);
+            fresh.Compute(View(moved, color), radius, &b);
+            ExpectTargetsNear(a, b, 1e-12);
+            EXPECT_EQ(a.num_pairs, b.num_pairs);
+            EXPECT_GT(a.num_pairs, 0);
+            // With one cloud the narrower radius never gathers: the wider one's lists serve it.
+            if (cell > 0.0 && radius < 0.08) {
+              EXPECT_EQ(shared.neighbor_queries(), queries);
+            }
+            queries = shared.neighbor_queries();
+          }
+        }
+      }
+    }
+  }
+  // The shared cloud is not the per-radius one: a radius of 0.05 alone subsamples finer.
+  EStepOptions per_radius;
+  per_radius.candidate_margin = 0.02;
+  EStepOptions one_cell = per_radius;
+  one_cell.voxel_cell = 0.02;
+  CorrespondenceTargets a, b;
+  EStep(sets.scan, per_radius).Compute(View(sets, false), 0.05, &a);
+  EStep(sets.scan, one_cell).Compute(View(sets, false), 0.05, &b);
+  EXPECT_NE(a.num_pairs, b.num_pairs);
+}
+
 TEST(EStepTest, KeyIdentityOfTheMStep) {
   // sum_s sum_t p_st |v_s - x_t|^2 == sum_t P_t |x_t - mu_t|^2 + constant for any x (p fixed).
   const PointSets sets = MakePointSets(200, 80, 14);
@@ -325,6 +388,13 @@ TEST(EStepTest, RejectsBadInput) {
   options.k = 8;
   options.candidate_margin = -0.01;
   EXPECT_THROW(EStep(sets.scan, options), Error);
+  options.candidate_margin = 0.01;
+  options.voxel_cell = -0.01;
+  EXPECT_THROW(EStep(sets.scan, options), Error);
+  options.voxel_cell = 0.0;
+  options.list_radius = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(EStep(sets.scan, options), Error);
+  options.list_radius = 0.0;
   Scan broken = sets.scan;
   broken.normals.resize(3, 3);
   EXPECT_THROW(EStep(broken, EStepOptions()), Error);

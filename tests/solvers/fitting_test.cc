@@ -122,6 +122,41 @@ TEST_F(FittingTest, TrackingFramesFitTheTrackingSubset) {
   EXPECT_LT(MeanVertexError(skinning_, a.pose(), truth_), 0.01);
 }
 
+TEST_F(FittingTest, TrackingFramesShareOneCloudAndGather) {
+  // tracking_shared_cloud: first frames are fitted as without it, bit for bit; a tracking
+  // frame is fitted exactly as with E-step options that give every radius the widest tracking
+  // radius' cloud and lists, gathering once where the per-radius clouds gather per radius.
+  EMFitterOptions shared = DefaultOptions(), per_radius = DefaultOptions();
+  ASSERT_TRUE(shared.tracking_shared_cloud);
+  ASSERT_GT(shared.tracking_radii.size(), 1u);
+  per_radius.tracking_shared_cloud = false;
+  EMFitterOptions explicit_options = per_radius;
+  const double widest = *std::max_element(shared.tracking_radii.begin(),
+                                          shared.tracking_radii.end());
+  explicit_options.estep.voxel_cell = widest * shared.estep.voxel_fraction;
+  explicit_options.estep.list_radius = widest;
+  EMFitter a(model_, shared), b(model_, per_radius), c(model_, explicit_options);
+  a.SetInitialPose(start_);
+  b.SetInitialPose(start_);
+  const FitSummary first_a = a.FitFrame(scan_), first_b = b.FitFrame(scan_);
+  EXPECT_EQ(first_a.iterations, first_b.iterations);
+  EXPECT_TRUE(a.pose().ToVector() == b.pose().ToVector());
+
+  b.Reset();
+  b.AcceptPose(scan_, a.pose());
+  c.AcceptPose(scan_, a.pose());
+  ASSERT_TRUE(a.tracking() && b.tracking() && c.tracking());
+  const FitSummary track_a = a.FitFrame(scan_), track_b = b.FitFrame(scan_),
+                   track_c = c.FitFrame(scan_);
+  EXPECT_TRUE(track_a.ok());
+  EXPECT_EQ(track_a.iterations, track_c.iterations);
+  EXPECT_TRUE(a.pose().ToVector() == c.pose().ToVector());
+  EXPECT_FALSE(a.pose().ToVector() == b.pose().ToVector());
+  EXPECT_LT(track_a.neighbor_queries, track_b.neighbor_queries);
+  EXPECT_LT(MeanVertexError(skinning_, a.pose(), truth_), 0.01);
+  EXPECT_LT(MeanVertexError(skinning_, b.pose(), truth_), 0.01);
+}
+
 TEST_F(FittingTest, CandidateListsDoNotChangeTheFit) {
   // The E-step's per-frame candidate lists are exact: the same EM trajectory as a kd-tree
   // search per E-step, on a first frame and on a tracking frame.
