@@ -18,10 +18,13 @@
 // BM_CandidateLimit/<max_candidates>/<max_sweeps>: the same with at most max_candidates images
 //   per triangle (0: all); energies compare across the limits.
 // BM_LevelSeams: seam levelling of one labelling.
+// BM_LevelSolve/fused:<0|1>: levelling's solve after the factorisation, Eigen's or one pass.
 // Median figures: --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
 #include <benchmark/benchmark.h>
 #include <time.h>
 
+#include <Eigen/OrderingMethods>
+#include <Eigen/SparseCholesky>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -133,11 +136,11 @@ void BM_AddFrame(benchmark::State& state) {
   // Identifies the sequence of labellings (equal hashes: identical view selection).
   state.counters["labels_hash"] = static_cast<double>(labels_hash % 1000000007ull);
 }
-// Arguments: TextureTermOptions::switch_cost in thousandths (0: the paper's energy; 20: the default);
-// surface-aware sampling (1: default, 0: plain bilinear sampling and vertex colours wherever a
-// triangle around the vertex is visible); alpha-expansion sweeps per frame (0: the default, one;
-// 50: converge every frame). energy_gap: median (max) over the frames of (E - E*) / E*, E* the
-// energy of the same frame's problem solved to convergence from the same warm start.
+// Arguments: TextureTermOptions::switch_cost in thousandths (0: the paper's energy; 20: the
+// default); surface-aware sampling (1: default, 0: plain bilinear sampling and vertex colours
+// wherever a triangle around the vertex is visible); alpha-expansion sweeps per frame (0: the
+// default, one; 50: converge every frame). energy_gap: median (max) over the frames of (E - E*) /
+// E*, E* the energy of the same frame's problem solved to convergence from the same warm start.
 BENCHMARK(BM_AddFrame)
     ->ArgNames({"switch_cost_x1000", "surface_aware", "sweeps"})
     ->Args({0, 1, 0})
@@ -288,6 +291,57 @@ void BM_LevelSeams(benchmark::State& state) {
   state.counters["rms_after"] = summary.seam_residual_after;
 }
 BENCHMARK(BM_LevelSeams)->Unit(benchmark::kMillisecond)->MinTime(1.0);
+
+// BM_LevelSolve/fused:<0|1>: the three-channel solve after seam levelling's factorisation, on
+// the normal equations of one label over the whole body (its vertex graph with the default
+// smoothness and regularisation, in AMD order, upper triangle): SimplicialLDLT::solve, one pass
+// over the factor per channel and substitution (0), or the leveller's SolveLdlt3, one pass for
+// all three (1); the same solution bit for bit. Counter: the factor's nonzeros.
+void BM_LevelSolve(benchmark::State& state) {
+  using seam_levelling_internal::Rows3;
+  using seam_levelling_internal::SparseMatrix;
+  const Template& body = Walk().body;
+  const SeamLevellingOptions options;
+  const int n = body.num_vertices();
+  std::vector<Eigen::Triplet<double, Eigen::Index>> entries;
+  for (int v = 0; v < n; ++v) entries.emplace_back(v, v, options.regularisation);
+  for (int f = 0; f < body.num_triangles(); ++f) {
+    for (int c = 0; c < 3; ++c) {
+      const int a = body.triangles(f, c), b = body.triangles(f, (c + 1) % 3);
+      entries.emplace_back(a, a, options.smoothness);
+      entries.emplace_back(b, b, options.smoothness);
+      entries.emplace_back(std::min(a, b), std::max(a, b), -options.smoothness);
+    }
+  }
+  SparseMatrix upper(n, n);
+  upper.setFromTriplets(entries.begin(), entries.end());
+  Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, Eigen::Index> order;
+  Eigen::AMDOrdering<Eigen::Index>()(upper.selfadjointView<Eigen::Upper>(), order);
+  SparseMatrix ordered(n, n);
+  ordered.selfadjointView<Eigen::Upper>() =
+      upper.selfadjointView<Eigen::Upper>().twistedBy(order.inverse());
+  Eigen::SimplicialLDLT<SparseMatrix, Eigen::Upper, Eigen::NaturalOrdering<Eigen::Index>> solver(
+      ordered);
+  Rows3 b(n, 3);
+  for (int v = 0; v < n; ++v) b.row(v) << std::sin(0.1 * v), std::cos(0.07 * v), 0.01 * (v % 17);
+  const Eigen::MatrixX3d b_columns = b;
+  Eigen::MatrixX3d x_columns(n, 3);
+  Rows3 x(n, 3);
+  for (auto _ : state) {
+    if (state.range(0) == 0) {
+      x_columns = solver.solve(b_columns);
+      benchmark::DoNotOptimize(x_columns.data());
+    } else {
+      x = b;
+      seam_levelling_internal::SolveLdlt3(solver.matrixL().nestedExpression(), solver.vectorD(),
+                                          &x);
+      benchmark::DoNotOptimize(x.data());
+    }
+  }
+  state.counters["factor_nonzeros"] =
+      static_cast<double>(solver.matrixL().nestedExpression().nonZeros());
+}
+BENCHMARK(BM_LevelSolve)->ArgName("fused")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
 // BM_ResampleTriangles/surface_aware:<0|1>: SampleTriangle over every triangle visible in one
 // pooled image (frame kWarmupFrames of the walk, 2048^2 atlas), on one thread. Counters: median

@@ -12,6 +12,63 @@
 #include "models/error.h"
 
 namespace artex {
+namespace seam_levelling_internal {
+
+void SolveLdlt3(const SparseMatrix& l, const Eigen::VectorXd& d, Rows3* x) {
+  const Eigen::Index n = l.cols();
+  const Eigen::Index* outer = l.outerIndexPtr();
+  const Eigen::Index* inner = l.innerIndexPtr();
+  const double* value = l.valuePtr();
+  const auto end = [&](Eigen::Index i) {
+    return l.isCompressed() ? outer[i + 1] : outer[i] + l.innerNonZeroPtr()[i];
+  };
+  double* b = x->data();
+  // Forward, L y = b: Eigen's column-oriented substitution, which skips a column whose
+  // value is zero (that keeps the signs of zeros, which subtracting 0 * l could flip).
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const double t0 = b[3 * i], t1 = b[3 * i + 1], t2 = b[3 * i + 2];
+    const Eigen::Index p_end = end(i);
+    if (t0 != 0.0 && t1 != 0.0 && t2 != 0.0) {
+      for (Eigen::Index p = outer[i]; p < p_end; ++p) {
+        double* r = b + 3 * inner[p];
+        const double v = value[p];
+        r[0] -= t0 * v;
+        r[1] -= t1 * v;
+        r[2] -= t2 * v;
+      }
+    } else if (t0 != 0.0 || t1 != 0.0 || t2 != 0.0) {
+      for (Eigen::Index p = outer[i]; p < p_end; ++p) {
+        double* r = b + 3 * inner[p];
+        const double v = value[p];
+        if (t0 != 0.0) r[0] -= t0 * v;
+        if (t1 != 0.0) r[1] -= t1 * v;
+        if (t2 != 0.0) r[2] -= t2 * v;
+      }
+    }
+  }
+  // D z = y as Eigen computes it: the inverse diagonal times y.
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const double inverse = 1.0 / d[i];
+    for (int c = 0; c < 3; ++c) b[3 * i + c] = inverse * b[3 * i + c];
+  }
+  // Backward, L^T x = z: row-oriented over the transpose (column i of L), in storage order.
+  for (Eigen::Index i = n - 1; i >= 0; --i) {
+    double t0 = b[3 * i], t1 = b[3 * i + 1], t2 = b[3 * i + 2];
+    const Eigen::Index p_end = end(i);
+    for (Eigen::Index p = outer[i]; p < p_end; ++p) {
+      const double* r = b + 3 * inner[p];
+      const double v = value[p];
+      t0 -= v * r[0];
+      t1 -= v * r[1];
+      t2 -= v * r[2];
+    }
+    b[3 * i] = t0;
+    b[3 * i + 1] = t1;
+    b[3 * i + 2] = t2;
+  }
+}
+
+}  // namespace seam_levelling_internal
 
 bool SeamLevellingOptions::IsValid(std::string* error) const {
   std::ostringstream msg;
@@ -167,7 +224,8 @@ void SeamLeveller::Level(const std::vector<int>& labels,
   Eigen::VectorXd diagonal(n);
   for (int u = 0; u < n; ++u)
     diagonal[u] = options_.regularisation + options_.smoothness * unknown_pairs[u];
-  Eigen::MatrixX3d rhs = Eigen::MatrixX3d::Zero(n, 3);
+  // The right-hand sides, solved in place into the corrections g.
+  seam_levelling_internal::Rows3 g = seam_levelling_internal::Rows3::Zero(n, 3);
   double before = 0.0;
   int seams = 0;
   // Seam equations: (g_a - g_b) = (f_b - f_a).
@@ -178,8 +236,8 @@ void SeamLeveller::Level(const std::vector<int>& labels,
         const Eigen::Vector3d d = (f_value[b] - f_value[a]).cast<double>();
         diagonal[a] += 1.0;
         diagonal[b] += 1.0;
-        rhs.row(a) += d.transpose();
-        rhs.row(b) -= d.transpose();
+        g.row(a) += d.transpose();
+        g.row(b) -= d.transpose();
         before += d.squaredNorm();
         ++seams;
       }
@@ -189,7 +247,7 @@ void SeamLeveller::Level(const std::vector<int>& labels,
   // smoothness pairs to (v', l) for earlier vertices v' (one per triangle with the edge v v'
   // and label l), the seam pairs to v's earlier labels, then the diagonal. SimplicialLDLT reads
   // this layout directly when it is told the order is natural (below).
-  using Matrix = Eigen::SparseMatrix<double, Eigen::ColMajor, Eigen::Index>;
+  using Matrix = seam_levelling_internal::SparseMatrix;
   Matrix normal(n, n);
   normal.resizeNonZeros(n + seams + static_cast<Eigen::Index>(edge_corners_.size()));
   Eigen::Index* outer = normal.outerIndexPtr();
@@ -223,7 +281,6 @@ void SeamLeveller::Level(const std::vector<int>& labels,
   }
   outer[n] = nz;
   normal.resizeNonZeros(nz);
-  Eigen::MatrixX3d g = Eigen::MatrixX3d::Zero(n, 3);
   if (n > 0) {
     // The unknowns are already in a fill-reducing order. Eigen 3.4 recognises no ordering only
     // as NaturalOrdering<Eigen::Index> (hence Eigen::Index indices): it then factorises `normal`
@@ -232,7 +289,9 @@ void SeamLeveller::Level(const std::vector<int>& labels,
     Eigen::SimplicialLDLT<Matrix, Eigen::Upper, Eigen::NaturalOrdering<Eigen::Index>> solver(
         normal);
     if (solver.info() != Eigen::Success) throw Error("seam levelling: factorisation failed");
-    g = solver.solve(rhs);
+    // The three channels in one pass over the factor (solver.solve(g) would make one per
+    // channel; the same corrections bit for bit).
+    seam_levelling_internal::SolveLdlt3(solver.matrixL().nestedExpression(), solver.vectorD(), &g);
   }
   corrections->resize(3 * f_count, 3);
   for (int k = 0; k < 3 * f_count; ++k) {

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <Eigen/SparseCore>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -67,6 +68,22 @@ class SeamLeveller {
   std::vector<int> edge_corner_offsets_;
   std::vector<int> edge_corners_;
 };
+
+namespace seam_levelling_internal {
+
+// The factor SeamLeveller::Level writes and factorises (compressed columns, Eigen::Index indices:
+// see there), and its solutions: n x 3, one row per unknown.
+using SparseMatrix = Eigen::SparseMatrix<double, Eigen::ColMajor, Eigen::Index>;
+using Rows3 = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
+
+// Solves L D L^T x = b in place for the three columns of x (= b on entry), given the strictly
+// lower unit triangle `l` (compressed columns, rows ascending) and the diagonal `d` of an
+// Eigen::SimplicialLDLT factorisation without ordering: one pass over `l` per substitution for
+// all three columns, with the arithmetic of SimplicialLDLT::solve per column (Eigen 3.4), so the
+// same solution bit for bit.
+void SolveLdlt3(const SparseMatrix& l, const Eigen::VectorXd& d, Rows3* x);
+
+}  // namespace seam_levelling_internal
 
 // One-off levelling (builds a SeamLeveller): triangles F x 3; labels, colour, corrections and
 // summary as in SeamLeveller::Level.

@@ -4,8 +4,10 @@
 // leveller against a dense least-squares solve, and the switch cost.
 #include <gtest/gtest.h>
 
+#include <Eigen/SparseCholesky>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <limits>
 #include <map>
 #include <opencv2/core.hpp>
@@ -441,6 +443,44 @@ TEST(TexturingTest, SeamLevellerSolvesFragmentedLabellings) {
   for (int f = 0; f < static_cast<int>(labels.size()); ++f)
     labels[f] = f % 13 == 0 ? -1 : (f / 9) % 4 + 2 * (f % 3 == 0);
   ExpectSolvesNormalEquations(sphere.num_vertices(), triangles, labels);
+}
+
+// The leveller's three-column solve gives SimplicialLDLT::solve's solution bit for bit, on a
+// random sparse SPD matrix in its layout (upper triangle, natural order) with right-hand sides
+// that have zero entries (+0 and -0) and an all-zero row.
+TEST(TexturingTest, SeamLevellerSolveMatchesEigenBitForBit) {
+  using seam_levelling_internal::Rows3;
+  using seam_levelling_internal::SparseMatrix;
+  const int n = 400;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  std::vector<Eigen::Triplet<double, Eigen::Index>> entries;
+  for (int j = 0; j < n; ++j) {
+    entries.emplace_back(j, j, 8.0 + uniform(rng));
+    for (int k = 0; k < 3; ++k) {
+      const int i = static_cast<int>(rng() % n);
+      if (i < j) entries.emplace_back(i, j, 0.5 * uniform(rng));
+    }
+  }
+  SparseMatrix upper(n, n);
+  upper.setFromTriplets(entries.begin(), entries.end());
+  Eigen::SimplicialLDLT<SparseMatrix, Eigen::Upper, Eigen::NaturalOrdering<Eigen::Index>> solver(
+      upper);
+  ASSERT_EQ(solver.info(), Eigen::Success);
+  Rows3 b(n, 3);
+  for (int i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c) b(i, c) = (i + c) % 5 == 0 ? 0.0 : uniform(rng);
+  b(3, 1) = -0.0;
+  b.row(17).setZero();
+  const Eigen::MatrixX3d expected = solver.solve(Eigen::MatrixX3d(b));
+  Rows3 x = b;
+  seam_levelling_internal::SolveLdlt3(solver.matrixL().nestedExpression(), solver.vectorD(), &x);
+  for (int i = 0; i < n; ++i) {
+    for (int c = 0; c < 3; ++c) {
+      ASSERT_EQ(std::memcmp(&x(i, c), &expected(i, c), sizeof(double)), 0)
+          << "row " << i << " column " << c << ": " << x(i, c) << " vs " << expected(i, c);
+    }
+  }
 }
 
 // With a switch cost, triangles keep their source image unless another is clearly better.
