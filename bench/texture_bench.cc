@@ -18,7 +18,8 @@
 // BM_CandidateLimit/<max_candidates>/<max_sweeps>: the same with at most max_candidates images
 //   per triangle (0: all); energies compare across the limits.
 // BM_LevelSeams: seam levelling of one labelling.
-// BM_LevelSolve/fused:<0|1>: levelling's solve after the factorisation, Eigen's or one pass.
+// BM_LevelFactor/ldlt_factor:<0|1>: levelling's factorisation and solve, SimplicialLDLT's or
+//   the leveller's own (the same arithmetic).
 // Median figures: --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
 #include <benchmark/benchmark.h>
 #include <time.h>
@@ -282,8 +283,7 @@ void BM_LevelSeams(benchmark::State& state) {
   };
   Eigen::MatrixX3f corrections;
   SeamLevellingSummary summary;
-  const SeamLeveller leveller(seq.body.num_vertices(), seq.body.triangles,
-                              BenchOptions().levelling);
+  SeamLeveller leveller(seq.body.num_vertices(), seq.body.triangles, BenchOptions().levelling);
   for (auto _ : state) leveller.Level(texturer.triangle_frames(), colour, &corrections, &summary);
   state.counters["unknowns"] = summary.unknowns;
   state.counters["seam_equations"] = summary.seam_equations;
@@ -292,14 +292,15 @@ void BM_LevelSeams(benchmark::State& state) {
 }
 BENCHMARK(BM_LevelSeams)->Unit(benchmark::kMillisecond)->MinTime(1.0);
 
-// BM_LevelSolve/fused:<0|1>: the three-channel solve after seam levelling's factorisation, on
+// BM_LevelFactor/ldlt_factor:<0|1>: seam levelling's factorisation and three-channel solve on
 // the normal equations of one label over the whole body (its vertex graph with the default
-// smoothness and regularisation, in AMD order, upper triangle): SimplicialLDLT::solve, one pass
-// over the factor per channel and substitution (0), or the leveller's SolveLdlt3, one pass for
-// all three (1); the same solution bit for bit. Counter: the factor's nonzeros.
-void BM_LevelSolve(benchmark::State& state) {
+// smoothness and regularisation, in AMD order, upper triangle): SimplicialLDLT with natural
+// order on Eigen::Index indices and its solve (0, as Level did), or the leveller's LdltFactor
+// (1: int indices, buffers kept across iterations, one pass per substitution for the three
+// channels); the same solution bit for bit. Counter: the factor's nonzeros.
+void BM_LevelFactor(benchmark::State& state) {
   using seam_levelling_internal::Rows3;
-  using seam_levelling_internal::SparseMatrix;
+  using SparseMatrix = Eigen::SparseMatrix<double, Eigen::ColMajor, Eigen::Index>;
   const Template& body = Walk().body;
   const SeamLevellingOptions options;
   const int n = body.num_vertices();
@@ -320,28 +321,34 @@ void BM_LevelSolve(benchmark::State& state) {
   SparseMatrix ordered(n, n);
   ordered.selfadjointView<Eigen::Upper>() =
       upper.selfadjointView<Eigen::Upper>().twistedBy(order.inverse());
-  Eigen::SimplicialLDLT<SparseMatrix, Eigen::Upper, Eigen::NaturalOrdering<Eigen::Index>> solver(
-      ordered);
+  const std::vector<int> outer(ordered.outerIndexPtr(), ordered.outerIndexPtr() + n + 1);
+  const std::vector<int> inner(ordered.innerIndexPtr(),
+                               ordered.innerIndexPtr() + ordered.nonZeros());
   Rows3 b(n, 3);
   for (int v = 0; v < n; ++v) b.row(v) << std::sin(0.1 * v), std::cos(0.07 * v), 0.01 * (v % 17);
   const Eigen::MatrixX3d b_columns = b;
-  Eigen::MatrixX3d x_columns(n, 3);
+  seam_levelling_internal::LdltFactor factor;
   Rows3 x(n, 3);
+  Eigen::Index factor_nonzeros = 0;
   for (auto _ : state) {
     if (state.range(0) == 0) {
-      x_columns = solver.solve(b_columns);
-      benchmark::DoNotOptimize(x_columns.data());
+      Eigen::SimplicialLDLT<SparseMatrix, Eigen::Upper, Eigen::NaturalOrdering<Eigen::Index>>
+          solver(ordered);
+      const Eigen::MatrixX3d solution = solver.solve(b_columns);
+      benchmark::DoNotOptimize(solution.data());
+      factor_nonzeros = solver.matrixL().nestedExpression().nonZeros();
     } else {
+      if (!factor.Factorize(n, outer.data(), inner.data(), ordered.valuePtr()))
+        state.SkipWithError("zero pivot");
       x = b;
-      seam_levelling_internal::SolveLdlt3(solver.matrixL().nestedExpression(), solver.vectorD(),
-                                          &x);
+      factor.Solve3(&x);
       benchmark::DoNotOptimize(x.data());
+      factor_nonzeros = static_cast<Eigen::Index>(factor.l_value().size());
     }
   }
-  state.counters["factor_nonzeros"] =
-      static_cast<double>(solver.matrixL().nestedExpression().nonZeros());
+  state.counters["factor_nonzeros"] = static_cast<double>(factor_nonzeros);
 }
-BENCHMARK(BM_LevelSolve)->ArgName("fused")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_LevelFactor)->ArgName("ldlt_factor")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
 // BM_ResampleTriangles/surface_aware:<0|1>: SampleTriangle over every triangle visible in one
 // pooled image (frame kWarmupFrames of the walk, 2048^2 atlas), on one thread. Counters: median
