@@ -226,7 +226,10 @@ BENCHMARK(BM_Solve)
     ->Unit(benchmark::kMillisecond);
 
 // The per-frame case: the next frame's unaries differ by kPerturbation; alpha-expansion starts
-// from the previous frame's solution (argument 1) or from the unary argmin (argument 0).
+// from the previous frame's solution (warm 1) or from the unary argmin (warm 0). kept_solver 1:
+// one solver solves every iteration (as the texturer's, whose min-cut graphs then keep their
+// arrays from the previous solve); 0: a new solver per iteration (graphs grown from empty, as
+// every solve was before the solver kept them).
 void BM_ExpansionNextFrame(benchmark::State& state) {
   const Scene scene = MakeScene();
   const MrfProblem first = MakeProblem(scene, 0);
@@ -234,18 +237,23 @@ void BM_ExpansionNextFrame(benchmark::State& state) {
   MrfSolverOptions options;
   options.type = MrfSolverType::kAlphaExpansion;
   options.warm_start = state.range(0) != 0;
-  const auto solver = MrfSolver::Create(options);
+  const bool kept = state.range(1) != 0;
+  auto solver = MrfSolver::Create(options);
   std::vector<int> previous;
   solver->Solve(first, &previous);
   state.SetLabel(options.warm_start ? "warm" : "cold");
   MrfSummary summary;
   for (auto _ : state) {
+    if (!kept) solver = MrfSolver::Create(options);
     std::vector<int> labels = previous;
     summary = solver->Solve(next, &labels);
   }
   Report(state, next, summary);
 }
-BENCHMARK(BM_ExpansionNextFrame)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_ExpansionNextFrame)
+    ->ArgNames({"warm", "kept_solver"})
+    ->ArgsProduct({{0, 1}, {0, 1}})
+    ->Unit(benchmark::kMillisecond);
 
 // TRW-S bound of the next frame, for the gap of the warm-started expansion.
 void BM_TrwsNextFrame(benchmark::State& state) {

@@ -18,10 +18,14 @@
 // BM_CandidateLimit/<max_candidates>/<max_sweeps>: the same with at most max_candidates images
 //   per triangle (0: all); energies compare across the limits.
 // BM_LevelSeams: seam levelling of one labelling.
+// BM_LevelFactor/ldlt_factor:<0|1>: levelling's factorisation and solve, SimplicialLDLT's or
+//   the leveller's own (the same arithmetic).
 // Median figures: --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
 #include <benchmark/benchmark.h>
 #include <time.h>
 
+#include <Eigen/OrderingMethods>
+#include <Eigen/SparseCholesky>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -133,11 +137,11 @@ void BM_AddFrame(benchmark::State& state) {
   // Identifies the sequence of labellings (equal hashes: identical view selection).
   state.counters["labels_hash"] = static_cast<double>(labels_hash % 1000000007ull);
 }
-// Arguments: TextureTermOptions::switch_cost in thousandths (0: the paper's energy; 20: the default);
-// surface-aware sampling (1: default, 0: plain bilinear sampling and vertex colours wherever a
-// triangle around the vertex is visible); alpha-expansion sweeps per frame (0: the default, one;
-// 50: converge every frame). energy_gap: median (max) over the frames of (E - E*) / E*, E* the
-// energy of the same frame's problem solved to convergence from the same warm start.
+// Arguments: TextureTermOptions::switch_cost in thousandths (0: the paper's energy; 20: the
+// default); surface-aware sampling (1: default, 0: plain bilinear sampling and vertex colours
+// wherever a triangle around the vertex is visible); alpha-expansion sweeps per frame (0: the
+// default, one; 50: converge every frame). energy_gap: median (max) over the frames of (E - E*) /
+// E*, E* the energy of the same frame's problem solved to convergence from the same warm start.
 BENCHMARK(BM_AddFrame)
     ->ArgNames({"switch_cost_x1000", "surface_aware", "sweeps"})
     ->Args({0, 1, 0})
@@ -181,19 +185,25 @@ const SelectionSetup& Selection() {
 }
 
 // SelectViews on the Selection() input with a solver made from `mrf`, once per iteration: the
-// last result, and the median solve time (s) in *solve_seconds.
+// last result, and the median solve time (s) in *solve_seconds. Sets the counter build_ms: the
+// median of the rest of SelectViews' time (candidates, tables, the MRF problem).
 ViewSelectionResult TimeSelection(
     benchmark::State& state, const MrfSolverOptions& mrf, double* solve_seconds,
     const ViewSelectionOptions& selection = BenchOptions().selection) {
   const SelectionSetup& setup = Selection();
   const std::unique_ptr<MrfSolver> solver = MrfSolver::Create(mrf);
   ViewSelectionResult result;
-  std::vector<double> seconds;
+  std::vector<double> seconds, build_seconds;
   for (auto _ : state) {
+    const auto t0 = std::chrono::steady_clock::now();
     result = SelectViews(setup.input, selection, solver.get());
+    const double total =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     seconds.push_back(result.mrf.seconds);
+    build_seconds.push_back(total - result.mrf.seconds);
   }
   *solve_seconds = Median(seconds);
+  state.counters["build_ms"] = 1e3 * Median(build_seconds);
   return result;
 }
 
@@ -279,8 +289,7 @@ void BM_LevelSeams(benchmark::State& state) {
   };
   Eigen::MatrixX3f corrections;
   SeamLevellingSummary summary;
-  const SeamLeveller leveller(seq.body.num_vertices(), seq.body.triangles,
-                              BenchOptions().levelling);
+  SeamLeveller leveller(seq.body.num_vertices(), seq.body.triangles, BenchOptions().levelling);
   for (auto _ : state) leveller.Level(texturer.triangle_frames(), colour, &corrections, &summary);
   state.counters["unknowns"] = summary.unknowns;
   state.counters["seam_equations"] = summary.seam_equations;
@@ -288,6 +297,64 @@ void BM_LevelSeams(benchmark::State& state) {
   state.counters["rms_after"] = summary.seam_residual_after;
 }
 BENCHMARK(BM_LevelSeams)->Unit(benchmark::kMillisecond)->MinTime(1.0);
+
+// BM_LevelFactor/ldlt_factor:<0|1>: seam levelling's factorisation and three-channel solve on
+// the normal equations of one label over the whole body (its vertex graph with the default
+// smoothness and regularisation, in AMD order, upper triangle): SimplicialLDLT with natural
+// order on Eigen::Index indices and its solve (0, as Level did), or the leveller's LdltFactor
+// (1: int indices, buffers kept across iterations, one pass per substitution for the three
+// channels); the same solution bit for bit. Counter: the factor's nonzeros.
+void BM_LevelFactor(benchmark::State& state) {
+  using seam_levelling_internal::Rows3;
+  using SparseMatrix = Eigen::SparseMatrix<double, Eigen::ColMajor, Eigen::Index>;
+  const Template& body = Walk().body;
+  const SeamLevellingOptions options;
+  const int n = body.num_vertices();
+  std::vector<Eigen::Triplet<double, Eigen::Index>> entries;
+  for (int v = 0; v < n; ++v) entries.emplace_back(v, v, options.regularisation);
+  for (int f = 0; f < body.num_triangles(); ++f) {
+    for (int c = 0; c < 3; ++c) {
+      const int a = body.triangles(f, c), b = body.triangles(f, (c + 1) % 3);
+      entries.emplace_back(a, a, options.smoothness);
+      entries.emplace_back(b, b, options.smoothness);
+      entries.emplace_back(std::min(a, b), std::max(a, b), -options.smoothness);
+    }
+  }
+  SparseMatrix upper(n, n);
+  upper.setFromTriplets(entries.begin(), entries.end());
+  Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, Eigen::Index> order;
+  Eigen::AMDOrdering<Eigen::Index>()(upper.selfadjointView<Eigen::Upper>(), order);
+  SparseMatrix ordered(n, n);
+  ordered.selfadjointView<Eigen::Upper>() =
+      upper.selfadjointView<Eigen::Upper>().twistedBy(order.inverse());
+  const std::vector<int> outer(ordered.outerIndexPtr(), ordered.outerIndexPtr() + n + 1);
+  const std::vector<int> inner(ordered.innerIndexPtr(),
+                               ordered.innerIndexPtr() + ordered.nonZeros());
+  Rows3 b(n, 3);
+  for (int v = 0; v < n; ++v) b.row(v) << std::sin(0.1 * v), std::cos(0.07 * v), 0.01 * (v % 17);
+  const Eigen::MatrixX3d b_columns = b;
+  seam_levelling_internal::LdltFactor factor;
+  Rows3 x(n, 3);
+  Eigen::Index factor_nonzeros = 0;
+  for (auto _ : state) {
+    if (state.range(0) == 0) {
+      Eigen::SimplicialLDLT<SparseMatrix, Eigen::Upper, Eigen::NaturalOrdering<Eigen::Index>>
+          solver(ordered);
+      const Eigen::MatrixX3d solution = solver.solve(b_columns);
+      benchmark::DoNotOptimize(solution.data());
+      factor_nonzeros = solver.matrixL().nestedExpression().nonZeros();
+    } else {
+      if (!factor.Factorize(n, outer.data(), inner.data(), ordered.valuePtr()))
+        state.SkipWithError("zero pivot");
+      x = b;
+      factor.Solve3(&x);
+      benchmark::DoNotOptimize(x.data());
+      factor_nonzeros = static_cast<Eigen::Index>(factor.l_value().size());
+    }
+  }
+  state.counters["factor_nonzeros"] = static_cast<double>(factor_nonzeros);
+}
+BENCHMARK(BM_LevelFactor)->ArgName("ldlt_factor")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
 // BM_ResampleTriangles/surface_aware:<0|1>: SampleTriangle over every triangle visible in one
 // pooled image (frame kWarmupFrames of the walk, 2048^2 atlas), on one thread. Counters: median

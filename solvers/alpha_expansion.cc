@@ -233,15 +233,17 @@ struct alignas(64) Sweeper {
   std::vector<char> dirty;      // labels whose expansion might still lower the energy (padded)
   mrf_internal::BinaryMove move;
   std::vector<char> y;
-  mrf_internal::BinaryMoveCut cut;
-  std::vector<int> var_of;  // move variable of node i, -1 when fixed
-  MrfSummary counts;        // accepted_moves, truncated_terms
+  mrf_internal::BinaryMoveCut* cut;  // this sweeper's own
+  std::vector<int> var_of;           // move variable of node i, -1 when fixed
+  MrfSummary counts;                 // accepted_moves, truncated_terms
 
-  Sweeper(const MrfProblem& p, const MrfAdjacency& a, const MrfLabelIndex& l)
+  Sweeper(const MrfProblem& p, const MrfAdjacency& a, const MrfLabelIndex& l,
+          mrf_internal::BinaryMoveCut* c)
       : problem(&p),
         adjacency(&a),
         labels(&l),
         dirty(LabelFlags(p.num_labels(), 1)),
+        cut(c),
         var_of(p.num_nodes(), -1) {}
 
   // A label's move depends only on the labels of its variables (nodes having it as a candidate)
@@ -279,7 +281,7 @@ struct alignas(64) Sweeper {
       }
       if (move.size() == 0) continue;
       const long truncated_before = counts.truncated_terms;
-      if (!mrf_internal::ApplyBinaryMove(*problem, *adjacency, move, var_of, &cut, &y, x,
+      if (!mrf_internal::ApplyBinaryMove(*problem, *adjacency, move, var_of, cut, &y, x,
                                          &energy_change, &counts))
         continue;
       for (int v = 0; v < move.size(); ++v) {
@@ -300,6 +302,12 @@ bool AnyDirty(const std::vector<char>& dirty) {
 }  // namespace
 
 }  // namespace mrf_internal
+
+AlphaExpansionSolver::AlphaExpansionSolver(const MrfSolverOptions& options) : options_(options) {
+  for (auto& cut : cuts_) cut = std::make_unique<mrf_internal::BinaryMoveCut>();
+}
+
+AlphaExpansionSolver::~AlphaExpansionSolver() = default;
 
 MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<int>* labels) {
   using mrf_internal::Sweeper;
@@ -330,10 +338,11 @@ MrfSummary AlphaExpansionSolver::Solve(const MrfProblem& problem, std::vector<in
     adjacency = BuildMrfAdjacency(problem);
     label_index = BuildMrfLabelIndex(problem);
   }
-  Sweeper whole(problem, adjacency, label_index);
-  Sweeper sides[2] = {Sweeper(problem, adjacency, part_index[0]),
-                      Sweeper(problem, adjacency, part_index[1])};
-  Sweeper separator(problem, adjacency, part_index[static_cast<int>(mrf_internal::kSeparatorPart)]);
+  Sweeper whole(problem, adjacency, label_index, cuts_[0].get());
+  Sweeper sides[2] = {Sweeper(problem, adjacency, part_index[0], cuts_[1].get()),
+                      Sweeper(problem, adjacency, part_index[1], cuts_[2].get())};
+  Sweeper separator(problem, adjacency, part_index[static_cast<int>(mrf_internal::kSeparatorPart)],
+                    cuts_[3].get());
   std::vector<int> side_x[2];  // the halves' copies of the labelling
 
   double energy = summary.initial_energy;

@@ -5,6 +5,7 @@
 // Within 2x of the optimum on Potts energies; exact on submodular two-label energies.
 #pragma once
 
+#include <array>
 #include <memory>
 #include <vector>
 
@@ -12,13 +13,22 @@
 
 namespace artex {
 
+namespace mrf_internal {
+class BinaryMoveCut;
+}  // namespace mrf_internal
+
 class AlphaExpansionSolver : public MrfSolver {
  public:
-  explicit AlphaExpansionSolver(const MrfSolverOptions& options) : options_(options) {}
+  explicit AlphaExpansionSolver(const MrfSolverOptions& options);
+  ~AlphaExpansionSolver() override;
   MrfSummary Solve(const MrfProblem& problem, std::vector<int>* labels) override;
 
  private:
   MrfSolverOptions options_;
+  // The min-cut graphs of the sweeps (all nodes, the two halves, the separator), kept from
+  // solve to solve: a graph grows its node and arc arrays to the largest move it has cut, so
+  // later solves of similar problems (the next frame's) reallocate nothing.
+  std::array<std::unique_ptr<mrf_internal::BinaryMoveCut>, 4> cuts_;
 };
 
 namespace mrf_internal {

@@ -1,7 +1,6 @@
 #include "solvers/seam_levelling.h"
 
 #include <Eigen/OrderingMethods>
-#include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
 #include <algorithm>
 #include <array>
@@ -12,6 +11,147 @@
 #include "models/error.h"
 
 namespace artex {
+namespace seam_levelling_internal {
+
+bool LdltFactor::Factorize(int n, const int* outer, const int* inner, const double* value) {
+  n_ = n;
+  parent_.resize(n);
+  count_.resize(n);
+  tags_.resize(n);
+  pattern_.resize(n);
+  y_.resize(n);
+  d_.resize(n);
+  l_outer_.resize(n + 1);
+  // Symbolic: the elimination tree and the column counts of L (SimplicialLDLT's
+  // analyzePattern_preordered).
+  int* parent = parent_.data();
+  int* count = count_.data();
+  int* tags = tags_.data();
+  for (int k = 0; k < n; ++k) {
+    parent[k] = -1;
+    tags[k] = k;
+    count[k] = 0;
+    for (int p = outer[k]; p < outer[k + 1]; ++p) {
+      int i = inner[p];
+      if (i >= k) continue;
+      // The path from i towards the root up to a node already met in this row.
+      for (; tags[i] != k; i = parent[i]) {
+        if (parent[i] == -1) parent[i] = k;
+        ++count[i];
+        tags[i] = k;
+      }
+    }
+  }
+  int* lp = l_outer_.data();
+  lp[0] = 0;
+  for (int k = 0; k < n; ++k) lp[k + 1] = lp[k] + count[k];
+  l_inner_.resize(lp[n]);
+  l_value_.resize(lp[n]);
+  // Numeric, row by row (SimplicialLDLT's factorize_preordered): row k of L solves a sparse
+  // triangular system whose pattern is the etree reach of column k of the matrix.
+  int* li = l_inner_.data();
+  double* lx = l_value_.data();
+  int* pattern = pattern_.data();
+  double* y = y_.data();
+  double* d = d_.data();
+  for (int k = 0; k < n; ++k) {
+    y[k] = 0.0;
+    int top = n;
+    tags[k] = k;
+    count[k] = 0;
+    for (int p = outer[k]; p < outer[k + 1]; ++p) {
+      int i = inner[p];
+      if (i > k) continue;
+      y[i] += value[p];
+      int len = 0;
+      for (; tags[i] != k; i = parent[i]) {
+        pattern[len++] = i;
+        tags[i] = k;
+      }
+      while (len > 0) pattern[--top] = pattern[--len];
+    }
+    double dk = y[k];
+    y[k] = 0.0;
+    for (; top < n; ++top) {
+      const int i = pattern[top];
+      const double yi = y[i];
+      y[i] = 0.0;
+      const double l_ki = yi / d[i];
+      const int p_end = lp[i] + count[i];
+      // y[r] -= L(r, i) yi over the column so far, four rows at a time: the rows of a column
+      // are distinct, so loading the four before storing them is the same computation, and
+      // the loads need not wait for the previous stores.
+      int p = lp[i];
+      for (; p + 4 <= p_end; p += 4) {
+        const int r0 = li[p], r1 = li[p + 1], r2 = li[p + 2], r3 = li[p + 3];
+        const double y0 = y[r0] - lx[p] * yi, y1 = y[r1] - lx[p + 1] * yi;
+        const double y2 = y[r2] - lx[p + 2] * yi, y3 = y[r3] - lx[p + 3] * yi;
+        y[r0] = y0;
+        y[r1] = y1;
+        y[r2] = y2;
+        y[r3] = y3;
+      }
+      for (; p < p_end; ++p) y[li[p]] -= lx[p] * yi;
+      dk -= l_ki * yi;
+      li[p_end] = k;
+      lx[p_end] = l_ki;
+      ++count[i];
+    }
+    d[k] = dk;
+    if (dk == 0.0) return false;
+  }
+  return true;
+}
+
+void LdltFactor::Solve3(Rows3* x) const {
+  const int* lp = l_outer_.data();
+  const int* li = l_inner_.data();
+  const double* lx = l_value_.data();
+  double* b = x->data();
+  // Forward, L y = b: SimplicialLDLT's column-oriented substitution, which skips a column whose
+  // value is zero (that keeps the signs of zeros, which subtracting 0 * l could flip).
+  for (int i = 0; i < n_; ++i) {
+    const double t0 = b[3 * i], t1 = b[3 * i + 1], t2 = b[3 * i + 2];
+    if (t0 != 0.0 && t1 != 0.0 && t2 != 0.0) {
+      for (int p = lp[i]; p < lp[i + 1]; ++p) {
+        double* r = b + 3 * li[p];
+        const double v = lx[p];
+        r[0] -= t0 * v;
+        r[1] -= t1 * v;
+        r[2] -= t2 * v;
+      }
+    } else if (t0 != 0.0 || t1 != 0.0 || t2 != 0.0) {
+      for (int p = lp[i]; p < lp[i + 1]; ++p) {
+        double* r = b + 3 * li[p];
+        const double v = lx[p];
+        if (t0 != 0.0) r[0] -= t0 * v;
+        if (t1 != 0.0) r[1] -= t1 * v;
+        if (t2 != 0.0) r[2] -= t2 * v;
+      }
+    }
+  }
+  // D z = y as Eigen computes it: the inverse diagonal times y.
+  for (int i = 0; i < n_; ++i) {
+    const double inverse = 1.0 / d_[i];
+    for (int c = 0; c < 3; ++c) b[3 * i + c] = inverse * b[3 * i + c];
+  }
+  // Backward, L^T x = z: row-oriented over the transpose (column i of L), in storage order.
+  for (int i = n_ - 1; i >= 0; --i) {
+    double t0 = b[3 * i], t1 = b[3 * i + 1], t2 = b[3 * i + 2];
+    for (int p = lp[i]; p < lp[i + 1]; ++p) {
+      const double* r = b + 3 * li[p];
+      const double v = lx[p];
+      t0 -= v * r[0];
+      t1 -= v * r[1];
+      t2 -= v * r[2];
+    }
+    b[3 * i] = t0;
+    b[3 * i + 1] = t1;
+    b[3 * i + 2] = t2;
+  }
+}
+
+}  // namespace seam_levelling_internal
 
 bool SeamLevellingOptions::IsValid(std::string* error) const {
   std::ostringstream msg;
@@ -107,7 +247,7 @@ SeamLeveller::~SeamLeveller() = default;
 
 void SeamLeveller::Level(const std::vector<int>& labels,
                          const std::function<bool(int, int, Eigen::Vector3f*)>& colour,
-                         Eigen::MatrixX3f* corrections, SeamLevellingSummary* summary) const {
+                         Eigen::MatrixX3f* corrections, SeamLevellingSummary* summary) {
   const auto start = std::chrono::steady_clock::now();
   const int f_count = num_triangles_;
   if (static_cast<int>(labels.size()) != f_count) {
@@ -167,7 +307,8 @@ void SeamLeveller::Level(const std::vector<int>& labels,
   Eigen::VectorXd diagonal(n);
   for (int u = 0; u < n; ++u)
     diagonal[u] = options_.regularisation + options_.smoothness * unknown_pairs[u];
-  Eigen::MatrixX3d rhs = Eigen::MatrixX3d::Zero(n, 3);
+  // The right-hand sides, solved in place into the corrections g.
+  seam_levelling_internal::Rows3 g = seam_levelling_internal::Rows3::Zero(n, 3);
   double before = 0.0;
   int seams = 0;
   // Seam equations: (g_a - g_b) = (f_b - f_a).
@@ -178,8 +319,8 @@ void SeamLeveller::Level(const std::vector<int>& labels,
         const Eigen::Vector3d d = (f_value[b] - f_value[a]).cast<double>();
         diagonal[a] += 1.0;
         diagonal[b] += 1.0;
-        rhs.row(a) += d.transpose();
-        rhs.row(b) -= d.transpose();
+        g.row(a) += d.transpose();
+        g.row(b) -= d.transpose();
         before += d.squaredNorm();
         ++seams;
       }
@@ -187,14 +328,13 @@ void SeamLeveller::Level(const std::vector<int>& labels,
   }
   // Upper triangle in compressed columns, rows ascending: column u = (v, l) holds the
   // smoothness pairs to (v', l) for earlier vertices v' (one per triangle with the edge v v'
-  // and label l), the seam pairs to v's earlier labels, then the diagonal. SimplicialLDLT reads
-  // this layout directly when it is told the order is natural (below).
-  using Matrix = Eigen::SparseMatrix<double, Eigen::ColMajor, Eigen::Index>;
-  Matrix normal(n, n);
-  normal.resizeNonZeros(n + seams + static_cast<Eigen::Index>(edge_corners_.size()));
-  Eigen::Index* outer = normal.outerIndexPtr();
-  Eigen::Index* inner = normal.innerIndexPtr();
-  double* value = normal.valuePtr();
+  // and label l), the seam pairs to v's earlier labels, then the diagonal.
+  normal_outer_.resize(n + 1);
+  normal_inner_.resize(n + seams + edge_corners_.size());
+  normal_value_.resize(normal_inner_.size());
+  int* outer = normal_outer_.data();
+  int* inner = normal_inner_.data();
+  double* value = normal_value_.data();
   int nz = 0;
   for (int i = 0; i < num_vertices_; ++i) {
     for (int u = vertex_first[i]; u < vertex_first[i + 1]; ++u) {
@@ -222,18 +362,11 @@ void SeamLeveller::Level(const std::vector<int>& labels,
     }
   }
   outer[n] = nz;
-  normal.resizeNonZeros(nz);
-  Eigen::MatrixX3d g = Eigen::MatrixX3d::Zero(n, 3);
-  if (n > 0) {
-    // The unknowns are already in a fill-reducing order. Eigen 3.4 recognises no ordering only
-    // as NaturalOrdering<Eigen::Index> (hence Eigen::Index indices): it then factorises `normal`
-    // where it lies; with NaturalOrdering<int> it would copy it twice (to a full symmetric
-    // matrix, then to an upper triangle permuted by the empty permutation).
-    Eigen::SimplicialLDLT<Matrix, Eigen::Upper, Eigen::NaturalOrdering<Eigen::Index>> solver(
-        normal);
-    if (solver.info() != Eigen::Success) throw Error("seam levelling: factorisation failed");
-    g = solver.solve(rhs);
-  }
+  // The unknowns are already in a fill-reducing order: factorised as they are, with
+  // SimplicialLDLT's arithmetic (LdltFactor).
+  if (!factor_.Factorize(n, outer, inner, value))
+    throw Error("seam levelling: factorisation failed");
+  factor_.Solve3(&g);
   corrections->resize(3 * f_count, 3);
   for (int k = 0; k < 3 * f_count; ++k) {
     const int u = corner_unknown[k];

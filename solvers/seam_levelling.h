@@ -30,10 +30,52 @@ struct SeamLevellingSummary {
   double seconds = 0.0;
 };
 
+namespace seam_levelling_internal {
+
+// Solutions of the levelling's normal equations: n x 3, one row per unknown.
+using Rows3 = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
+
+// The LDL^T factorisation of a sparse symmetric matrix in its given order, with the arithmetic
+// of Eigen 3.4's SimplicialLDLT (Upper, natural order: the same elimination tree, row patterns
+// in the same topological order, the same operations in the same order), so the same factor
+// and solutions bit for bit; it keeps its buffers from one factorisation to the next and holds
+// indices as int (half the index traffic of the Eigen::Index indices SimplicialLDLT needs to
+// factorise in place without copying).
+class LdltFactor {
+ public:
+  // Factorises the n x n matrix whose upper triangle (diagonal included, every diagonal entry
+  // present) is given in compressed columns (outer: n + 1 offsets; rows ascending within a
+  // column). False when a pivot is zero (the factor is then unusable).
+  bool Factorize(int n, const int* outer, const int* inner, const double* value);
+  // Solves L D L^T x = b in place for the three columns of x (= b on entry, n rows): one pass
+  // over the factor per substitution for all three columns, with SimplicialLDLT::solve's
+  // arithmetic per column.
+  void Solve3(Rows3* x) const;
+
+  // The factor, in SimplicialLDLT's layout: the strict lower triangle of unit L in compressed
+  // columns (rows ascending) and D.
+  const std::vector<int>& l_outer() const { return l_outer_; }
+  const std::vector<int>& l_inner() const { return l_inner_; }
+  const std::vector<double>& l_value() const { return l_value_; }
+  const std::vector<double>& d() const { return d_; }
+
+ private:
+  int n_ = 0;
+  std::vector<int> parent_;  // elimination tree (-1: root)
+  std::vector<int> count_;   // nonzeros per column of L
+  std::vector<int> tags_, pattern_;
+  std::vector<double> y_;
+  std::vector<int> l_outer_, l_inner_;
+  std::vector<double> l_value_, d_;
+};
+
+}  // namespace seam_levelling_internal
+
 // Levels seams of many labellings of one mesh (e.g. one per frame). The fill-reducing order
 // of the sparse factorisation is computed once from the mesh (approximate minimum degree on the
 // vertex graph); the unknowns of a vertex are numbered consecutively in that order, so every
 // call writes the upper triangle of the normal equations column by column and only factorises.
+// Calls reuse the leveller's buffers: one leveller levels one labelling at a time.
 // Throws artex::Error for invalid options or triangle indices outside [0, num_vertices).
 class SeamLeveller {
  public:
@@ -47,7 +89,7 @@ class SeamLeveller {
   // triangles). summary may be null.
   void Level(const std::vector<int>& labels,
              const std::function<bool(int, int, Eigen::Vector3f*)>& colour,
-             Eigen::MatrixX3f* corrections, SeamLevellingSummary* summary) const;
+             Eigen::MatrixX3f* corrections, SeamLevellingSummary* summary);
 
  private:
   int num_vertices_;
@@ -66,6 +108,11 @@ class SeamLeveller {
   std::vector<int> edge_offsets_;
   std::vector<int> edge_corner_offsets_;
   std::vector<int> edge_corners_;
+  // Kept from call to call (their buffers): the normal equations' upper triangle (compressed
+  // columns) and its factorisation.
+  std::vector<int> normal_outer_, normal_inner_;
+  std::vector<double> normal_value_;
+  seam_levelling_internal::LdltFactor factor_;
 };
 
 // One-off levelling (builds a SeamLeveller): triangles F x 3; labels, colour, corrections and

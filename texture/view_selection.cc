@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <memory>
 #include <numeric>
@@ -19,6 +20,20 @@ namespace artex {
 namespace {
 // Tables ahead whose colours the pairwise-table loop prefetches.
 constexpr int kPrefetchTables = 4;
+// The data cost D of an image that cannot texture a triangle.
+constexpr double kNotCandidate = std::numeric_limits<double>::infinity();
+
+// condition ? a : b through a bit mask, without a jump.
+inline double Select(bool condition, double a, double b) {
+  std::uint64_t bits_a, bits_b;
+  std::memcpy(&bits_a, &a, sizeof a);
+  std::memcpy(&bits_b, &b, sizeof b);
+  const std::uint64_t mask = -static_cast<std::uint64_t>(condition);
+  const std::uint64_t bits = (bits_a & mask) | (bits_b & ~mask);
+  double out;
+  std::memcpy(&out, &bits, sizeof out);
+  return out;
+}
 }  // namespace
 
 bool ViewSelectionOptions::IsValid(std::string* error) const {
@@ -83,8 +98,16 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
           const float* quality = slot_quality[s] + begin;
           const double age_cost = slot_age_cost[s];
           double* out = &chunk_d[static_cast<std::size_t>(s) * size];
-          for (int k = 0; k < size; ++k)
-            out[k] = ViewDataCostFromAge(visible[k] != 0, quality[k], age_cost, terms);
+          // ViewDataCostFromAge without jumps (the compiler branches on its conditions, and
+          // visibility patterns are irregular: they mispredict): both outcomes are computed and
+          // one is selected by a bit mask, the same value.
+          const double beta = terms.beta, min_quality = terms.min_quality;
+          for (int k = 0; k < size; ++k) {
+            const double q = quality[k];
+            const double d = beta * (1.0 - q) + age_cost;
+            const bool candidate = (visible[k] != 0) & !(q < min_quality);
+            out[k] = Select(candidate, d, kNotCandidate);
+          }
         }
         std::vector<int> best(keep + 1);       // the best slots by (D, slot), ascending
         std::vector<double> best_d(keep + 1);  // and their D

@@ -308,6 +308,29 @@ TEST_P(MrfConformanceTest, Deterministic) {
   EXPECT_EQ(a.lower_bound, b.lower_bound);
 }
 
+// A solver that solved other problems before (solvers may keep buffers from solve to solve)
+// gives what a new one gives: the same labels, trace and bound, for problems of growing and
+// shrinking size, parallel sweeps included.
+TEST_P(MrfConformanceTest, ReusedSolverMatchesNewOne) {
+  MrfSolverOptions options = Options(GetParam());
+  options.expansion_parallel_min_nodes = 1;
+  const auto reused = MrfSolver::Create(options);
+  std::mt19937_64 rng(5);
+  const Spec specs[] = {
+      MakeSpec(1200, 5, GridEdges(30, 40), PairKind::kPotts, 0.1, 21), Cases().back().spec,
+      MakeSpec(400, 4, RandomGraphEdges(400, 300, &rng), PairKind::kNonMetric, 0.1, 22),
+      Cases().front().spec};
+  for (const Spec& spec : specs) {
+    const MrfProblem problem = spec.Build();
+    std::vector<int> fresh_labels, reused_labels;
+    const MrfSummary a = MrfSolver::Create(options)->Solve(problem, &fresh_labels);
+    const MrfSummary b = reused->Solve(problem, &reused_labels);
+    EXPECT_EQ(fresh_labels, reused_labels) << spec.n << " nodes";
+    EXPECT_EQ(a.trace, b.trace) << spec.n << " nodes";
+    EXPECT_EQ(a.lower_bound, b.lower_bound) << spec.n << " nodes";
+  }
+}
+
 TEST_P(MrfConformanceTest, NoEdgesGivesUnaryArgmin) {
   Spec spec = MakeSpec(6, 4, {}, PairKind::kPotts, 0.3, 77);
   const MrfProblem problem = spec.Build();

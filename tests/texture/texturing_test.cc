@@ -4,8 +4,10 @@
 // leveller against a dense least-squares solve, and the switch cost.
 #include <gtest/gtest.h>
 
+#include <Eigen/SparseCholesky>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <limits>
 #include <map>
 #include <opencv2/core.hpp>
@@ -441,6 +443,64 @@ TEST(TexturingTest, SeamLevellerSolvesFragmentedLabellings) {
   for (int f = 0; f < static_cast<int>(labels.size()); ++f)
     labels[f] = f % 13 == 0 ? -1 : (f / 9) % 4 + 2 * (f % 3 == 0);
   ExpectSolvesNormalEquations(sphere.num_vertices(), triangles, labels);
+}
+
+// The leveller's factorisation (LdltFactor) gives SimplicialLDLT's factor and solutions bit for
+// bit, on random sparse SPD matrices in its layout (upper triangle, natural order) with much
+// fill, for right-hand sides that have zero entries (+0 and -0) and an all-zero row; one
+// LdltFactor refactorises (its buffers reused, the matrices growing and shrinking).
+TEST(TexturingTest, SeamLevellerFactorMatchesEigenBitForBit) {
+  using SparseMatrix = Eigen::SparseMatrix<double, Eigen::ColMajor, Eigen::Index>;
+  using seam_levelling_internal::Rows3;
+  const auto same_bits = [](double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; };
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  seam_levelling_internal::LdltFactor factor;
+  for (const int n : {400, 90, 700}) {
+    std::vector<Eigen::Triplet<double, Eigen::Index>> entries;
+    for (int j = 0; j < n; ++j) {
+      entries.emplace_back(j, j, 8.0 + uniform(rng));
+      for (int k = 0; k < 3; ++k) {
+        const int i = static_cast<int>(rng() % n);
+        if (i < j) entries.emplace_back(i, j, 0.5 * uniform(rng));
+      }
+    }
+    SparseMatrix upper(n, n);
+    upper.setFromTriplets(entries.begin(), entries.end());
+    Eigen::SimplicialLDLT<SparseMatrix, Eigen::Upper, Eigen::NaturalOrdering<Eigen::Index>> solver(
+        upper);
+    ASSERT_EQ(solver.info(), Eigen::Success);
+    const std::vector<int> outer(upper.outerIndexPtr(), upper.outerIndexPtr() + n + 1);
+    const std::vector<int> inner(upper.innerIndexPtr(), upper.innerIndexPtr() + upper.nonZeros());
+    ASSERT_TRUE(factor.Factorize(n, outer.data(), inner.data(), upper.valuePtr()));
+    const SparseMatrix& l = solver.matrixL().nestedExpression();
+    ASSERT_EQ(static_cast<int>(factor.l_value().size()), l.nonZeros());
+    for (int k = 0; k <= n; ++k) ASSERT_EQ(factor.l_outer()[k], l.outerIndexPtr()[k]);
+    for (int p = 0; p < l.nonZeros(); ++p) {
+      ASSERT_EQ(factor.l_inner()[p], l.innerIndexPtr()[p]);
+      ASSERT_TRUE(same_bits(factor.l_value()[p], l.valuePtr()[p])) << "entry " << p;
+    }
+    for (int k = 0; k < n; ++k) ASSERT_TRUE(same_bits(factor.d()[k], solver.vectorD()[k]));
+    Rows3 b(n, 3);
+    for (int i = 0; i < n; ++i)
+      for (int c = 0; c < 3; ++c) b(i, c) = (i + c) % 5 == 0 ? 0.0 : uniform(rng);
+    b(3, 1) = -0.0;
+    b.row(17).setZero();
+    const Eigen::MatrixX3d expected = solver.solve(Eigen::MatrixX3d(b));
+    Rows3 x = b;
+    factor.Solve3(&x);
+    for (int i = 0; i < n; ++i) {
+      for (int c = 0; c < 3; ++c) {
+        ASSERT_TRUE(same_bits(x(i, c), expected(i, c)))
+            << "n " << n << " row " << i << " column " << c << ": " << x(i, c) << " vs "
+            << expected(i, c);
+      }
+    }
+  }
+  // A zero pivot is reported.
+  const std::vector<int> outer = {0, 1, 3}, inner = {0, 0, 1};
+  const std::vector<double> singular = {1.0, 1.0, 1.0};
+  EXPECT_FALSE(factor.Factorize(2, outer.data(), inner.data(), singular.data()));
 }
 
 // With a switch cost, triangles keep their source image unless another is clearly better.
