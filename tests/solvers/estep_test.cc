@@ -107,6 +107,27 @@ PosedTemplateView View(const PointSets& sets, bool color) {
   return view;
 }
 
+// Both E-steps' targets at `radius` agree to 1e-12, with the same pairs (at least one).
+void ExpectSameTargets(EStep* x, EStep* y, const PosedTemplateView& view, double radius) {
+  CorrespondenceTargets a, b;
+  x->Compute(view, radius, &a);
+  y->Compute(view, radius, &b);
+  ExpectTargetsNear(a, b, 1e-12);
+  EXPECT_EQ(a.num_pairs, b.num_pairs);
+  EXPECT_GT(a.num_pairs, 0);
+}
+
+// Candidate-list E-step options of the tests below: voxel cloud, 2 cm margin, small grains.
+EStepOptions ListOptions(bool normalize) {
+  EStepOptions options;
+  options.voxel_fraction = 0.25;
+  options.candidate_margin = 0.02;
+  options.grain_size = 16;
+  options.weights.normalize_per_scan_point = normalize;
+  options.weights.lambda_color = 0.01;
+  return options;
+}
+
 class EStepVariantsTest : public ::testing::TestWithParam<std::tuple<bool, bool>> {};
 
 TEST_P(EStepVariantsTest, DenseEqualsBruteForce) {
@@ -187,12 +208,7 @@ TEST(EStepTest, CandidateListsEqualAFreshRadiusSearch) {
   std::normal_distribution<double> g(0.0, 1.0);
   for (bool normalize : {false, true}) {
     for (bool color : {false, true}) {
-      EStepOptions cached_options;
-      cached_options.voxel_fraction = 0.25;
-      cached_options.candidate_margin = 0.02;
-      cached_options.grain_size = 16;
-      cached_options.weights.normalize_per_scan_point = normalize;
-      cached_options.weights.lambda_color = 0.01;
+      const EStepOptions cached_options = ListOptions(normalize);
       EStepOptions fresh_options = cached_options;
       fresh_options.candidate_margin = 0.0;
       EStep cached(sets.scan, cached_options), fresh(sets.scan, fresh_options);
@@ -201,12 +217,7 @@ TEST(EStepTest, CandidateListsEqualAFreshRadiusSearch) {
       for (double step : {0.0, 0.003, 0.003, 0.04, 0.003}) {
         for (int i = 0; i < moved.vertices.size(); ++i) moved.vertices.data()[i] += step * g(rng);
         for (double radius : {0.08, 0.05}) {
-          CorrespondenceTargets a, b;
-          cached.Compute(View(moved, color), radius, &a);
-          fresh.Compute(View(moved, color), radius, &b);
-          ExpectTargetsNear(a, b, 1e-12);
-          EXPECT_EQ(a.num_pairs, b.num_pairs);
-          EXPECT_GT(a.num_pairs, 0);
+          ExpectSameTargets(&cached, &fresh, View(moved, color), radius);
         }
       }
     }
@@ -224,14 +235,9 @@ TEST(EStepTest, SharedCloudAndListsEqualAFreshSearchOfThatCloud) {
   for (double cell : {0.02, 0.0}) {
     for (bool normalize : {false, true}) {
       for (bool color : {false, true}) {
-        EStepOptions shared_options;
-        shared_options.voxel_fraction = 0.25;
+        EStepOptions shared_options = ListOptions(normalize);
         shared_options.voxel_cell = cell;
         shared_options.list_radius = 0.08;
-        shared_options.candidate_margin = 0.02;
-        shared_options.grain_size = 16;
-        shared_options.weights.normalize_per_scan_point = normalize;
-        shared_options.weights.lambda_color = 0.01;
         EStepOptions fresh_options = shared_options;
         fresh_options.candidate_margin = 0.0;
         fresh_options.list_radius = 0.0;
@@ -248,12 +254,7 @@ TEST(EStepTest, SharedCloudAndListsEqualAFreshSearchOfThatCloud) {
               for (int i = 0; i < moved.vertices.size(); ++i)
                 moved.vertices.data()[i] += 0.006 * g(rng);
             }
-            CorrespondenceTargets a, b;
-            shared.Compute(View(moved, color), radius, &a);
-            fresh.Compute(View(moved, color), radius, &b);
-            ExpectTargetsNear(a, b, 1e-12);
-            EXPECT_EQ(a.num_pairs, b.num_pairs);
-            EXPECT_GT(a.num_pairs, 0);
+            ExpectSameTargets(&shared, &fresh, View(moved, color), radius);
             // With one cloud the narrower radius never gathers: the wider one's lists serve it.
             if (cell > 0.0 && radius < 0.08) {
               EXPECT_EQ(shared.neighbor_queries(), queries);

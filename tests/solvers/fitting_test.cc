@@ -50,6 +50,24 @@ class FittingTest : public ::testing::Test {
     return options;
   }
 
+  // Fits a's and b's first frames from start_ (the same, bit for bit, expected), then starts b
+  // again and c from a's pose as accepted tracking poses and fits a tracking frame with each.
+  struct TrackingFits {
+    FitSummary a, b, c;
+  };
+  TrackingFits FitFirstThenTrack(EMFitter* a, EMFitter* b, EMFitter* c) {
+    a->SetInitialPose(start_);
+    b->SetInitialPose(start_);
+    const FitSummary first_a = a->FitFrame(scan_), first_b = b->FitFrame(scan_);
+    EXPECT_EQ(first_a.iterations, first_b.iterations);
+    EXPECT_TRUE(a->pose().ToVector() == b->pose().ToVector());
+    b->Reset();
+    b->AcceptPose(scan_, a->pose());
+    c->AcceptPose(scan_, a->pose());
+    EXPECT_TRUE(a->tracking() && b->tracking() && c->tracking());
+    return {a->FitFrame(scan_), b->FitFrame(scan_), c->FitFrame(scan_)};
+  }
+
   FitSummary Fit(const EMFitterOptions& options, const Pose& start, Pose* result,
                  const Scan* scan = nullptr) {
     EMFitter fitter(model_, options);
@@ -103,20 +121,9 @@ TEST_F(FittingTest, TrackingFramesFitTheTrackingSubset) {
   EXPECT_LE(static_cast<int>(a.fit_vertices(true).size()), 100);
   EXPECT_GT(a.fit_vertices().size(), a.fit_vertices(true).size());
 
-  a.SetInitialPose(start_);
-  b.SetInitialPose(start_);
-  const FitSummary first_a = a.FitFrame(scan_), first_b = b.FitFrame(scan_);
-  EXPECT_EQ(first_a.iterations, first_b.iterations);
-  EXPECT_TRUE(a.pose().ToVector() == b.pose().ToVector());
-
-  c.AcceptPose(scan_, a.pose());
-  b.Reset();
-  b.AcceptPose(scan_, a.pose());
-  ASSERT_TRUE(a.tracking() && b.tracking() && c.tracking());
-  const FitSummary track_a = a.FitFrame(scan_), track_b = b.FitFrame(scan_),
-                   track_c = c.FitFrame(scan_);
-  EXPECT_TRUE(track_a.ok());
-  EXPECT_EQ(track_a.iterations, track_c.iterations);
+  const TrackingFits track = FitFirstThenTrack(&a, &b, &c);
+  EXPECT_TRUE(track.a.ok());
+  EXPECT_EQ(track.a.iterations, track.c.iterations);
   EXPECT_TRUE(a.pose().ToVector() == c.pose().ToVector());
   EXPECT_FALSE(a.pose().ToVector() == b.pose().ToVector());
   EXPECT_LT(MeanVertexError(skinning_, a.pose(), truth_), 0.01);
@@ -136,23 +143,12 @@ TEST_F(FittingTest, TrackingFramesShareOneCloudAndGather) {
   explicit_options.estep.voxel_cell = widest * shared.estep.voxel_fraction;
   explicit_options.estep.list_radius = widest;
   EMFitter a(model_, shared), b(model_, per_radius), c(model_, explicit_options);
-  a.SetInitialPose(start_);
-  b.SetInitialPose(start_);
-  const FitSummary first_a = a.FitFrame(scan_), first_b = b.FitFrame(scan_);
-  EXPECT_EQ(first_a.iterations, first_b.iterations);
-  EXPECT_TRUE(a.pose().ToVector() == b.pose().ToVector());
-
-  b.Reset();
-  b.AcceptPose(scan_, a.pose());
-  c.AcceptPose(scan_, a.pose());
-  ASSERT_TRUE(a.tracking() && b.tracking() && c.tracking());
-  const FitSummary track_a = a.FitFrame(scan_), track_b = b.FitFrame(scan_),
-                   track_c = c.FitFrame(scan_);
-  EXPECT_TRUE(track_a.ok());
-  EXPECT_EQ(track_a.iterations, track_c.iterations);
+  const TrackingFits track = FitFirstThenTrack(&a, &b, &c);
+  EXPECT_TRUE(track.a.ok());
+  EXPECT_EQ(track.a.iterations, track.c.iterations);
   EXPECT_TRUE(a.pose().ToVector() == c.pose().ToVector());
   EXPECT_FALSE(a.pose().ToVector() == b.pose().ToVector());
-  EXPECT_LT(track_a.neighbor_queries, track_b.neighbor_queries);
+  EXPECT_LT(track.a.neighbor_queries, track.b.neighbor_queries);
   EXPECT_LT(MeanVertexError(skinning_, a.pose(), truth_), 0.01);
   EXPECT_LT(MeanVertexError(skinning_, b.pose(), truth_), 0.01);
 }
