@@ -11,9 +11,11 @@
 #include <memory>
 #include <nanoflann.hpp>
 #include <nlohmann/json.hpp>
+#include <opencv2/core/utility.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <optional>
 #include <sstream>
+#include <tbb/global_control.h>
 
 #include "experiments/pipeline_output.h"
 #include "experiments/pipeline_stages.h"
@@ -333,6 +335,22 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
                            const PipelineOptions& options, const Config& resolved_config,
                            const std::string& out_dir,
                            const std::function<void(const PipelineProgress&)>& progress) {
+  // pipeline.threads: the parallel loops' threads for this run (restored after it).
+  std::unique_ptr<tbb::global_control> limit;
+  const int opencv_threads = cv::getNumThreads();
+  struct RestoreOpenCv {
+    int threads;
+    bool set;
+    ~RestoreOpenCv() {
+      if (set) cv::setNumThreads(threads);
+    }
+  } restore{opencv_threads, options.realtime.threads > 0};
+  if (options.realtime.threads > 0) {
+    limit = std::make_unique<tbb::global_control>(
+        tbb::global_control::max_allowed_parallelism,
+        static_cast<std::size_t>(options.realtime.threads));
+    cv::setNumThreads(options.realtime.threads);
+  }
   if (!options.shape.retrack || options.shape.mode == ShapeMode::kFixed) {
     return RunOnePass(sequence_dir, template_path, options, resolved_config, out_dir, progress);
   }

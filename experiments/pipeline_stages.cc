@@ -71,6 +71,8 @@ bool RealtimeOptions::IsValid(std::string* error) const {
   } else if (colour_delay_frames < 0) {
     msg = "pipeline.colour_delay_frames: expected >= 0, found " +
           std::to_string(colour_delay_frames);
+  } else if (threads < 0) {
+    msg = "pipeline.threads: expected >= 0 (0: every core), found " + std::to_string(threads);
   }
   if (msg.empty()) return true;
   if (error) *error = msg;

@@ -41,6 +41,10 @@ struct RealtimeOptions {
   // newest pose; every tracked frame still passes, posed with the current texture), so the
   // texturing's CPU goes to tracking when the two cores do not suffice for both at the rate.
   bool live_texture_skip = true;
+  // pipeline.threads: oneTBB (and OpenCV) threads of the run's parallel loops, 0: every core.
+  // Pipelined, the stages already run concurrently; 1 keeps each stage on its own thread
+  // (no worker spinning between a stage's loops; docs/realtime.md, "Threads").
+  int threads = 0;
 
   bool IsValid(std::string* error) const;
 };

@@ -204,6 +204,24 @@ TEST(PipelinedTrackingTest, TexturesEveryNthFrameWithTextureEvery) {
   EXPECT_EQ(every.realtime.frames_texture_not_due, 0);
 }
 
+TEST(PipelinedTrackingTest, OneThreadPerStageGivesTheSameResults) {
+  // pipeline.threads 1: every parallel loop on its stage's thread; the same poses and texture.
+  Config config = BaseConfig();
+  config.Set("pipeline.threads", "1");
+  const PipelineResult one = RunWith(config, "pipelined", "threads1");
+  const PipelineResult all = RunWith(BaseConfig(), "pipelined", "threads0");
+  ASSERT_EQ(one.frames.size(), all.frames.size());
+  for (size_t i = 0; i < one.frames.size(); ++i) {
+    ExpectNear(one.frames[i].mean_vertex_error_mm, all.frames[i].mean_vertex_error_mm,
+               "frame " + std::to_string(i));
+  }
+  const fs::path root = TestData().root;
+  EXPECT_EQ(ReadFileBytes(root / "threads1" / "poses.csv"),
+            ReadFileBytes(root / "threads0" / "poses.csv"));
+  EXPECT_EQ(ReadFileBytes(root / "threads1" / "texture.png"),
+            ReadFileBytes(root / "threads0" / "texture.png"));
+}
+
 TEST(PipelinedTrackingTest, LiveModeAccountsForEveryFrame) {
   // A clock far faster than tracking: frames are dropped, never queued without bound.
   Config config = BaseConfig();
@@ -294,6 +312,7 @@ TEST(PipelinedTrackingTest, RejectsInvalidOptions) {
                                                         {"pipeline.colour_delay_frames", "-1"},
                                                         {"pipeline.gap_refit_frames", "-1"},
                                                         {"pipeline.texture_every", "0"},
+                                                        {"pipeline.threads", "-1"},
                                                         {"pipeline.gap_refit_radii", "[0.05, 0]"},
                                                         {"pipeline.gap_refit_iterations_per_stage", "0"}}) {
     Config config = BaseConfig();
