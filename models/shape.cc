@@ -37,6 +37,7 @@ BodyShape BodyShape::Identity(int num_joints) {
   s.girth = Eigen::VectorXd::Ones(num_joints);
   s.leaf_length = Eigen::VectorXd::Ones(num_joints);
   s.fork_width = Eigen::VectorXd::Ones(num_joints);
+  s.depth = Eigen::VectorXd::Ones(num_joints);
   return s;
 }
 
@@ -50,8 +51,8 @@ int MirrorOf(const Template& t, int j) {
 }  // namespace
 
 ShapeModel::ShapeModel(const Template& base, ShapeMode mode, bool symmetric, bool leaf_lengths,
-                       bool fork_widths)
-    : base_(base), mode_(mode) {
+                       bool fork_widths, bool girth_depth)
+    : base_(base), mode_(mode), girth_depth_(girth_depth && mode == ShapeMode::kBonesGirth) {
   std::string error;
   if (!base_.IsValid(&error)) throw Error("ShapeModel: invalid template: " + error);
   const int nj = base_.num_joints();
@@ -106,6 +107,21 @@ ShapeModel::ShapeModel(const Template& base, ShapeMode mode, bool symmetric, boo
     alpha_[v] = a.dot(o);
     rho_.row(v) = (o - alpha_[v] * a).transpose();
   }
+  // Depth axes: +Z (the template faces it) across the twist axis; +Y for a segment along Z.
+  if (girth_depth_) {
+    std::vector<Eigen::Vector3d> depth_axis(nj);
+    for (int j = 0; j < nj; ++j) {
+      const Eigen::Vector3d a = base_.joints[j].twist_axis.normalized();
+      Eigen::Vector3d d = Eigen::Vector3d::UnitZ() - a.z() * a;
+      if (d.norm() < 0.5) d = Eigen::Vector3d::UnitY() - a.y() * a;
+      depth_axis[j] = d.normalized();
+    }
+    rho_depth_.resize(nv, 3);
+    for (int v = 0; v < nv; ++v) {
+      const Eigen::Vector3d& d = depth_axis[base_.vertex_joint[v]];
+      rho_depth_.row(v) = rho_.row(v).dot(d.transpose()) * d.transpose();
+    }
+  }
   // Reduced parameters.
   std::vector<std::vector<int>> rows;  // full rows of each reduced parameter
   if (mode_ == ShapeMode::kScale) {
@@ -115,9 +131,10 @@ ShapeModel::ShapeModel(const Template& base, ShapeMode mode, bool symmetric, boo
     for (int j = 0; j < nj; ++j) rows.back().push_back(nj + j);
   } else if (mode_ == ShapeMode::kBones || mode_ == ShapeMode::kBonesGirth) {
     const int groups = mode_ == ShapeMode::kBones ? 1 : 2;
-    for (int g : {0, 1, 2, 3}) {
+    for (int g : {0, 1, 2, 3, 4}) {
       if (g == 1 && groups < 2) continue;
       if (g == 2 && !leaves) continue;
+      if (g == 4 && !girth_depth_) continue;
       std::vector<int> index_of(nj, -1);
       for (int j = g == 0 ? 1 : 0; j < nj; ++j) {
         if (g == 2 && stretch_row_[j] != 2 * nj + j) continue;  // leaves only
@@ -128,13 +145,13 @@ ShapeModel::ShapeModel(const Template& base, ShapeMode mode, bool symmetric, boo
           continue;
         }
         index_of[j] = static_cast<int>(rows.size());
-        static const char* const kPrefix[] = {"bone:", "girth:", "length:", "width:"};
+        static const char* const kPrefix[] = {"bone:", "girth:", "length:", "width:", "depth:"};
         names_.push_back(kPrefix[g] + base_.joints[j].name);
         rows.push_back({g * nj + j});
       }
     }
   }
-  expansion_ = Eigen::MatrixXd::Zero(4 * nj, static_cast<int>(names_.size()));
+  expansion_ = Eigen::MatrixXd::Zero(full_rows(), static_cast<int>(names_.size()));
   for (size_t p = 0; p < rows.size(); ++p) {
     for (int r : rows[p]) expansion_(r, static_cast<int>(p)) = 1.0;
   }
@@ -148,15 +165,18 @@ BodyShape ShapeModel::Expand(const Eigen::VectorXd& q) const {
     throw Error(msg.str());
   }
   const int nj = base_.num_joints();
+  const int rows = full_rows();
   const Eigen::VectorXd full =
-      Eigen::VectorXd::Ones(4 * nj) +
-      (q.size() ? Eigen::VectorXd(expansion_ * q) : Eigen::VectorXd::Zero(4 * nj));
+      Eigen::VectorXd::Ones(rows) +
+      (q.size() ? Eigen::VectorXd(expansion_ * q) : Eigen::VectorXd::Zero(rows));
   BodyShape s;
   s.bone_length = full.head(nj);
   s.bone_length[0] = 1.0;
   s.girth = full.segment(nj, nj);
   s.leaf_length = full.segment(2 * nj, nj);
-  s.fork_width = full.tail(nj);
+  s.fork_width = full.segment(3 * nj, nj);
+  s.depth = girth_depth_ ? Eigen::VectorXd(full.segment(4 * nj, nj))
+                         : Eigen::VectorXd(Eigen::VectorXd::Ones(nj));
   return s;
 }
 
@@ -184,6 +204,10 @@ void ShapeModel::RestGeometry(const Eigen::VectorXd& q, Eigen::MatrixX3d* center
     const double l = row < 0 ? 1.0 : row < nj ? s.bone_length[row] : s.leaf_length[row - 2 * nj];
     const Eigen::Vector3d a = base_.joints[k].twist_axis.normalized();
     vertices->row(v) = centers->row(k) + (l * alpha_[v]) * a.transpose() + g * rho_.row(v);
+    if (girth_depth_) {
+      const double d = w * s.depth[k] + (1.0 - w) * s.depth[k == 0 ? 0 : parent];
+      vertices->row(v) += (d - 1.0) * rho_depth_.row(v);
+    }
   }
 }
 
@@ -218,7 +242,7 @@ void ShapeModel::PosedJacobian(const Pose& pose, const std::vector<int>& vertice
     twist[j] = st.twist_angle;
   }
   const int n = vertices.empty() ? base_.num_vertices() : static_cast<int>(vertices.size());
-  Eigen::Matrix<double, 3, Eigen::Dynamic> full(3, 4 * nj);
+  Eigen::Matrix<double, 3, Eigen::Dynamic> full(3, full_rows());
   jacobian->resize(3 * n, num_parameters());
   for (int i = 0; i < n; ++i) {
     const int v = vertices.empty() ? i : vertices[i];
@@ -250,9 +274,30 @@ void ShapeModel::PosedJacobian(const Pose& pose, const std::vector<int>& vertice
       full.col(nj + k) += w * dg;
       full.col(nj + base_.joints[k].parent) += (1.0 - w) * dg;
     }
+    if (girth_depth_) {
+      const Eigen::Vector3d rd = rho_depth_.row(v).transpose();
+      const Eigen::Vector3d dd =
+          g_map * (std::cos(angle) * rd + std::sin(angle) * a.cross(rd));
+      if (k == 0) {
+        full.col(4 * nj) += dd;
+      } else {
+        full.col(4 * nj + k) += w * dd;
+        full.col(4 * nj + base_.joints[k].parent) += (1.0 - w) * dd;
+      }
+    }
     full.col(0).setZero();  // the root's bone length is unused
     jacobian->middleRows<3>(3 * i) = full * expansion_;
   }
+}
+
+}  // namespace artex
+
+namespace artex {
+
+bool ShapeModel::IsGirthParameter(int p) const {
+  const int nj = base_.num_joints();
+  const Eigen::VectorXd col = expansion_.col(p);
+  return col.head(nj).isZero() && col.segment(2 * nj, 2 * nj).isZero();
 }
 
 }  // namespace artex

@@ -131,7 +131,8 @@ ShapeOptions Checked(const ShapeOptions& options) {
 
 ShapeEstimator::ShapeEstimator(const Template& base, const ShapeOptions& options)
     : options_(Checked(options)),
-      model_(base, options.mode, options.symmetric, options.leaf_lengths, options.fork_widths) {
+      model_(base, options.mode, options.symmetric, options.leaf_lengths, options.fork_widths,
+             options.girth_depth) {
   q_ = Eigen::VectorXd::Zero(model_.num_parameters());
   const int v = base.num_vertices();
   const int stride = options_.max_fit_vertices > 0 && v > options_.max_fit_vertices
@@ -217,9 +218,7 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
   // Columns of q that move girths only (held at wide radii).
   std::vector<int> girth_columns;
   for (int p = 0; p < nq; ++p) {
-    const int nj = base.num_joints();
-    const auto col = model_.expansion().col(p);
-    if (col.head(nj).isZero() && col.tail(2 * nj).isZero()) girth_columns.push_back(p);
+    if (model_.IsGirthParameter(p)) girth_columns.push_back(p);
   }
   bool first = true;
   for (double radius : options_.radii) {

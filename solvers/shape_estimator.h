@@ -43,6 +43,10 @@ struct ShapeOptions {
   // bones, bones_girth: the shoulders' and hips' offsets get a width factor across the parent's
   // axis besides their length along it (models/shape.h).
   bool fork_widths = true;
+  // bones_girth: each girth segment also gets a depth factor (its cross-section's front-back
+  // extent against its width, models/shape.h), bounded like the girths. A subject's trunk and
+  // limbs differ from the template in proportion, not only in size.
+  bool girth_depth = false;
   int calibration_frames = 5;  // accepted frames per calibration round (>= 1)
   // Every n-th accepted frame (with a settled global scale) is a calibration frame: poses
   // further apart constrain the bone lengths better. >= 1.

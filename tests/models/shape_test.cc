@@ -99,9 +99,9 @@ TEST(ShapeModelTest, PosedJacobianMatchesFiniteDifferences) {
   const Template& t = CoarseTemplate();
   std::mt19937 rng(7);
   for (ShapeMode mode : {ShapeMode::kScale, ShapeMode::kBones, ShapeMode::kBonesGirth}) {
-    for (int variant = 0; variant < 4; ++variant) {
-      const bool symmetric = variant % 2 == 1, extended = variant >= 2;
-      const ShapeModel m(t, mode, symmetric, extended, extended);
+    for (int variant = 0; variant < 6; ++variant) {
+      const bool symmetric = variant % 2 == 1, extended = variant >= 2, depth = variant >= 4;
+      const ShapeModel m(t, mode, symmetric, extended, extended, depth);
       for (int trial = 0; trial < 2; ++trial) {
         const Pose pose = RandomPose(t.num_joints(), &rng, 0.6);
         const Eigen::VectorXd q = RandomShape(m.num_parameters(), &rng, 0.2);
@@ -129,7 +129,8 @@ TEST(ShapeModelTest, PosedJacobianMatchesFiniteDifferences) {
         }
         EXPECT_GT(largest, 0.05) << ShapeModeName(mode);  // the columns are not all zero
         EXPECT_LT(worst, 1e-7) << ShapeModeName(mode) << " symmetric " << symmetric
-                               << " leaf lengths and fork widths " << extended;
+                               << " leaf lengths and fork widths " << extended << " depth "
+                               << depth;
       }
     }
   }
@@ -180,6 +181,64 @@ TEST(ShapeModelTest, LeafLengthsAndForkWidths) {
   const Eigen::Vector3d moved = wide.joints[shoulder].center - t.joints[shoulder].center;
   EXPECT_GT(moved.norm(), 0.01);
   EXPECT_LT(std::abs(moved.dot(axis)), 1e-12);
+}
+
+// A depth factor scales a segment's cross-section front to back (+Z for the trunk and limbs,
+// +Y for the feet) and leaves its width; girth scales both; without girth_depth the model is
+// bones_girth as before.
+TEST(ShapeModelTest, DepthFactorScalesTheCrossSectionFrontToBack) {
+  const Template& t = CoarseTemplate();
+  const ShapeModel plain(t, ShapeMode::kBonesGirth, true, true, true);
+  const ShapeModel m(t, ShapeMode::kBonesGirth, true, true, true, true);
+  EXPECT_EQ(m.num_parameters(), plain.num_parameters() + 11);
+  EXPECT_EQ(ShapeModel(t, ShapeMode::kBones, true, true, true, true).num_parameters(),
+            ShapeModel(t, ShapeMode::kBones, true, true, true).num_parameters());
+  const auto& names = m.parameter_names();
+  const auto index = [&](const std::string& name) {
+    return static_cast<int>(std::find(names.begin(), names.end(), name) - names.begin());
+  };
+  ASSERT_LT(index("depth:l_knee"), m.num_parameters());
+  for (int p = 0; p < m.num_parameters(); ++p) {
+    EXPECT_EQ(m.IsGirthParameter(p),
+              names[p].rfind("girth:", 0) == 0 || names[p].rfind("depth:", 0) == 0)
+        << names[p];
+  }
+  // The same bones_girth parameters give the same template.
+  std::mt19937 rng(5);
+  const Eigen::VectorXd qp = RandomShape(plain.num_parameters(), &rng, 0.2);
+  Eigen::VectorXd q = Eigen::VectorXd::Zero(m.num_parameters());
+  q.head(plain.num_parameters()) = qp;
+  EXPECT_LT((m.Apply(q).vertices - plain.Apply(qp).vertices).cwiseAbs().maxCoeff(), 1e-12);
+  // Extent of a segment's vertices (those of weight 1: no blending) along an axis through its
+  // centre.
+  const auto extent = [&](const Template& shaped, int joint, const Eigen::Vector3d& axis) {
+    double lo = 1e9, hi = -1e9;
+    for (int v = 0; v < t.num_vertices(); ++v) {
+      if (t.vertex_joint[v] != joint || t.lbs_weight[v] < 1.0) continue;
+      const double x = axis.dot(shaped.vertices.row(v).transpose() - shaped.joints[joint].center);
+      lo = std::min(lo, x);
+      hi = std::max(hi, x);
+    }
+    return hi - lo;
+  };
+  const int chest = t.FindJoint("chest"), ankle = t.FindJoint("l_ankle");
+  Eigen::VectorXd d = Eigen::VectorXd::Zero(m.num_parameters());
+  d[index("depth:chest")] = 0.25;
+  d[index("depth:l_ankle")] = -0.2;
+  const Template deep = m.Apply(d);
+  EXPECT_NEAR(extent(deep, chest, Eigen::Vector3d::UnitZ()),
+              1.25 * extent(t, chest, Eigen::Vector3d::UnitZ()), 1e-9);
+  EXPECT_NEAR(extent(deep, chest, Eigen::Vector3d::UnitX()),
+              extent(t, chest, Eigen::Vector3d::UnitX()), 1e-9);
+  // The foot points forwards (and a little down): its depth axis is +Y across its twist axis.
+  const Eigen::Vector3d a = t.joints[ankle].twist_axis.normalized();
+  const Eigen::Vector3d up = (Eigen::Vector3d::UnitY() - a.y() * a).normalized();
+  EXPECT_NEAR(extent(deep, ankle, up), 0.8 * extent(t, ankle, up), 1e-9);
+  EXPECT_NEAR(extent(deep, ankle, a.cross(up)), extent(t, ankle, a.cross(up)), 1e-9);
+  EXPECT_NEAR(extent(deep, ankle, a), extent(t, ankle, a), 1e-9);
+  for (int j = 0; j < t.num_joints(); ++j) {
+    EXPECT_EQ(deep.joints[j].center, t.joints[j].center);  // joints stay
+  }
 }
 
 TEST(ShapeModelTest, SetRestGeometryEqualsANewSkinning) {

@@ -49,14 +49,17 @@ ShapeOptions Options(ShapeMode mode) {
 // Known shape parameters are recovered from noise-free scans of a subject with that shape,
 // jointly with (perturbed) poses, starting from the template; with and without the leaf
 // lengths and fork widths (5 more parameters, the hands' and feet's lengths seen on few
-// vertices of this coarse mesh: the surface fit is looser).
+// vertices of this coarse mesh: the surface fit is looser), and bones_girth with the depth
+// factors too (11 more).
 TEST(ShapeEstimatorTest, RecoversKnownShapeFromNoiseFreeScans) {
   const Template& t = CoarseTemplate();
-  for (int variant = 0; variant < 4; ++variant) {
-    const ShapeMode mode = variant % 2 == 0 ? ShapeMode::kBones : ShapeMode::kBonesGirth;
+  for (int variant = 0; variant < 5; ++variant) {
+    const ShapeMode mode = variant % 2 == 0 && variant < 4 ? ShapeMode::kBones
+                                                           : ShapeMode::kBonesGirth;
     const bool extended = variant >= 2;
     ShapeOptions options = Options(mode);
     options.leaf_lengths = options.fork_widths = extended;
+    options.girth_depth = variant == 4;
     ShapeEstimator estimator(t, options);
     const ShapeModel& model = estimator.model();
     std::mt19937 rng(11);
@@ -84,9 +87,9 @@ TEST(ShapeEstimatorTest, RecoversKnownShapeFromNoiseFreeScans) {
     // (the correspondences pull little along a surface): a few per cent remain on the least
     // observable parameters of this coarse mesh.
     const Eigen::VectorXd error = (estimator.parameters() - truth).cwiseAbs();
-    EXPECT_LT(error.mean(), 0.01) << ShapeModeName(mode) << ": initial mean error "
-                                  << truth.cwiseAbs().mean();
-    EXPECT_LT(error.maxCoeff(), 0.04) << ShapeModeName(mode);
+    EXPECT_LT(error.mean(), 0.01) << ShapeModeName(mode) << " variant " << variant
+                                  << ": initial mean error " << truth.cwiseAbs().mean();
+    EXPECT_LT(error.maxCoeff(), 0.04) << ShapeModeName(mode) << " variant " << variant;
     // The fitted surface: mean vertex distance to the truth, against the template's.
     Eigen::MatrixX3d ours, before;
     Skinning(estimator.SubjectTemplate()).Apply(poses[0], &ours);
