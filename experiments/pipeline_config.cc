@@ -585,7 +585,7 @@ bool PipelineOptions::IsValid(std::string* error) const {
 // Section shape (solvers/shape_estimator.h).
 void BindShape(const Config& c, ShapeOptions* o) {
   c.CheckKeys({"mode", "retrack", "symmetric", "seed_pose", "leaf_lengths", "fork_widths",
-               "girth_depth",
+               "girth_depth", "depth_prior_weight",
                "calibration_frames", "calibration_stride", "calibration_rounds", "radii",
                "iterations_per_stage", "over_relaxation", "bias_correction",
                "visibility_min_cos", "bias_density", "girth_max_radius", "scan_to_model_weight",
@@ -600,6 +600,7 @@ void BindShape(const Config& c, ShapeOptions* o) {
   c.Get("leaf_lengths", &o->leaf_lengths);
   c.Get("fork_widths", &o->fork_widths);
   c.Get("girth_depth", &o->girth_depth);
+  c.Get("depth_prior_weight", &o->depth_prior_weight);
   c.Get("calibration_frames", &o->calibration_frames);
   c.Get("calibration_stride", &o->calibration_stride);
   c.Get("calibration_rounds", &o->calibration_rounds);

@@ -44,6 +44,8 @@ bool ShapeOptions::IsValid(std::string* error) const {
         << scan_to_model_max_distance;
   } else if (!(std::isfinite(chain_prior_weight) && chain_prior_weight >= 0.0)) {
     msg << "shape.chain_prior_weight: expected a finite value >= 0, found " << chain_prior_weight;
+  } else if (!(std::isfinite(depth_prior_weight) && depth_prior_weight >= 0.0)) {
+    msg << "shape.depth_prior_weight: expected a finite value >= 0, found " << depth_prior_weight;
   } else if (!(std::isfinite(prior_weight) && prior_weight >= 0.0)) {
     msg << "shape.prior_weight: expected a finite value >= 0, found " << prior_weight;
   } else if (!(std::isfinite(pose_damping) && pose_damping >= 0.0)) {
@@ -347,6 +349,15 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
       cost += prior_weight * dq.dot(ete * dq);
       h.topLeftCorner(nq, nq) += prior_weight * ete;
       g.head(nq) += prior_weight * ete * dq;
+      if (options_.depth_prior_weight > 0.0) {
+        // w |q_p|^2 per depth parameter: towards the template's cross-section proportions.
+        for (int p = 0; p < nq; ++p) {
+          if (model_.parameter_names()[p].rfind("depth:", 0) != 0) continue;
+          cost += options_.depth_prior_weight * q_[p] * q_[p];
+          h(p, p) += options_.depth_prior_weight;
+          g[p] += options_.depth_prior_weight * q_[p];
+        }
+      }
       if (options_.chain_prior_weight > 0.0 && chain_.rows() > 0) {
         // w |C q|^2, C q the differences of collinear bones' length factors.
         const Eigen::VectorXd d = chain_ * q_;

@@ -47,6 +47,11 @@ struct ShapeOptions {
   // extent against its width, models/shape.h), bounded like the girths. A subject's trunk and
   // limbs differ from the template in proportion, not only in size.
   bool girth_depth = false;
+  // girth_depth: depth_prior_weight |q_d|^2 per depth parameter (the depth factor's departure
+  // from the segment's girth), cost m^2 per unit^2 as prior_weight. A one-sided view sees a
+  // cross-section's depth only where the segment turns; this keeps it near the template's
+  // proportions where the data say little. 0: off.
+  double depth_prior_weight = 0.0;
   int calibration_frames = 5;  // accepted frames per calibration round (>= 1)
   // Every n-th accepted frame (with a settled global scale) is a calibration frame: poses
   // further apart constrain the bone lengths better. >= 1.

@@ -176,6 +176,49 @@ TEST(ShapeEstimatorTest, FixedModeNeverChangesTheTemplate) {
   EXPECT_LT((estimator.SubjectTemplate().vertices - t.vertices).cwiseAbs().maxCoeff(), 1e-15);
 }
 
+// A deeper chest (depth factor 1.15, every other parameter the template's) is recovered with
+// girth_depth; a strong depth prior holds the depth factors at the girths' proportions.
+TEST(ShapeEstimatorTest, DepthPriorHoldsTheProportions) {
+  const Template& t = CoarseTemplate();
+  for (double weight : {0.0, 1.0}) {
+    ShapeOptions o = Options(ShapeMode::kBonesGirth);
+    o.girth_depth = true;
+    o.depth_prior_weight = weight;
+    ShapeEstimator estimator(t, o);
+    const auto& names = estimator.model().parameter_names();
+    const int chest =
+        static_cast<int>(std::find(names.begin(), names.end(), "depth:chest") - names.begin());
+    ASSERT_LT(chest, estimator.model().num_parameters());
+    Eigen::VectorXd truth = Eigen::VectorXd::Zero(estimator.model().num_parameters());
+    truth[chest] = 0.15;
+    const Template subject = estimator.model().Apply(truth);
+    std::mt19937 rng(13);
+    std::vector<Scan> scans;
+    std::vector<Pose> poses;
+    for (int f = 0; f < 2; ++f) {
+      poses.push_back(RandomPose(t.num_joints(), &rng, 0.2));
+      scans.push_back(ScanOf(subject, poses.back()));
+    }
+    estimator.Solve({&scans[0], &scans[1]}, &poses, Eigen::VectorXd::Zero(truth.size()), 1e-8);
+    double depth_max = 0.0;
+    for (int p = 0; p < truth.size(); ++p) {
+      if (names[p].rfind("depth:", 0) == 0) {
+        depth_max = std::max(depth_max, std::abs(estimator.parameters()[p]));
+      }
+    }
+    if (weight == 0.0) {
+      EXPECT_NEAR(estimator.parameters()[chest], 0.15, 0.02);
+    } else {
+      EXPECT_LT(depth_max, 0.01);
+    }
+  }
+  ShapeOptions bad;
+  bad.depth_prior_weight = -1.0;
+  std::string why;
+  EXPECT_FALSE(bad.IsValid(&why));
+  EXPECT_NE(why.find("depth_prior_weight"), std::string::npos) << why;
+}
+
 TEST(ShapeEstimatorTest, BoundsHoldAndOptionsAreChecked) {
   const Template& t = CoarseTemplate();
   ShapeOptions o = Options(ShapeMode::kScale);
