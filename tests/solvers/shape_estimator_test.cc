@@ -35,6 +35,22 @@ Scan ScanOf(const Template& subject, const Pose& pose) {
   return scan;
 }
 
+// `frames` random poses (seeded) and noise-free scans of the subject in them.
+void PosesAndScans(const Template& subject, int frames, double spread, unsigned seed,
+                   std::vector<Pose>* poses, std::vector<Scan>* scans) {
+  std::mt19937 rng(seed);
+  for (int f = 0; f < frames; ++f) {
+    poses->push_back(RandomPose(subject.num_joints(), &rng, spread));
+    scans->push_back(ScanOf(subject, poses->back()));
+  }
+}
+
+// Index of the named shape parameter (num_parameters() when absent).
+int ParameterIndex(const ShapeModel& model, const std::string& name) {
+  const auto& names = model.parameter_names();
+  return static_cast<int>(std::find(names.begin(), names.end(), name) - names.begin());
+}
+
 ShapeOptions Options(ShapeMode mode) {
   ShapeOptions o;
   o.mode = mode;
@@ -112,20 +128,14 @@ TEST(ShapeEstimatorTest, ScanToModelTermRecoversLongShanks) {
     o.scan_to_model_weight = with_term ? 0.3 : 0.0;
     ShapeEstimator estimator(t, o);
     const ShapeModel& model = estimator.model();
-    const std::vector<std::string>& names = model.parameter_names();
-    const int shank = static_cast<int>(std::find(names.begin(), names.end(), "bone:l_ankle") -
-                                       names.begin());
+    const int shank = ParameterIndex(model, "bone:l_ankle");
     ASSERT_LT(shank, model.num_parameters());
     Eigen::VectorXd truth = Eigen::VectorXd::Zero(model.num_parameters());
     truth[shank] = 0.35;
     const Template subject = model.Apply(truth);
-    std::mt19937 rng(7);
     std::vector<Scan> scans;
     std::vector<Pose> poses;
-    for (int f = 0; f < 3; ++f) {
-      poses.push_back(RandomPose(t.num_joints(), &rng, 0.25));
-      scans.push_back(ScanOf(subject, poses.back()));
-    }
+    PosesAndScans(subject, 3, 0.25, 7, &poses, &scans);
     std::vector<const Scan*> pointers;
     for (const Scan& s : scans) pointers.push_back(&s);
     estimator.Solve(pointers, &poses, Eigen::VectorXd::Zero(truth.size()), 1e-8);
@@ -186,19 +196,14 @@ TEST(ShapeEstimatorTest, DepthPriorHoldsTheProportions) {
     o.depth_prior_weight = weight;
     ShapeEstimator estimator(t, o);
     const auto& names = estimator.model().parameter_names();
-    const int chest =
-        static_cast<int>(std::find(names.begin(), names.end(), "depth:chest") - names.begin());
+    const int chest = ParameterIndex(estimator.model(), "depth:chest");
     ASSERT_LT(chest, estimator.model().num_parameters());
     Eigen::VectorXd truth = Eigen::VectorXd::Zero(estimator.model().num_parameters());
     truth[chest] = 0.15;
     const Template subject = estimator.model().Apply(truth);
-    std::mt19937 rng(13);
     std::vector<Scan> scans;
     std::vector<Pose> poses;
-    for (int f = 0; f < 2; ++f) {
-      poses.push_back(RandomPose(t.num_joints(), &rng, 0.2));
-      scans.push_back(ScanOf(subject, poses.back()));
-    }
+    PosesAndScans(subject, 2, 0.2, 13, &poses, &scans);
     estimator.Solve({&scans[0], &scans[1]}, &poses, Eigen::VectorXd::Zero(truth.size()), 1e-8);
     double depth_max = 0.0;
     for (int p = 0; p < truth.size(); ++p) {
@@ -227,13 +232,9 @@ TEST(ShapeEstimatorTest, BoundsHoldAndOptionsAreChecked) {
   o.radii = {0.05, 0.03};
   ShapeEstimator estimator(t, o);
   const Template subject = estimator.model().Apply(Eigen::VectorXd::Constant(1, 0.1));
-  std::mt19937 rng(9);
   std::vector<Scan> scans;
   std::vector<Pose> poses;
-  for (int f = 0; f < 2; ++f) {
-    poses.push_back(RandomPose(t.num_joints(), &rng, 0.2));
-    scans.push_back(ScanOf(subject, poses.back()));
-  }
+  PosesAndScans(subject, 2, 0.2, 9, &poses, &scans);
   estimator.Solve({&scans[0], &scans[1]}, &poses, Eigen::VectorXd::Zero(1), 1e-8);
   EXPECT_NEAR(estimator.parameters()[0], 0.02, 1e-12);  // pushed to the bound
   ShapeOptions bad;
