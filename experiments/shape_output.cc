@@ -53,7 +53,7 @@ void AddShapeToSummary(const std::string& summary_path, const PipelineResult& re
     if (est.options().fork_widths && body.fork_width[j] != 1.0) {
       jj["width_factor"] = body.fork_width[j];
     }
-    if (est.options().girth_depth && body.depth[j] != 1.0) {
+    if (est.options().girth_depth && est.options().mode == ShapeMode::kBonesGirth) {
       jj["depth_factor"] = body.girth[j] + body.depth[j] - 1.0;  // of the cross-section's depth
     }
     if (j > 0) {

@@ -290,10 +290,6 @@ void ShapeModel::PosedJacobian(const Pose& pose, const std::vector<int>& vertice
   }
 }
 
-}  // namespace artex
-
-namespace artex {
-
 bool ShapeModel::IsGirthParameter(int p) const {
   const int nj = base_.num_joints();
   const Eigen::VectorXd col = expansion_.col(p);
