@@ -197,16 +197,17 @@ void ShapeModel::RestGeometry(const Eigen::VectorXd& q, Eigen::MatrixX3d* center
   vertices->resize(nv, 3);
   for (int v = 0; v < nv; ++v) {
     const int k = base_.vertex_joint[v];
-    const int parent = std::max(0, base_.joints[k].parent);
+    const int parent = std::max(0, base_.joints[k].parent);  // the root blends with itself
     const double w = base_.lbs_weight[v];
-    const double g = w * s.girth[k] + (1.0 - w) * s.girth[k == 0 ? 0 : parent];
+    // A cross-section factor blended across the joint like the skinning.
+    const auto blend = [&](const Eigen::VectorXd& f) { return w * f[k] + (1.0 - w) * f[parent]; };
+    const double g = blend(s.girth);
     const int row = stretch_row_[k];
     const double l = row < 0 ? 1.0 : row < nj ? s.bone_length[row] : s.leaf_length[row - 2 * nj];
     const Eigen::Vector3d a = base_.joints[k].twist_axis.normalized();
     vertices->row(v) = centers->row(k) + (l * alpha_[v]) * a.transpose() + g * rho_.row(v);
     if (girth_depth_) {
-      const double d = w * s.depth[k] + (1.0 - w) * s.depth[k == 0 ? 0 : parent];
-      vertices->row(v) += (d - 1.0) * rho_depth_.row(v);
+      vertices->row(v) += (blend(s.depth) - 1.0) * rho_depth_.row(v);
     }
   }
 }
@@ -265,26 +266,22 @@ void ShapeModel::PosedJacobian(const Pose& pose, const std::vector<int>& vertice
     const Eigen::Matrix3d g_map =
         world[k] * (w * swing[k] + (1.0 - w) * Eigen::Matrix3d::Identity());
     if (stretch_row_[k] >= 0) full.col(stretch_row_[k]) += g_map * (alpha_[v] * a);
+    // A radial offset x twisted by the SLERP share of the joint's twist and mapped, into the
+    // columns of the cross-section factor group starting at full row `first` (girths or depth
+    // factors), split across the joint like the blend in RestGeometry.
     const double angle = tau * twist[k];
-    const Eigen::Vector3d r = std::cos(angle) * rho + std::sin(angle) * a.cross(rho);
-    const Eigen::Vector3d dg = g_map * r;
-    if (k == 0) {
-      full.col(nj) += dg;
-    } else {
-      full.col(nj + k) += w * dg;
-      full.col(nj + base_.joints[k].parent) += (1.0 - w) * dg;
-    }
-    if (girth_depth_) {
-      const Eigen::Vector3d rd = rho_depth_.row(v).transpose();
-      const Eigen::Vector3d dd =
-          g_map * (std::cos(angle) * rd + std::sin(angle) * a.cross(rd));
+    const double cos_angle = std::cos(angle), sin_angle = std::sin(angle);
+    const auto add_cross_section = [&](int first, const Eigen::Vector3d& x) {
+      const Eigen::Vector3d d = g_map * (cos_angle * x + sin_angle * a.cross(x));
       if (k == 0) {
-        full.col(4 * nj) += dd;
+        full.col(first) += d;
       } else {
-        full.col(4 * nj + k) += w * dd;
-        full.col(4 * nj + base_.joints[k].parent) += (1.0 - w) * dd;
+        full.col(first + k) += w * d;
+        full.col(first + base_.joints[k].parent) += (1.0 - w) * d;
       }
-    }
+    };
+    add_cross_section(nj, rho);
+    if (girth_depth_) add_cross_section(4 * nj, rho_depth_.row(v).transpose());
     full.col(0).setZero();  // the root's bone length is unused
     jacobian->middleRows<3>(3 * i) = full * expansion_;
   }
@@ -294,6 +291,11 @@ bool ShapeModel::IsGirthParameter(int p) const {
   const int nj = base_.num_joints();
   const Eigen::VectorXd col = expansion_.col(p);
   return col.head(nj).isZero() && col.segment(2 * nj, 2 * nj).isZero();
+}
+
+bool ShapeModel::IsDepthParameter(int p) const {
+  const int nj = base_.num_joints();
+  return girth_depth_ && expansion_.col(p).head(4 * nj).isZero();
 }
 
 }  // namespace artex

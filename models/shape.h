@@ -70,11 +70,13 @@ class ShapeModel {
   // Q names: "bone:<joint>" (the bone ending at the joint), "girth:<joint>", "length:<leaf>",
   // "width:<joint>", "depth:<joint>", "scale".
   const std::vector<std::string>& parameter_names() const { return names_; }
-  // 4 J (5 J with girth_depth) x Q 0/1 matrix E: rows 0..J-1 bone lengths, J..2J-1 girths, 2J..3J-1 leaf lengths,
-  // 3J..4J-1 fork widths, 4J..5J-1 depth factors.
+  // 4 J (5 J with girth_depth) x Q 0/1 matrix E: rows 0..J-1 bone lengths, J..2J-1 girths,
+  // 2J..3J-1 leaf lengths, 3J..4J-1 fork widths, 4J..5J-1 depth factors.
   const Eigen::MatrixXd& expansion() const { return expansion_; }
   // Parameter p moves cross-sections only (girth or depth rows), no length.
   bool IsGirthParameter(int p) const;
+  // Parameter p is a depth factor ("depth:<joint>", girth_depth only).
+  bool IsDepthParameter(int p) const;
 
   // full = 1 + E q. Throws artex::Error when q has not Q entries.
   BodyShape Expand(const Eigen::VectorXd& q) const;

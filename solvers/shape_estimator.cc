@@ -352,7 +352,7 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
       if (options_.depth_prior_weight > 0.0) {
         // w |q_p|^2 per depth parameter: towards the template's cross-section proportions.
         for (int p = 0; p < nq; ++p) {
-          if (model_.parameter_names()[p].rfind("depth:", 0) != 0) continue;
+          if (!model_.IsDepthParameter(p)) continue;
           cost += options_.depth_prior_weight * q_[p] * q_[p];
           h(p, p) += options_.depth_prior_weight;
           g[p] += options_.depth_prior_weight * q_[p];

@@ -202,6 +202,7 @@ TEST(ShapeModelTest, DepthFactorScalesTheCrossSectionFrontToBack) {
     EXPECT_EQ(m.IsGirthParameter(p),
               names[p].rfind("girth:", 0) == 0 || names[p].rfind("depth:", 0) == 0)
         << names[p];
+    EXPECT_EQ(m.IsDepthParameter(p), names[p].rfind("depth:", 0) == 0) << names[p];
   }
   // The same bones_girth parameters give the same template.
   std::mt19937 rng(5);
