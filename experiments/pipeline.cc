@@ -17,6 +17,7 @@
 #include <sstream>
 #include <tbb/global_control.h>
 
+#include "experiments/heap_retention.h"
 #include "experiments/pipeline_output.h"
 #include "experiments/pipeline_stages.h"
 #include "experiments/pose_csv.h"
@@ -335,6 +336,8 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
                            const PipelineOptions& options, const Config& resolved_config,
                            const std::string& out_dir,
                            const std::function<void(const PipelineProgress&)>& progress) {
+  // pipeline.heap_retain_mb: process-wide, kept after the run (heap_retention.h).
+  RetainFreedHeap(options.realtime.heap_retain_mb);
   // pipeline.threads: the parallel loops' threads for this run (restored after it).
   std::unique_ptr<tbb::global_control> limit;
   const int opencv_threads = cv::getNumThreads();

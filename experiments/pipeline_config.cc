@@ -446,7 +446,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
                "texture_quality_every", "texture_quality_yaws_deg", "texture_quality_height",
                "export_atlases", "stream", "stream_estimate", "concurrency", "queue_depth", "live",
                "live_queue_depth", "live_rate_hz", "colour_delay_frames", "live_texture_skip",
-               "threads"});
+               "threads", "heap_retain_mb"});
   c.Get("texture", &o->texture);
   c.Get("colour_term", &o->colour_term);
   c.Get("first_frame", &o->first_frame);
@@ -483,6 +483,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("live_rate_hz", &o->realtime.live_rate_hz);
   c.Get("colour_delay_frames", &o->realtime.colour_delay_frames);
   c.Get("threads", &o->realtime.threads);
+  c.Get("heap_retain_mb", &o->realtime.heap_retain_mb);
 }
 
 void BindStream(const Config& c, StreamOptions* o) {

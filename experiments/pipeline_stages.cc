@@ -73,6 +73,9 @@ bool RealtimeOptions::IsValid(std::string* error) const {
           std::to_string(colour_delay_frames);
   } else if (threads < 0) {
     msg = "pipeline.threads: expected >= 0 (0: every core), found " + std::to_string(threads);
+  } else if (heap_retain_mb < 0 || heap_retain_mb > 65536) {
+    msg = "pipeline.heap_retain_mb: expected 0 (the allocator's defaults) to 65536, found " +
+          std::to_string(heap_retain_mb);
   }
   if (msg.empty()) return true;
   if (error) *error = msg;

@@ -45,6 +45,10 @@ struct RealtimeOptions {
   // Pipelined, the stages already run concurrently; 1 keeps each stage on its own thread
   // (no worker spinning between a stage's loops; docs/realtime.md, "Threads").
   int threads = 0;
+  // pipeline.heap_retain_mb: freed memory up to this many MB stays in the process for the
+  // next frame's buffers instead of going back to the kernel (experiments/heap_retention.h;
+  // process-wide, applied when a run starts and kept after it); 0: the allocator's defaults.
+  int heap_retain_mb = 512;
 
   bool IsValid(std::string* error) const;
 };
