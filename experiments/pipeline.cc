@@ -196,8 +196,8 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
   shape.SetCameraCenter(calibration.depth.world_to_camera.inverse().translation());
   TrackStage track(options, calibration, &preprocessor, &fitter);
   track.SetShape(&shape, &tmpl);
-  TextureStage texturing(options, calibration, texturer.get(), &sinks, truth_scene != nullptr,
-                         begin, end);
+  PoolStage pooling(options, calibration, texturer.get());
+  TextureStage texturing(options, texturer.get(), &sinks, truth_scene != nullptr, begin, end);
   OutputStage output(options, tmpl, truth, out_dir, begin, end, &result, progress);
   const double rate_hz = options.realtime.live_rate_hz > 0 ? options.realtime.live_rate_hz
                                                            : calibration.frame_rate;
@@ -205,7 +205,7 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
   RealtimeOptions realtime = options.realtime;
   if (shape.enabled()) realtime.concurrency = PipelineConcurrency::kSequential;
   result.realtime =
-      RunStages(realtime, &reader, begin, end, rate_hz, &track, &texturing, &output);
+      RunStages(realtime, &reader, begin, end, rate_hz, &track, &pooling, &texturing, &output);
   const int shape_calibrated_frame = track.shape_calibrated_frame;
   result.shape_calibrated_frame = shape_calibrated_frame;
   result.shape_final_frame = track.shape_final_frame;

@@ -130,15 +130,15 @@ FrameWork ReadWork(FrameSource* source, int frame, int sequence, PipelineClock::
 }  // namespace
 
 RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int begin, int end,
-                        double rate_hz, TrackStage* track, TextureStage* texture,
-                        OutputStage* output) {
+                        double rate_hz, TrackStage* track, PoolStage* pool,
+                        TextureStage* texture, OutputStage* output) {
   RealtimeStats stats;
   stats.concurrency = options.concurrency;
   stats.live = options.live;
   stats.rate_hz = options.live ? rate_hz : 0.0;
   FrameClock clock(options.live, rate_hz, begin, end);
-  StageClock read_clock, track_clock, texture_clock, output_clock;
-  for (StageClock* c : {&read_clock, &track_clock, &texture_clock, &output_clock})
+  StageClock read_clock, track_clock, pool_clock, texture_clock, output_clock;
+  for (StageClock* c : {&read_clock, &track_clock, &pool_clock, &texture_clock, &output_clock})
     c->whole_process = options.concurrency == PipelineConcurrency::kSequential;
   std::vector<double> latencies;  // ms, processed frames
   double first_done = -1.0;       // s since start: the first frame textured
@@ -187,6 +187,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
       FrameWork work = read_clock.Time([&] { return ReadWork(source, frame, sequence, at); });
       take_colours(sequence);
       track_clock.Time([&] { track->Process(&work); });
+      pool_clock.Time([&] { pool->Process(&work); });
       run_texture(&work);
       finish(&work);
       ++sequence;
@@ -196,7 +197,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
     const std::size_t depth = static_cast<std::size_t>(options.queue_depth);
     BoundedQueue<FrameWork> to_track(
         options.live ? static_cast<std::size_t>(options.live_queue_depth) : depth);
-    BoundedQueue<FrameWork> to_texture(depth), to_output(depth);
+    BoundedQueue<FrameWork> to_pool(depth), to_texture(depth), to_output(depth);
     std::mutex error_mutex;
     std::exception_ptr error;
     const auto abort = [&](std::exception_ptr e) {
@@ -205,6 +206,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
         if (!error) error = e;
       }
       to_track.Close();
+      to_pool.Close();
       to_texture.Close();
       to_output.Close();
       mailbox.Abort();
@@ -248,6 +250,25 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
           work.sequence = sequence++;
           take_colours(work.sequence);
           track_clock.Time([&] { track->Process(&work); });
+          if (!to_pool.Push(std::move(work))) break;
+        }
+      } catch (...) {
+        abort(std::current_exception());
+      }
+      to_pool.Close();
+    });
+    std::atomic<int> texture_skipped{0};
+    std::thread pooler([&] {
+      try {
+        FrameWork work;
+        while (to_pool.Pop(&work)) {
+          if (options.live && options.live_texture_skip && work.texture_frame &&
+              !work.record.skipped && first_textured && to_pool.size() > 0) {
+            work.texture_frame = false;  // a newer frame waits: texture that one
+            work.record.texture_skipped = true;
+            ++texture_skipped;
+          }
+          pool_clock.Time([&] { pool->Process(&work); });
           if (!to_texture.Push(std::move(work))) break;
         }
       } catch (...) {
@@ -255,17 +276,10 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
       }
       to_texture.Close();
     });
-    std::atomic<int> texture_skipped{0};
     std::thread texturer([&] {
       try {
         FrameWork work;
         while (to_texture.Pop(&work)) {
-          if (options.live && options.live_texture_skip && work.texture_frame &&
-              !work.record.skipped && first_textured && to_texture.size() > 0) {
-            work.texture_frame = false;  // a newer frame waits: texture that one
-            work.record.texture_skipped = true;
-            ++texture_skipped;
-          }
           run_texture(&work);
           if (!to_output.Push(std::move(work))) break;
         }
@@ -282,12 +296,13 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
     }
     reader.join();
     tracker.join();
+    pooler.join();
     texturer.join();
     if (error) std::rethrow_exception(error);
     stats.frames_dropped = dropped;
     stats.frames_texture_skipped = texture_skipped;
   }
-  stats.frames_texture_not_due = texture->frames_not_due;
+  stats.frames_texture_not_due = pool->frames_not_due;
   stats.wall_seconds = SecondsSince(start);
   const double cpu = CpuSeconds() - cpu_start;
   stats.frames_dropped_after_first = dropped_after_first;
@@ -311,7 +326,8 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
     return t;
   };
   stats.stages = {stage("read", read_clock), stage("track", track_clock),
-                  stage("texture", texture_clock), stage("output", output_clock)};
+                  stage("pool", pool_clock), stage("texture", texture_clock),
+                  stage("output", output_clock)};
   return stats;
 }
 

@@ -276,11 +276,30 @@ void TrackStage::Process(FrameWork* work) {
 // ---------------------------------------------------------------------------------------------
 // TextureStage
 
-TextureStage::TextureStage(const PipelineOptions& options, const Calibration& calibration,
-                           Texturer* texturer, FrameSinks* sinks, bool evaluate_texture, int begin,
-                           int end)
+PoolStage::PoolStage(const PipelineOptions& options, const Calibration& calibration,
+                     Texturer* texturer)
+    : options_(options), calibration_(calibration), texturer_(texturer) {}
+
+void PoolStage::Process(FrameWork* work) {
+  FrameRecord& record = work->record;
+  if (record.skipped) return;
+  const int i = record.frame;
+  if (texturer_ && work->texture_frame && last_textured_ >= 0 &&
+      i - last_textured_ < options_.texture_every) {
+    work->texture_frame = false;  // not due yet: the texture stays as it is
+    record.texture_not_due = true;
+    ++frames_not_due;
+  }
+  if (texturer_ && work->texture_frame) {
+    last_textured_ = i;
+    work->prepared = texturer_->PrepareFrame(i, work->frame.color, calibration_.color, work->posed);
+  }
+  work->frame.color.release();
+}
+
+TextureStage::TextureStage(const PipelineOptions& options, Texturer* texturer, FrameSinks* sinks,
+                           bool evaluate_texture, int begin, int end)
     : options_(options),
-      calibration_(calibration),
       texturer_(texturer),
       sinks_(sinks),
       evaluate_texture_(evaluate_texture && texturer != nullptr),
@@ -294,15 +313,8 @@ bool TextureStage::Process(FrameWork* work, Eigen::MatrixX3d* colours) {
   FrameRecord& record = work->record;
   bool changed = false;
   if (options_.stream_estimate) stream_bytes += sizeof(float) * work->pose.num_parameters();
-  if (texturer_ && work->texture_frame && last_textured_ >= 0 &&
-      i - last_textured_ < options_.texture_every) {
-    work->texture_frame = false;  // not due yet: the texture stays as it is
-    record.texture_not_due = true;
-    ++frames_not_due;
-  }
   if (texturer_ && work->texture_frame) {
-    last_textured_ = i;
-    record.texture = texturer_->AddFrame(i, work->frame.color, calibration_.color, work->posed);
+    record.texture = texturer_->AddPrepared(std::move(work->prepared));
     texture_seconds += record.texture.seconds_total;
     if (options_.stream_estimate) stream_bytes += TextureUpdateBytes(*texturer_);
     if (options_.colour_term) {
@@ -335,7 +347,6 @@ bool TextureStage::Process(FrameWork* work, Eigen::MatrixX3d* colours) {
     work->atlas = texturer_->Atlas().clone();
     if (work->evaluate_texture) work->triangle_frames = texturer_->triangle_frames();
   }
-  work->frame.color.release();
   return changed;
 }
 

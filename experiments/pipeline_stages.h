@@ -1,7 +1,8 @@
 // The stages of the per-sequence pipeline (experiments/pipeline.h, docs/realtime.md) and the
 // scheduler that runs them one after another or concurrently (realtime_options.h).
 //
-// read -> track (preprocess + fit + fit quality + re-initialisation) -> texture (atlas, stream
+// read -> track (preprocess + fit + fit quality + re-initialisation) -> pool (which frames are
+// textured, their images prepared for the image pool) -> texture (view selection, atlas, stream
 // sinks, colour feedback) -> output (ground-truth metrics, per-frame files, the run's record).
 // Each stage is a serial unit owning its state: frames pass through every stage in order, so
 // the pipelined schedule computes exactly what the sequential one does. Dependences between
@@ -45,6 +46,7 @@ struct FrameWork {
   Pose pose;                // the frame's pose (fitted frames)
   Eigen::MatrixX3d posed;   // its skinned template (world, m)
   bool texture_frame = false;
+  PreparedFrame prepared;   // the pool stage's work for the texture stage (texture frames)
   cv::Mat foreground;       // pipeline.export_foreground
   // The texture after this frame, for the output stage (novel-view quality, atlas_frames).
   cv::Mat atlas;
@@ -116,29 +118,45 @@ class TrackStage {
   FitQualityLabel previous_label_ = FitQualityLabel::kLost;  // of the last processed frame
 };
 
-// On-the-fly texturing of the fitted frames, the stream sinks, the vertex colours for the
-// colour term, and the texture snapshots the output stage evaluates.
-class TextureStage {
+// The first half of the texturing: whether a tracked frame is textured (pipeline.texture_every)
+// and, if so, its colour image made ready for the image pool (Texturer::PrepareFrame: the
+// visibility and colours of the new image, about a quarter of the texturing's CPU), on its own
+// thread ahead of the texture stage.
+class PoolStage {
  public:
-  // texturer, sinks may be null. evaluate_texture: novel-view quality is measured (every
-  // options.texture_quality_every-th frame of [begin, end) and the last).
-  TextureStage(const PipelineOptions& options, const Calibration& calibration, Texturer* texturer,
-               FrameSinks* sinks, bool evaluate_texture, int begin, int end);
-  // True and *colours set when the fitter's template colours change after this frame.
-  bool Process(FrameWork* work, Eigen::MatrixX3d* colours);
+  PoolStage(const PipelineOptions& options, const Calibration& calibration, Texturer* texturer);
+  void Process(FrameWork* work);
 
-  double texture_seconds = 0.0;
-  std::size_t stream_bytes = 0;  // pose + texture updates
-  int frames_not_due = 0;        // left untextured by pipeline.texture_every
+  int frames_not_due = 0;  // left untextured by pipeline.texture_every
 
  private:
   const PipelineOptions& options_;
   const Calibration& calibration_;
   Texturer* texturer_;
+  int last_textured_ = -1;  // frame number of the last textured frame (-1: none yet)
+};
+
+// On-the-fly texturing of the fitted frames (the pool stage's prepared images), the stream
+// sinks, the vertex colours for the colour term, and the texture snapshots the output stage
+// evaluates.
+class TextureStage {
+ public:
+  // texturer, sinks may be null. evaluate_texture: novel-view quality is measured (every
+  // options.texture_quality_every-th frame of [begin, end) and the last).
+  TextureStage(const PipelineOptions& options, Texturer* texturer, FrameSinks* sinks,
+               bool evaluate_texture, int begin, int end);
+  // True and *colours set when the fitter's template colours change after this frame.
+  bool Process(FrameWork* work, Eigen::MatrixX3d* colours);
+
+  double texture_seconds = 0.0;
+  std::size_t stream_bytes = 0;  // pose + texture updates
+
+ private:
+  const PipelineOptions& options_;
+  Texturer* texturer_;
   FrameSinks* sinks_;
   bool evaluate_texture_;
   int begin_, end_;
-  int last_textured_ = -1;  // frame number of the last textured frame (-1: none yet)
 };
 
 // What the output stage needs of the ground truth (absent: subject == nullptr).
@@ -189,8 +207,8 @@ class OutputStage {
 // pipelined; live: on a clock at rate_hz, dropping what the first queue cannot take) and
 // returns what it measured. Rethrows the first stage's exception after stopping all stages.
 RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int begin, int end,
-                        double rate_hz, TrackStage* track, TextureStage* texture,
-                        OutputStage* output);
+                        double rate_hz, TrackStage* track, PoolStage* pool,
+                        TextureStage* texture, OutputStage* output);
 
 // Writes realtime.json (RealtimeStats) into out_dir.
 void WriteRealtimeJson(const std::string& path, const RealtimeStats& stats);

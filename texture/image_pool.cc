@@ -251,6 +251,12 @@ ImagePool::ImagePool(const TextureMesh* mesh, const ImagePoolOptions& pool_optio
 
 int ImagePool::Add(int frame_index, const cv::Mat& color_bgr, const PinholeCamera& camera,
                    const Eigen::MatrixX3d& posed_vertices) {
+  return Insert(MakeEntry(frame_index, color_bgr, camera, posed_vertices));
+}
+
+std::unique_ptr<PoolEntry> ImagePool::MakeEntry(int frame_index, const cv::Mat& color_bgr,
+                                                const PinholeCamera& camera,
+                                                const Eigen::MatrixX3d& posed_vertices) const {
   if (color_bgr.type() != CV_8UC3 || color_bgr.cols != camera.width ||
       color_bgr.rows != camera.height) {
     std::ostringstream msg;
@@ -330,6 +336,17 @@ int ImagePool::Add(int frame_index, const cv::Mat& color_bgr, const PinholeCamer
   }
   SampleVertexColors(*entry, cam, pixels, vertex_quality, &entry->vertex_colors);
   SampleEdgeColors(*entry, *mesh_, cam, options_.edge_samples, &entry->edge_colors);
+  return entry;
+}
+
+int ImagePool::Insert(std::unique_ptr<PoolEntry> entry) {
+  if (!entry) throw Error("ImagePool::Insert: expected an entry, found none");
+  const TriangleVisibility& vis = entry->visibility;
+  if (static_cast<int>(vis.visible.size()) != mesh_->triangles.rows()) {
+    throw Error("ImagePool::Insert: expected visibility of " +
+                std::to_string(mesh_->triangles.rows()) + " triangles, found " +
+                std::to_string(vis.visible.size()));
+  }
   // The entry's histogram level per triangle for pruning: 0 where not visible, else 1 + the bin
   // of W (the last bin includes W = 1).
   const int bins = options_.histogram_bins;

@@ -179,8 +179,18 @@ class ImagePool {
             const VisibilityOptions& visibility_options);
 
   // Adds the image of a frame with its posed template; returns the new entry's slot.
+  // Insert(MakeEntry(...)).
   int Add(int frame_index, const cv::Mat& color_bgr, const PinholeCamera& camera,
           const Eigen::MatrixX3d& posed_vertices);
+  // The entry Add would pool for this frame (visibility, crop, vertex and edge colours), not
+  // pooled yet. Reads only the mesh and the options, never the pooled entries: it may run on
+  // one thread while another inserts, prunes or reads entries (a pipeline stage ahead of the
+  // texturing). Throws artex::Error for an image of the wrong size or type.
+  std::unique_ptr<PoolEntry> MakeEntry(int frame_index, const cv::Mat& color_bgr,
+                                       const PinholeCamera& camera,
+                                       const Eigen::MatrixX3d& posed_vertices) const;
+  // Pools an entry from MakeEntry (newest); returns its slot.
+  int Insert(std::unique_ptr<PoolEntry> entry);
   // Applies the pruning rule; returns the frame indices of the dropped images.
   std::vector<int> Prune();
 

@@ -69,21 +69,38 @@ Texturer::~Texturer() = default;
 TextureFrameSummary Texturer::AddFrame(int frame, const cv::Mat& color_bgr,
                                        const PinholeCamera& camera,
                                        const Eigen::MatrixX3d& posed_vertices) {
+  return AddPrepared(PrepareFrame(frame, color_bgr, camera, posed_vertices));
+}
+
+PreparedFrame Texturer::PrepareFrame(int frame, const cv::Mat& color_bgr,
+                                     const PinholeCamera& camera,
+                                     const Eigen::MatrixX3d& posed_vertices) {
   const auto start = std::chrono::steady_clock::now();
-  TextureFrameSummary s;
-  s.frame = frame;
   if (posed_vertices.rows() != template_.num_vertices() || !posed_vertices.allFinite()) {
     std::ostringstream msg;
     msg << "texturing frame " << frame << ": expected " << template_.num_vertices()
         << " finite posed vertices, found " << posed_vertices.rows();
     throw Error(msg.str());
   }
-  if (frames_seen_++ % options_.add_every == 0) {
-    pool_->Add(frame, color_bgr, camera, posed_vertices);
+  PreparedFrame prepared;
+  prepared.frame = frame;
+  if (frames_seen_++ % options_.add_every == 0)
+    prepared.entry = pool_->MakeEntry(frame, color_bgr, camera, posed_vertices);
+  prepared.seconds = SecondsSince(start);
+  return prepared;
+}
+
+TextureFrameSummary Texturer::AddPrepared(PreparedFrame prepared) {
+  const auto start = std::chrono::steady_clock::now();
+  TextureFrameSummary s;
+  const int frame = prepared.frame;
+  s.frame = frame;
+  if (prepared.entry) {
+    pool_->Insert(std::move(prepared.entry));
     pool_->Prune();
     s.image_added = true;
   }
-  s.seconds_pool = SecondsSince(start);
+  s.seconds_pool = prepared.seconds + SecondsSince(start);
   s.pool_size = pool_->size();
   s.pool_bytes = pool_->MemoryBytes();
 
@@ -169,7 +186,7 @@ TextureFrameSummary Texturer::AddFrame(int frame, const cv::Mat& color_bgr,
     s.seconds_levelling = SecondsSince(t_level);
   };
   tbb::parallel_invoke(resample, seams, level);
-  s.seconds_total = SecondsSince(start);
+  s.seconds_total = prepared.seconds + SecondsSince(start);
   return s;
 }
 

@@ -60,6 +60,13 @@ struct TextureFrameSummary {
          seconds_total = 0.0;
 };
 
+// A frame's image made ready to join the pool (Texturer::PrepareFrame).
+struct PreparedFrame {
+  int frame = -1;
+  std::unique_ptr<PoolEntry> entry;  // null: the image does not join the pool (add_every)
+  double seconds = 0.0;              // wall time of the preparation
+};
+
 class Texturer {
  public:
   // Throws artex::Error for invalid options or a template without UVs.
@@ -68,8 +75,20 @@ class Texturer {
 
   // color_bgr: the full colour image (CV_8UC3) of `frame`; camera: the colour camera;
   // posed_vertices: V x 3 fitted template of that frame (world, m).
+  // AddPrepared(PrepareFrame(...)).
   TextureFrameSummary AddFrame(int frame, const cv::Mat& color_bgr, const PinholeCamera& camera,
                                const Eigen::MatrixX3d& posed_vertices);
+  // AddFrame in two halves, for two threads: the image of frame t+1 is prepared while frame t
+  // is textured. PrepareFrame decides whether the image joins the pool (every add_every-th
+  // call) and builds its entry (visibility, colours; ImagePool::MakeEntry); it reads only the
+  // template's mesh and the options, so one thread may call it while another calls
+  // AddPrepared. AddPrepared does the rest of AddFrame (pooling, pruning, view selection,
+  // resampling, levelling). Every PrepareFrame's result goes to AddPrepared once, in the
+  // order of the PrepareFrame calls; the results are those of AddFrame bit for bit.
+  // PrepareFrame throws artex::Error for posed vertices of the wrong count or not finite.
+  PreparedFrame PrepareFrame(int frame, const cv::Mat& color_bgr, const PinholeCamera& camera,
+                             const Eigen::MatrixX3d& posed_vertices);
+  TextureFrameSummary AddPrepared(PreparedFrame prepared);
 
   // The current atlas (CV_8UC3, BGR, atlas_size^2): levelled (when on) and padded.
   cv::Mat Atlas() const;
@@ -109,7 +128,7 @@ class Texturer {
   std::vector<double> edge_weight_;
   Eigen::MatrixX3f corrections_;  // 3F x 3
   std::vector<int> changed_;
-  int frames_seen_ = 0;
+  int frames_seen_ = 0;  // PrepareFrame calls (only PrepareFrame reads and writes it)
 };
 
 // Renders a textured template (per-corner UVs into `atlas`, bilinear) through a camera: the

@@ -94,7 +94,7 @@ void ExpectSameRuns(const Config& config, const std::string& name, int* reinitia
   EXPECT_EQ(pip.realtime.concurrency, PipelineConcurrency::kPipelined);
   EXPECT_EQ(pip.realtime.frames_processed, kFrames);
   EXPECT_EQ(pip.realtime.frames_dropped, 0);
-  ASSERT_EQ(pip.realtime.stages.size(), 4u);
+  ASSERT_EQ(pip.realtime.stages.size(), 5u);
   for (const StageTiming& s : pip.realtime.stages) EXPECT_EQ(s.frames, kFrames) << s.name;
   if (reinitialised) {
     *reinitialised = 0;
