@@ -111,14 +111,16 @@ def main():
                  rt["frames_dropped_after_first"], r["rss_mb"],
                  m["mean_vertex_error_mm"] or float("nan"),
                  m["mean_novel_view_psnr_db"] or float("nan")))
-    print("stage busy ms/frame (read, track, texture, output):")
+    # Stages by name (the two builds may have different stages: the pool stage is newer).
+    print("stage busy ms/frame:")
     for name, r in results.items():
-        print("  %-32s %s" % (name, ", ".join("%.1f" % s["ms_per_frame"]
+        print("  %-32s %s" % (name, ", ".join("%s %.1f" % (s["name"], s["ms_per_frame"])
                                               for s in r["realtime"]["stages"])))
-    print("stage CPU ms/frame (read, track, texture, output; sequential: the process's, "
-          "pipelined: the stage thread's without oneTBB workers):")
+    print("stage CPU ms/frame (sequential: the process's, pipelined: the stage thread's "
+          "without oneTBB workers):")
     for name, r in results.items():
-        print("  %-32s %s" % (name, ", ".join("%.1f" % s.get("cpu_ms_per_frame", float("nan"))
+        print("  %-32s %s" % (name, ", ".join("%s %.1f" % (s["name"],
+                                                           s.get("cpu_ms_per_frame", float("nan")))
                                               for s in r["realtime"]["stages"])))
     with open(os.path.join(args.work, "results.json"), "w") as f:
         json.dump({"uptime_before": before, "uptime_after": after, "runs": results}, f, indent=2)

@@ -375,6 +375,7 @@ void BindTexture(const Config& c, TexturingOptions* o) {
                "atlas_size",
                "padding_texels",
                "seam_levelling",
+               "levelling_every_frame",
                "levelling_smoothness",
                "add_every",
                "depth_tolerance",
@@ -411,6 +412,7 @@ void BindTexture(const Config& c, TexturingOptions* o) {
   c.Get("atlas_size", &o->atlas_size);
   c.Get("padding_texels", &o->padding_texels);
   c.Get("seam_levelling", &o->seam_levelling);
+  c.Get("levelling_every_frame", &o->levelling_every_frame);
   c.Get("levelling_smoothness", &o->levelling.smoothness);
   c.Get("add_every", &o->add_every);
   c.Get("depth_tolerance", &o->visibility.depth_tolerance);

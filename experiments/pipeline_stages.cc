@@ -317,7 +317,11 @@ bool TextureStage::Process(FrameWork* work, Eigen::MatrixX3d* colours) {
     record.texture = texturer_->AddPrepared(std::move(work->prepared));
     texture_seconds += record.texture.seconds_total;
     if (options_.stream_estimate) stream_bytes += TextureUpdateBytes(*texturer_);
-    if (options_.colour_term) {
+    // The colour term starts once the texture covers most of the body (counted without
+    // levelling the seams: the colours, which need it, are read only then); vertices without
+    // texture take the mean colour (neutral for the colour distance on average).
+    if (options_.colour_term &&
+        texturer_->ColouredVertexCount() > 0.9 * work->posed.rows()) {
       std::vector<uint8_t> valid;
       Eigen::MatrixX3d& c = *colours;
       texturer_->VertexColors(&c, &valid);
@@ -328,8 +332,6 @@ bool TextureStage::Process(FrameWork* work, Eigen::MatrixX3d* colours) {
         mean += c.row(v).transpose();
         ++count;
       }
-      // The colour term starts once the texture covers most of the body; vertices without
-      // texture take the mean colour (neutral for the colour distance on average).
       if (count > 0.9 * c.rows()) {
         mean /= count;
         for (int v = 0; v < c.rows(); ++v)
@@ -346,6 +348,17 @@ bool TextureStage::Process(FrameWork* work, Eigen::MatrixX3d* colours) {
   if (work->evaluate_texture || work->write_atlas) {
     work->atlas = texturer_->Atlas().clone();
     if (work->evaluate_texture) work->triangle_frames = texturer_->triangle_frames();
+  }
+  // Seams levelled by a read after AddFrame (texture.levelling_every_frame false: the colour
+  // term, an atlas snapshot, the stream): the frame's record gets their residuals and time.
+  if (texturer_ && work->texture_frame && std::isnan(record.texture.seam_rms_after) &&
+      texturer_->seams_levelled()) {
+    record.texture.seam_rms_before = texturer_->seam_rms_before();
+    record.texture.seam_rms_after = texturer_->seam_rms_after();
+    const double seconds = texturer_->levelling_seconds_since_add();
+    record.texture.seconds_levelling += seconds;
+    record.texture.seconds_total += seconds;
+    texture_seconds += seconds;
   }
   return changed;
 }

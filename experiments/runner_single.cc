@@ -102,7 +102,9 @@ void RunSingle(const std::string& config_path, const std::string& sequence_dir,
       changed.push_back(r.texture.changed_triangles);
       mrf_iterations.push_back(r.texture.mrf_iterations);
       pool.push_back(r.texture.pool_size);
-      if (r.texture.seam_edges > 0) {
+      // Frames whose seams were levelled (texture.levelling_every_frame false: those whose
+      // texture was read; the others' residuals are NaN).
+      if (r.texture.seam_edges > 0 && std::isfinite(r.texture.seam_rms_after)) {
         seam_before.push_back(r.texture.seam_rms_before);
         seam_after.push_back(r.texture.seam_rms_after);
       }

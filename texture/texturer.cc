@@ -163,39 +163,84 @@ TextureFrameSummary Texturer::AddPrepared(PreparedFrame prepared) {
         geodesics_->DistanceField(seam_vertices, options_.selection.terms.seam_distance_scale +
                                                      geodesics_->max_edge_length());
   };
+  const bool level_now = options_.seam_levelling && options_.levelling_every_frame;
+  levelled_ = !options_.seam_levelling;
+  levelling_seconds_ = 0.0;
+  if (!options_.seam_levelling) {
+    corrections_.setZero(3 * f_count, 3);
+    seam_rms_before_ = seam_rms_after_ = 0.0;
+  }
   const auto level = [&] {
-    const auto t_level = std::chrono::steady_clock::now();
-    if (options_.seam_levelling) {
-      SeamLevellingSummary ls;
-      leveller_->Level(
-          frames_,
-          [this](int v, int frame_index, Eigen::Vector3f* c) {
-            const int slot = pool_->SlotOfFrame(frame_index);
-            if (slot < 0) return false;
-            const auto row = pool_->entry(slot).vertex_colors.row(v);
-            if (!row.allFinite()) return false;
-            *c = row.transpose();
-            return true;
-          },
-          &corrections_, &ls);
-      s.seam_rms_before = ls.seam_residual_before;
-      s.seam_rms_after = ls.seam_residual_after;
-    } else {
-      corrections_.setZero(3 * f_count, 3);
-    }
-    s.seconds_levelling = SecondsSince(t_level);
+    if (!level_now) return;
+    s.seconds_levelling = LevelSeams();
+    s.seam_rms_before = seam_rms_before_;
+    s.seam_rms_after = seam_rms_after_;
   };
+  if (options_.seam_levelling && !level_now) {
+    s.seam_rms_before = s.seam_rms_after = std::numeric_limits<double>::quiet_NaN();
+  }
   tbb::parallel_invoke(resample, seams, level);
   s.seconds_total = prepared.seconds + SecondsSince(start);
   return s;
 }
 
+double Texturer::LevelSeams() const {
+  if (levelled_) return 0.0;
+  const auto start = std::chrono::steady_clock::now();
+  SeamLevellingSummary ls;
+  leveller_->Level(
+      frames_,
+      [this](int v, int frame_index, Eigen::Vector3f* c) {
+        const int slot = pool_->SlotOfFrame(frame_index);
+        if (slot < 0) return false;
+        const auto row = pool_->entry(slot).vertex_colors.row(v);
+        if (!row.allFinite()) return false;
+        *c = row.transpose();
+        return true;
+      },
+      &corrections_, &ls);
+  seam_rms_before_ = ls.seam_residual_before;
+  seam_rms_after_ = ls.seam_residual_after;
+  levelled_ = true;
+  const double seconds = SecondsSince(start);
+  levelling_seconds_ += seconds;
+  return seconds;
+}
+
+double Texturer::seam_rms_before() const {
+  LevelSeams();
+  return seam_rms_before_;
+}
+
+double Texturer::seam_rms_after() const {
+  LevelSeams();
+  return seam_rms_after_;
+}
+
+int Texturer::ColouredVertexCount() const {
+  std::vector<uint8_t> seen(template_.num_vertices(), 0);
+  for (int f = 0; f < template_.num_triangles(); ++f) {
+    if (frames_[f] < 0) continue;
+    const int slot = pool_->SlotOfFrame(frames_[f]);
+    if (slot < 0) continue;
+    for (int c = 0; c < 3; ++c) {
+      const int v = template_.triangles(f, c);
+      if (pool_->entry(slot).vertex_colors.row(v).allFinite()) seen[v] = 1;
+    }
+  }
+  int count = 0;
+  for (uint8_t b : seen) count += b;
+  return count;
+}
+
 cv::Mat Texturer::Atlas() const {
+  LevelSeams();
   return ComposeAtlas(*map_, base_, options_.seam_levelling ? &corrections_ : nullptr,
                       options_.padding_texels);
 }
 
 void Texturer::VertexColors(Eigen::MatrixX3d* rgb, std::vector<uint8_t>* valid) const {
+  LevelSeams();
   const int v_count = template_.num_vertices();
   Eigen::MatrixX3d sum = Eigen::MatrixX3d::Zero(v_count, 3);
   std::vector<int> count(v_count, 0);

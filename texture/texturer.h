@@ -38,6 +38,11 @@ struct TexturingOptions {
   int padding_texels = 4;      // dilation passes at chart borders when composing the atlas
   bool seam_levelling = true;  // Lempitsky-Ivanov levelling on/off
   SeamLevellingOptions levelling;
+  // texture.levelling_every_frame. false: the seams are levelled when the texture is read
+  // (Atlas, VertexColors, LevelSeams) and the labelling changed since the last levelling, not
+  // in every AddFrame: the same atlas and colours bit for bit, but a frame's summary has no
+  // seam_rms_before/after (NaN; LevelSeams reports them). true: every AddFrame levels.
+  bool levelling_every_frame = false;
   int add_every = 1;  // add every n-th frame's image to the pool; >= 1
 
   bool IsValid(std::string* error) const;
@@ -90,13 +95,29 @@ class Texturer {
                              const Eigen::MatrixX3d& posed_vertices);
   TextureFrameSummary AddPrepared(PreparedFrame prepared);
 
-  // The current atlas (CV_8UC3, BGR, atlas_size^2): levelled (when on) and padded.
+  // The current atlas (CV_8UC3, BGR, atlas_size^2): levelled (when on) and padded. Levels the
+  // seams first when they are not (LevelSeams).
   cv::Mat Atlas() const;
+  // Levels the seams of the current labelling unless that was done (by AddFrame with
+  // levelling_every_frame, or by an earlier read); returns the wall seconds it took now (0:
+  // nothing to do). Atlas and VertexColors call it: like them it is not to be called
+  // concurrently with other calls on this texturer (PrepareFrame apart).
+  double LevelSeams() const;
+  // RMS colour jump at the seam vertices of the current labelling before and after levelling
+  // (LevelSeams first when they are not levelled; 0 without seams or with levelling off).
+  double seam_rms_before() const;
+  double seam_rms_after() const;
+  // Whether the current labelling's seams are levelled (always with levelling off), and the
+  // wall seconds LevelSeams spent since the last AddFrame.
+  bool seams_levelled() const { return levelled_; }
+  double levelling_seconds_since_add() const { return levelling_seconds_; }
   // F: source frame per triangle, -1 untextured.
   const std::vector<int>& triangle_frames() const { return frames_; }
   // V x 3 RGB in [0, 1] per template vertex from the current texture; valid[v] = 0 where no
-  // incident triangle is textured.
+  // incident triangle is textured. Levels the seams first when they are not (LevelSeams).
   void VertexColors(Eigen::MatrixX3d* rgb, std::vector<uint8_t>* valid) const;
+  // How many vertices VertexColors would mark valid, without levelling.
+  int ColouredVertexCount() const;
   // A label map for inspection: every triangle's UV footprint coloured by its source frame.
   cv::Mat LabelMap() const;
   // Triangles whose source image changed in the last AddFrame (their texels were resampled).
@@ -121,12 +142,16 @@ class Texturer {
   std::unique_ptr<ImagePool> pool_;
   std::unique_ptr<MrfSolver> solver_;
   std::unique_ptr<MeshGeodesics> geodesics_;  // rest mesh, for Psi's distance field
+  // Levelling runs on reads too (LevelSeams is const): its state is mutable.
   std::unique_ptr<SeamLeveller> leveller_;
+  mutable bool levelled_ = true;  // corrections_ belong to the current labelling
+  mutable double seam_rms_before_ = 0.0, seam_rms_after_ = 0.0;
+  mutable double levelling_seconds_ = 0.0;  // LevelSeams since the last AddPrepared
   TexelBuffer base_;         // unlevelled texel colours (triangle-major)
   std::vector<int> frames_;  // F
   std::vector<double> seam_distance_;
   std::vector<double> edge_weight_;
-  Eigen::MatrixX3f corrections_;  // 3F x 3
+  mutable Eigen::MatrixX3f corrections_;  // 3F x 3
   std::vector<int> changed_;
   int frames_seen_ = 0;  // PrepareFrame calls (only PrepareFrame reads and writes it)
 };

@@ -101,6 +101,9 @@ class TexturingSequenceTest : public ::testing::Test {
       *last = texturer->AddFrame(static_cast<int>(i), sequence_->color[i], sequence_->camera,
                                  sequence_->posed[i]);
     }
+    // The seams of the last labelling, levelled on this read (levelling_every_frame false).
+    last->seam_rms_before = texturer->seam_rms_before();
+    last->seam_rms_after = texturer->seam_rms_after();
     return texturer;
   }
 

@@ -158,6 +158,9 @@ std::unique_ptr<Texturer> Feed(const Scene& scene, const TexturingOptions& optio
     *last = texturer->AddFrame(f, scene.Image(f, angle, gain), OrbitCamera(angle, scene.image_size),
                                scene.sphere.vertices);
   }
+  // The seams of the last labelling, levelled on this read (levelling_every_frame false).
+  last->seam_rms_before = texturer->seam_rms_before();
+  last->seam_rms_after = texturer->seam_rms_after();
   return texturer;
 }
 
@@ -201,6 +204,52 @@ TEST(TexturingTest, SeamLevellingLowersColourJumps) {
   ASSERT_GT(last.seam_edges, 0);
   EXPECT_LT(last.seam_rms_after, 0.5 * last.seam_rms_before)
       << last.seam_rms_before << " -> " << last.seam_rms_after;
+}
+
+// Levelling when the texture is read (the default) and in every AddFrame give the same atlas,
+// vertex colours and seam residuals bit for bit, also when the texture is read between frames;
+// without a read the frame summaries carry no residuals.
+TEST(TexturingTest, LevellingOnReadMatchesLevellingEveryFrame) {
+  Scene scene;
+  TexturingOptions every = SmallOptions();
+  every.levelling_every_frame = true;
+  TexturingOptions on_read = SmallOptions();
+  ASSERT_FALSE(on_read.levelling_every_frame);
+  Texturer a(scene.sphere, every), b(scene.sphere, on_read);
+  const int frames = 8;
+  for (int f = 0; f < frames; ++f) {
+    const double angle = 2.0 * M_PI * f / frames;
+    const double gain = 1.0 + 0.2 * ((f % 2) ? 1.0 : -1.0);
+    const cv::Mat image = scene.Image(f, angle, gain);
+    const TextureFrameSummary sa =
+        a.AddFrame(f, image, OrbitCamera(angle, scene.image_size), scene.sphere.vertices);
+    const TextureFrameSummary sb =
+        b.AddFrame(f, image, OrbitCamera(angle, scene.image_size), scene.sphere.vertices);
+    EXPECT_EQ(sa.changed_triangles, sb.changed_triangles) << "frame " << f;
+    EXPECT_FALSE(b.seams_levelled()) << "frame " << f;
+    EXPECT_TRUE(std::isnan(sb.seam_rms_after)) << "frame " << f;
+    if (f == 3) {  // a read between frames levels that frame's labelling
+      const cv::Mat atlas_a = a.Atlas(), atlas_b = b.Atlas();
+      EXPECT_TRUE(b.seams_levelled());
+      EXPECT_GT(b.levelling_seconds_since_add(), 0.0);
+      ASSERT_EQ(atlas_a.size(), atlas_b.size());
+      EXPECT_EQ(cv::norm(atlas_a, atlas_b, cv::NORM_INF), 0.0) << "frame " << f;
+      EXPECT_EQ(sa.seam_rms_after, b.seam_rms_after()) << "frame " << f;
+      EXPECT_EQ(sa.seam_rms_before, b.seam_rms_before()) << "frame " << f;
+    }
+  }
+  ASSERT_GT(b.seam_rms_before(), b.seam_rms_after());
+  const cv::Mat atlas_a = a.Atlas(), atlas_b = b.Atlas();
+  EXPECT_EQ(cv::norm(atlas_a, atlas_b, cv::NORM_INF), 0.0);
+  Eigen::MatrixX3d rgb_a, rgb_b;
+  std::vector<uint8_t> valid_a, valid_b;
+  a.VertexColors(&rgb_a, &valid_a);
+  b.VertexColors(&rgb_b, &valid_b);
+  EXPECT_EQ(valid_a, valid_b);
+  EXPECT_TRUE(rgb_a == rgb_b);
+  int valid_count = 0;
+  for (uint8_t v : valid_b) valid_count += v;
+  EXPECT_EQ(b.ColouredVertexCount(), valid_count);
 }
 
 TEST(TexturingTest, PoolStaysBoundedOverLongSequences) {
