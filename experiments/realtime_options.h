@@ -11,8 +11,8 @@
 namespace artex {
 
 // kSequential: every stage of a frame on the calling thread before the next frame is read.
-// kPipelined: read, track (preprocess + fit), texture and output stages on their own threads;
-// frame t+1 is tracked while frame t is textured and frame t-1 is evaluated and written. Both
+// kPipelined: read, track (preprocess + fit), pool, texture and output stages on their own
+// threads; frame t+1 is tracked while frame t is textured and frame t-1 is evaluated and written. Both
 // give the same poses, labels, texture and metrics (the stages see the same inputs in the
 // same order).
 enum class PipelineConcurrency { kSequential, kPipelined };
