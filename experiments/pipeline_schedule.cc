@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <exception>
+#include <functional>
 #include <limits>
 #include <mutex>
 #include <nlohmann/json.hpp>
@@ -241,53 +242,41 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
       }
       to_track.Close();
     });
-    std::thread tracker([&] {
-      try {
-        FrameWork work;
-        int sequence = 0;
-        while (to_track.Pop(&work)) {
-          // Numbered as the track stage takes them (live frames dropped before are not).
-          work.sequence = sequence++;
-          take_colours(work.sequence);
-          track_clock.Time([&] { track->Process(&work); });
-          if (!to_pool.Push(std::move(work))) break;
+    // A middle stage's thread: takes frames from `in`, processes each, passes it to `out`, and
+    // closes `out` when `in` is done or a stage failed.
+    const auto relay = [&](BoundedQueue<FrameWork>* in, BoundedQueue<FrameWork>* out,
+                           const std::function<void(FrameWork*)>& process) {
+      return std::thread([&abort, in, out, process] {
+        try {
+          FrameWork work;
+          while (in->Pop(&work)) {
+            process(&work);
+            if (!out->Push(std::move(work))) break;
+          }
+        } catch (...) {
+          abort(std::current_exception());
         }
-      } catch (...) {
-        abort(std::current_exception());
-      }
-      to_pool.Close();
+        out->Close();
+      });
+    };
+    int sequence = 0;  // the track stage's numbering
+    std::thread tracker = relay(&to_track, &to_pool, [&](FrameWork* work) {
+      // Numbered as the track stage takes them (live frames dropped before are not).
+      work->sequence = sequence++;
+      take_colours(work->sequence);
+      track_clock.Time([&] { track->Process(work); });
     });
     std::atomic<int> texture_skipped{0};
-    std::thread pooler([&] {
-      try {
-        FrameWork work;
-        while (to_pool.Pop(&work)) {
-          if (options.live && options.live_texture_skip && work.texture_frame &&
-              !work.record.skipped && first_textured && to_pool.size() > 0) {
-            work.texture_frame = false;  // a newer frame waits: texture that one
-            work.record.texture_skipped = true;
-            ++texture_skipped;
-          }
-          pool_clock.Time([&] { pool->Process(&work); });
-          if (!to_texture.Push(std::move(work))) break;
-        }
-      } catch (...) {
-        abort(std::current_exception());
+    std::thread pooler = relay(&to_pool, &to_texture, [&](FrameWork* work) {
+      if (options.live && options.live_texture_skip && work->texture_frame &&
+          !work->record.skipped && first_textured && to_pool.size() > 0) {
+        work->texture_frame = false;  // a newer frame waits: texture that one
+        work->record.texture_skipped = true;
+        ++texture_skipped;
       }
-      to_texture.Close();
+      pool_clock.Time([&] { pool->Process(work); });
     });
-    std::thread texturer([&] {
-      try {
-        FrameWork work;
-        while (to_texture.Pop(&work)) {
-          run_texture(&work);
-          if (!to_output.Push(std::move(work))) break;
-        }
-      } catch (...) {
-        abort(std::current_exception());
-      }
-      to_output.Close();
-    });
+    std::thread texturer = relay(&to_texture, &to_output, run_texture);
     try {
       FrameWork work;
       while (to_output.Pop(&work)) finish(&work);

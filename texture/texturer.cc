@@ -219,15 +219,7 @@ double Texturer::seam_rms_after() const {
 
 int Texturer::ColouredVertexCount() const {
   std::vector<uint8_t> seen(template_.num_vertices(), 0);
-  for (int f = 0; f < template_.num_triangles(); ++f) {
-    if (frames_[f] < 0) continue;
-    const int slot = pool_->SlotOfFrame(frames_[f]);
-    if (slot < 0) continue;
-    for (int c = 0; c < 3; ++c) {
-      const int v = template_.triangles(f, c);
-      if (pool_->entry(slot).vertex_colors.row(v).allFinite()) seen[v] = 1;
-    }
-  }
+  ForEachColouredCorner([&](int, int, int v, const Eigen::RowVector3f&) { seen[v] = 1; });
   int count = 0;
   for (uint8_t b : seen) count += b;
   return count;
@@ -244,19 +236,11 @@ void Texturer::VertexColors(Eigen::MatrixX3d* rgb, std::vector<uint8_t>* valid) 
   const int v_count = template_.num_vertices();
   Eigen::MatrixX3d sum = Eigen::MatrixX3d::Zero(v_count, 3);
   std::vector<int> count(v_count, 0);
-  for (int f = 0; f < template_.num_triangles(); ++f) {
-    if (frames_[f] < 0) continue;
-    const int slot = pool_->SlotOfFrame(frames_[f]);
-    if (slot < 0) continue;
-    for (int c = 0; c < 3; ++c) {
-      const int v = template_.triangles(f, c);
-      const auto col = pool_->entry(slot).vertex_colors.row(v);
-      if (!col.allFinite()) continue;
-      Eigen::Vector3d bgr = (col + corrections_.row(3 * f + c)).cast<double>().transpose();
-      sum.row(v) += Eigen::Vector3d(bgr.z(), bgr.y(), bgr.x()).transpose();
-      ++count[v];
-    }
-  }
+  ForEachColouredCorner([&](int f, int c, int v, const Eigen::RowVector3f& col) {
+    Eigen::Vector3d bgr = (col + corrections_.row(3 * f + c)).cast<double>().transpose();
+    sum.row(v) += Eigen::Vector3d(bgr.z(), bgr.y(), bgr.x()).transpose();
+    ++count[v];
+  });
   rgb->setZero(v_count, 3);
   valid->assign(v_count, 0);
   for (int v = 0; v < v_count; ++v) {

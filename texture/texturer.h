@@ -135,6 +135,23 @@ class Texturer {
   const std::vector<double>& edge_weight() const { return edge_weight_; }
 
  private:
+  // visit(f, c, v, colour) for every corner c (vertex v) of a textured triangle f whose source
+  // image saw v (finite pooled vertex colour, BGR in [0, 1]), triangles ascending.
+  template <class Visit>
+  void ForEachColouredCorner(Visit&& visit) const {
+    for (int f = 0; f < template_.num_triangles(); ++f) {
+      if (frames_[f] < 0) continue;
+      const int slot = pool_->SlotOfFrame(frames_[f]);
+      if (slot < 0) continue;
+      const auto& colours = pool_->entry(slot).vertex_colors;
+      for (int c = 0; c < 3; ++c) {
+        const int v = template_.triangles(f, c);
+        const Eigen::RowVector3f col = colours.row(v);
+        if (col.allFinite()) visit(f, c, v, col);
+      }
+    }
+  }
+
   Template template_;
   TexturingOptions options_;
   TextureMesh mesh_;
