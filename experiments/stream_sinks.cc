@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <opencv2/imgcodecs.hpp>
 
+#include "experiments/pipeline_stages.h"  // WritePngFile
 #include "models/error.h"
 #include "models/mesh_export.h"
 
@@ -15,12 +16,6 @@ std::string AtlasName(const std::string& dir, int frame, const char* suffix) {
   char name[64];
   std::snprintf(name, sizeof(name), "/%06d%s.png", frame, suffix);
   return dir + name;
-}
-
-void WritePngFile(const std::string& path, const cv::Mat& image) {
-  std::vector<unsigned char> bytes;
-  if (!cv::imencode(".png", image, bytes)) throw Error(path + ": PNG encoding failed");
-  WriteFileAtomically(path, std::string(bytes.begin(), bytes.end()));
 }
 
 StreamTap* g_stream_tap = nullptr;
