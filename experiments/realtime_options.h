@@ -36,7 +36,7 @@ struct RealtimeOptions {
   // was after frame t - 1 - this (0: after frame t-1, which makes fitting wait for texturing;
   // 1: fitting of t overlaps texturing of t-1). The same in both concurrency modes.
   int colour_delay_frames = 1;
-  // pipeline.live_texture_skip: live and pipelined, the texture stage leaves a frame
+  // pipeline.live_texture_skip: live and pipelined, the pool stage leaves a frame
   // untextured when a newer tracked frame is already waiting for it (the texture follows the
   // newest pose; every tracked frame still passes, posed with the current texture), so the
   // texturing's CPU goes to tracking when the two cores do not suffice for both at the rate.
