@@ -274,7 +274,7 @@ void TrackStage::Process(FrameWork* work) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// TextureStage
+// PoolStage
 
 PoolStage::PoolStage(const PipelineOptions& options, const Calibration& calibration,
                      Texturer* texturer)
@@ -296,6 +296,9 @@ void PoolStage::Process(FrameWork* work) {
   }
   work->frame.color.release();
 }
+
+// ---------------------------------------------------------------------------------------------
+// TextureStage
 
 TextureStage::TextureStage(const PipelineOptions& options, Texturer* texturer, FrameSinks* sinks,
                            bool evaluate_texture, int begin, int end)
@@ -332,12 +335,11 @@ bool TextureStage::Process(FrameWork* work, Eigen::MatrixX3d* colours) {
         mean += c.row(v).transpose();
         ++count;
       }
-      if (count > 0.9 * c.rows()) {
-        mean /= count;
-        for (int v = 0; v < c.rows(); ++v)
-          if (!valid[v]) c.row(v) = mean.transpose();
-        changed = true;
-      }
+      // count is ColouredVertexCount (the same corners), so above the 90 % already.
+      mean /= count;
+      for (int v = 0; v < c.rows(); ++v)
+        if (!valid[v]) c.row(v) = mean.transpose();
+      changed = true;
     }
     for (int f : options_.atlas_frames) work->write_atlas = work->write_atlas || f == i;
   }
