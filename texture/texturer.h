@@ -139,9 +139,13 @@ class Texturer {
   // image saw v (finite pooled vertex colour, BGR in [0, 1]), triangles ascending.
   template <class Visit>
   void ForEachColouredCorner(Visit&& visit) const {
+    int memo_frame = -1, slot = -1;  // the last frame looked up (neighbours share sources)
     for (int f = 0; f < template_.num_triangles(); ++f) {
       if (frames_[f] < 0) continue;
-      const int slot = pool_->SlotOfFrame(frames_[f]);
+      if (frames_[f] != memo_frame) {
+        memo_frame = frames_[f];
+        slot = pool_->SlotOfFrame(memo_frame);
+      }
       if (slot < 0) continue;
       const auto& colours = pool_->entry(slot).vertex_colors;
       for (int c = 0; c < 3; ++c) {
