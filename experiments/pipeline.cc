@@ -193,6 +193,19 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
     truth.to_truth_world = world.to_calibration_world;
   }
   ShapeEstimator shape(tmpl, options.shape);
+  {
+    // The joint solve minimises the tracker's energy: its pose priors apply to every frame.
+    std::vector<std::shared_ptr<const FittingTerm>> priors;
+    const EMFitterOptions& fit = options.fitting;
+    if (fit.joint_limits.weight > 0.0) {
+      priors.push_back(std::make_shared<JointLimitTerm>(
+          ResolveJointLimits(fit.joint_limits, tmpl.JointNames()), tmpl.num_joints()));
+    }
+    if (fit.joint_coupling.weight > 0.0) {
+      priors.push_back(std::make_shared<JointCouplingTerm>(fit.joint_coupling, tmpl.JointNames()));
+    }
+    shape.SetPosePriors(std::move(priors));
+  }
   shape.SetCameraCenter(calibration.depth.world_to_camera.inverse().translation());
   TrackStage track(options, calibration, &preprocessor, &fitter);
   track.SetShape(&shape, &tmpl);

@@ -256,6 +256,21 @@ void BindJointLimits(const Config& c, JointLimitOptions* o) {
   }
 }
 
+// fitting.joint_coupling: {weight, pairs: [A, B, C, D, ...]}: the pairs (A, B), (C, D), ...
+void BindJointCoupling(const Config& c, JointCouplingOptions* o) {
+  c.CheckKeys({"weight", "pairs"});
+  c.Get("weight", &o->weight);
+  if (!c.Has("pairs")) return;
+  std::vector<std::string> names;
+  c.Get("pairs", &names);
+  if (names.size() % 2 != 0) {
+    throw Error(c.Path("pairs") + ": expected joint names two by two (pairs), found " +
+                std::to_string(names.size()) + " names");
+  }
+  o->pairs.clear();
+  for (std::size_t i = 0; i < names.size(); i += 2) o->pairs.emplace_back(names[i], names[i + 1]);
+}
+
 void BindFitting(const Config& c, EMFitterOptions* o) {
   c.CheckKeys({"correspondence", "solver", "estep", "k", "voxel_fraction", "epsilon",
                "lambda_color", "use_color", "normalize_per_scan_point", "icp_metric",
@@ -263,7 +278,7 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
                "first_frame_iterations_per_stage", "tracking_iterations_per_stage",
                "max_iterations", "over_relaxation", "relative_cost_tolerance",
                "parameter_tolerance", "normalize_data_term", "tikhonov", "temporal",
-               "smoothness", "joint_limits", "scale_mode", "scale_estimation_frames",
+               "smoothness", "joint_limits", "joint_coupling", "scale_mode", "scale_estimation_frames",
                "scale_max_radius", "scale_prior_weight", "icp_first_frame",
                "constant_velocity_prediction", "max_fit_vertices", "tracking_max_fit_vertices",
                "tracking_shared_cloud",
@@ -308,6 +323,7 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   BindWeights(c.Section("temporal"), &o->tikhonov.temporal);
   BindWeights(c.Section("smoothness"), &o->smoothness);
   BindJointLimits(c.Section("joint_limits"), &o->joint_limits);
+  BindJointCoupling(c.Section("joint_coupling"), &o->joint_coupling);
   const Config sil = c.Section("silhouette");
   sil.CheckKeys({"weight", "depth_margin", "front_weight", "max_radius"});
   sil.Get("max_radius", &o->silhouette.max_radius);

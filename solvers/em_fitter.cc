@@ -79,6 +79,10 @@ EMFitter::EMFitter(const Template& tmpl, const EMFitterOptions& options) : optio
   if (!options_.joint_limits.IsValid(tmpl.num_joints(), &error)) {
     throw Error("fitting options: joint_limits." + error);
   }
+  // Throws naming a coupled joint the template lacks (checked here, not at the first M-step).
+  if (options_.joint_coupling.weight > 0.0) {
+    [[maybe_unused]] const JointCouplingTerm check(options_.joint_coupling, tmpl.JointNames());
+  }
   skinning_ = std::make_unique<Skinning>(tmpl);
   subsets_[0] = MakeFitSubset(tmpl, options.max_fit_vertices);
   int tracking = options.tracking_max_fit_vertices;
@@ -440,6 +444,10 @@ EMIterationInfo EMFitter::Iterate() {
   TikhonovTerm tikhonov(tikhonov_options, model.num_joints(),
                         st.has_previous ? &st.previous : nullptr);
   JointLimitTerm joint_limits(options_.joint_limits, model.num_joints());
+  const bool couple = options_.joint_coupling.weight > 0.0;
+  JointCouplingTerm joint_coupling =
+      couple ? JointCouplingTerm(options_.joint_coupling, model.JointNames())
+             : JointCouplingTerm(JointCouplingOptions{0.0, {}}, {});
   UprightTerm upright(options_.upright, 0);  // joint 0: the root joint (the pelvis)
   const bool prior_scale = options_.scale_mode == ScaleMode::kEstimateThenPrior &&
                            scale_samples() >= options_.scale_estimation_frames;
@@ -453,6 +461,7 @@ EMIterationInfo EMFitter::Iterate() {
   if (silhouette_term) problem.terms.push_back(silhouette_term.get());
   if (unobserved_term) problem.terms.push_back(unobserved_term.get());
   if (options_.joint_limits.weight > 0.0) problem.terms.push_back(&joint_limits);
+  if (couple) problem.terms.push_back(&joint_coupling);
   if (options_.upright.weight > 0.0 &&
       (!options_.upright.only_out_of_view || !st.held_parameters.empty())) {
     problem.terms.push_back(&upright);

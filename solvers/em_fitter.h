@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "energies/joint_coupling_term.h"
 #include "energies/joint_limit_term.h"
 #include "energies/upright_term.h"
 #include "energies/one_to_many_correspondence.h"
@@ -102,6 +103,9 @@ struct EMFitterOptions {
   // iteration and frame to frame since the cost barely changes along them.
   PoseGroupWeights tracking_update = {0.0, 0.0, 0.0, 3e-3};
   JointLimitOptions joint_limits;  // soft joint boxes (weight 0: off)
+  // Pairs of joints held to turn alike (energies/joint_coupling_term.h): the neck and the head
+  // by default. weight 0: off (the paper's energy).
+  JointCouplingOptions joint_coupling;
   UprightOptions upright;          // the pelvis's tilt from world up (weight 0: off)
   // Free space (energies/silhouette_term.h): fitted vertices that project where the camera saw
   // something else behind them are pulled towards the subject's silhouette; used when the scan

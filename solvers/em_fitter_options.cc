@@ -72,6 +72,8 @@ bool EMFitterOptions::IsValid(std::string* error) const {
     msg << "icp." << inner;
   } else if (!unobserved_joints.IsValid(&inner)) {
     msg << "unobserved_joints." << inner;
+  } else if (!joint_coupling.IsValid(&inner)) {
+    msg << "joint_coupling." << inner;
   } else if (!upright.IsValid(&inner)) {
     msg << "upright." << inner;
   } else if (!silhouette.IsValid(&inner)) {

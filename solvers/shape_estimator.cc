@@ -367,6 +367,21 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
       }
       for (int f = 0; f < nf; ++f) {
         const int offset = nq + f * np;
+        if (!pose_priors_.empty()) {
+          // The tracker's pose priors at the frame's pose (tangent delta 0).
+          FitEvaluation eval;
+          PrepareFitEvaluation(nullptr, (*poses)[f], Eigen::VectorXd::Zero(np), false, false,
+                               &eval);
+          for (const auto& term : pose_priors_) {
+            const int rows = term->num_residuals();
+            Eigen::VectorXd r(rows);
+            Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> j(rows, np);
+            if (!term->Evaluate(eval, r.data(), j.data())) continue;
+            cost += r.squaredNorm();
+            h.block(offset, offset, np, np) += j.transpose() * j;
+            g.segment(offset, np) += j.transpose() * r;
+          }
+        }
         for (int p = 1; p < np; ++p) h(offset + p, offset + p) += options_.pose_damping;
         h(offset + kScaleIndex, offset + kScaleIndex) = 1.0;  // held: no data, no update
         g[offset + kScaleIndex] = 0.0;

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "energies/fitting_term.h"
 #include "models/pose.h"
 #include "models/shape.h"
 #include "models/template.h"
@@ -142,6 +143,13 @@ class ShapeEstimator {
     has_camera_ = true;
   }
 
+  // Pose priors of the tracker (terms that need no skinning: joint limits, coupled joints)
+  // added to every calibration frame's pose in the joint solve, so that it minimises the
+  // tracker's energy, not the data alone. Kept by shared ownership.
+  void SetPosePriors(std::vector<std::shared_ptr<const FittingTerm>> priors) {
+    pose_priors_ = std::move(priors);
+  }
+
   // Feeds an accepted frame (scan and fitted pose, world frame). scale_settled: the tracker's
   // global scale is final (frames before are no calibration frames). Returns true when the
   // shape changed (calibration solved, or refined): the caller swaps SubjectTemplate() in.
@@ -164,6 +172,7 @@ class ShapeEstimator {
 
   ShapeOptions options_;
   ShapeModel model_;
+  std::vector<std::shared_ptr<const FittingTerm>> pose_priors_;
   Eigen::Vector3d camera_center_ = Eigen::Vector3d::Zero();
   bool has_camera_ = false;
   std::vector<int> fit_vertices_;

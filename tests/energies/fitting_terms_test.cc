@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include "energies/fitting_term.h"
+#include "energies/joint_coupling_term.h"
 #include "energies/joint_limit_term.h"
 #include "energies/one_to_many_correspondence.h"
 #include "energies/one_to_one_correspondence.h"
@@ -245,6 +246,37 @@ TEST_F(FittingTermsTest, JointLimitJacobianAndHinge) {
   EXPECT_NEAR(r.norm(), std::sqrt(3.0) * 0.1, 1e-12);
   options.per_joint_min.resize(2);
   EXPECT_FALSE(options.IsValid(model_.num_joints(), nullptr));
+}
+
+TEST_F(FittingTermsTest, JointCouplingJacobianAndDifference) {
+  const std::vector<std::string> names = model_.JointNames();
+  ASSERT_GE(names.size(), 4u);
+  JointCouplingOptions options;
+  options.weight = 2.0;
+  options.pairs = {{names[1], names[2]}, {names[0], names[3]}};
+  ASSERT_TRUE(options.IsValid(nullptr));
+  JointCouplingTerm term(options, names);
+  EXPECT_EQ(term.num_residuals(), 6);
+  CheckJacobian(term, delta_, 1e-5);
+  // Both joints turned alike: no residual; turned against each other: sqrt(w) times the
+  // difference of the rotation vectors.
+  anchor_ = Pose::Identity(model_.num_joints());
+  const Eigen::Vector3d w(0.2, -0.1, 0.3);
+  anchor_.joint_rotations[1] = ExpSO3(w);
+  anchor_.joint_rotations[2] = ExpSO3(w);
+  EXPECT_LT(Residuals(term, Eigen::VectorXd::Zero(p_)).norm(), 1e-12);
+  anchor_.joint_rotations[2] = ExpSO3(-w);
+  const Eigen::VectorXd r = Residuals(term, Eigen::VectorXd::Zero(p_));
+  EXPECT_LT((r.head<3>() - std::sqrt(2.0) * 2.0 * w).norm(), 1e-12);
+  EXPECT_EQ(r.tail<3>().norm(), 0.0);
+  // A joint the template lacks, a pair of one joint.
+  options.pairs = {{names[1], "no_such_joint"}};
+  EXPECT_THROW(JointCouplingTerm(options, names), Error);
+  options.pairs = {{names[1], names[1]}};
+  EXPECT_FALSE(options.IsValid(nullptr));
+  options.pairs = {{names[1], names[2]}};
+  options.weight = -1.0;
+  EXPECT_FALSE(options.IsValid(nullptr));
 }
 
 TEST_F(FittingTermsTest, AnatomicalLimitsMirrorAndOverride) {
