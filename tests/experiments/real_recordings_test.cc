@@ -171,11 +171,18 @@ TEST(RealRecordingsTest, SkeltrackEveryFrameUpright) {
   // tracking make every doubted frame initialised again (docs/real-data.md).
   const TrackedRun run = Track("skeltrack");
   ASSERT_EQ(run.result.frames.size(), 12u);
-  // Measured: 7 good, 5 doubtful, 0 lost, no leg raised (before the legs below the image were
-  // held, fitting.out_of_view, with reinitialise_on doubtful: 6 good, 6 doubtful, legs lifted
-  // beside the body; with the former default reinitialise_on lost: 3 good, 8 doubtful, 1 lost).
+  // Measured: 6 good, 6 doubtful, 0 lost, no leg raised, mean depth residual 38.0 mm (before
+  // the neck and head were coupled, fitting.joint_coupling: 7 good, 37.9 mm, with a head leaning
+  // into the shoulder and two arms twisted behind the body; before the legs below the image
+  // were held, fitting.out_of_view, with reinitialise_on doubtful: 6 good, 6 doubtful, legs
+  // lifted beside the body; with the former default reinitialise_on lost: 3 good, 8 doubtful,
+  // 1 lost). The labels are knife-edge (the shape test below): the residual is bounded too.
   EXPECT_EQ(run.result.lost_frames, 0);
-  EXPECT_GE(run.result.good_frames, 7) << "good for most frames";
+  EXPECT_GE(run.result.good_frames, 6) << "good for half of the frames";
+  double residual = 0.0;
+  for (const FrameRecord& f : run.result.frames) residual += f.quality.depth_residual_m;
+  EXPECT_LT(residual / static_cast<double>(run.result.frames.size()), 0.0395)
+      << "mean depth residual (m)";
   EXPECT_EQ(FramesWithAShinInView(run), 0) << "the legs stay below the image";
   EXPECT_EQ(run.result.skipped_frames, 0);
   const Uprightness u = CheckUpright(run);
