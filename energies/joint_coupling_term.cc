@@ -2,7 +2,6 @@
 
 #include <cmath>
 
-#include "models/error.h"
 #include "models/so3.h"
 
 namespace artex {
@@ -21,19 +20,33 @@ bool JointCouplingOptions::IsValid(std::string* error) const {
   return true;
 }
 
+namespace {
+int JointIndex(const std::vector<std::string>& joint_names, const std::string& name) {
+  for (std::size_t j = 0; j < joint_names.size(); ++j) {
+    if (joint_names[j] == name) return static_cast<int>(j);
+  }
+  return -1;
+}
+}  // namespace
+
 JointCouplingTerm::JointCouplingTerm(const JointCouplingOptions& options,
                                      const std::vector<std::string>& joint_names)
     : sqrt_weight_(std::sqrt(options.weight)) {
-  const auto index = [&joint_names](const std::string& name) {
-    for (std::size_t j = 0; j < joint_names.size(); ++j) {
-      if (joint_names[j] == name) return static_cast<int>(j);
+  for (const auto& [a, b] : options.pairs) {
+    const int ia = JointIndex(joint_names, a), ib = JointIndex(joint_names, b);
+    if (ia >= 0 && ib >= 0) pairs_.emplace_back(ia, ib);
+  }
+}
+
+std::string JointCouplingTerm::MissingJoints(const JointCouplingOptions& options,
+                                             const std::vector<std::string>& joint_names) {
+  std::string missing;
+  for (const auto& [a, b] : options.pairs) {
+    for (const std::string& name : {a, b}) {
+      if (JointIndex(joint_names, name) < 0) missing += (missing.empty() ? "" : ", ") + name;
     }
-    std::string known;
-    for (const std::string& j : joint_names) known += (known.empty() ? "" : ", ") + j;
-    throw Error("fitting options: joint_coupling.pairs: expected a joint of the template (" +
-                known + "), found " + name);
-  };
-  for (const auto& [a, b] : options.pairs) pairs_.emplace_back(index(a), index(b));
+  }
+  return missing;
 }
 
 bool JointCouplingTerm::Evaluate(const FitEvaluation& eval, double* residuals,

@@ -19,7 +19,9 @@ struct JointCouplingOptions {
   // w (cost units per rad^2 of the difference; the data term is a mean squared distance in m^2,
   // fitting.normalize_data_term); 0 disables the prior.
   double weight = 1e-2;
-  // Joint pairs by name (config `fitting.joint_coupling.pairs`: [[neck, head]]).
+  // Joint pairs by name (config `fitting.joint_coupling.pairs`: [neck, head], two by two). A
+  // pair naming a joint the template lacks is skipped (an imported rig may name its joints
+  // otherwise; `artex track` warns).
   std::vector<std::pair<std::string, std::string>> pairs = {{"neck", "head"}};
 
   bool IsValid(std::string* error) const;  // weight >= 0 and finite, no pair of one joint
@@ -27,10 +29,13 @@ struct JointCouplingOptions {
 
 class JointCouplingTerm : public FittingTerm {
  public:
-  // Resolves the pairs' names among `joint_names`; throws artex::Error naming a pair's joint
-  // the template lacks.
+  // Resolves the pairs' names among `joint_names` (pairs with a name not among them are
+  // skipped).
   JointCouplingTerm(const JointCouplingOptions& options,
                     const std::vector<std::string>& joint_names);
+  // The names of `options.pairs` that are no joint of `joint_names` ("" when none).
+  static std::string MissingJoints(const JointCouplingOptions& options,
+                                   const std::vector<std::string>& joint_names);
 
   std::string name() const override { return "joint_coupling"; }
   int num_residuals() const override { return 3 * static_cast<int>(pairs_.size()); }

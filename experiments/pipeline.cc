@@ -203,6 +203,12 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
     }
     if (fit.joint_coupling.weight > 0.0) {
       priors.push_back(std::make_shared<JointCouplingTerm>(fit.joint_coupling, tmpl.JointNames()));
+      const std::string missing =
+          JointCouplingTerm::MissingJoints(fit.joint_coupling, tmpl.JointNames());
+      if (!missing.empty()) {
+        result.warnings.push_back("fitting.joint_coupling: the template has no joint " + missing +
+                                  "; those pairs are not coupled");
+      }
     }
     shape.SetPosePriors(std::move(priors));
   }

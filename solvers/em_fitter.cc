@@ -79,10 +79,6 @@ EMFitter::EMFitter(const Template& tmpl, const EMFitterOptions& options) : optio
   if (!options_.joint_limits.IsValid(tmpl.num_joints(), &error)) {
     throw Error("fitting options: joint_limits." + error);
   }
-  // Throws naming a coupled joint the template lacks (checked here, not at the first M-step).
-  if (options_.joint_coupling.weight > 0.0) {
-    [[maybe_unused]] const JointCouplingTerm check(options_.joint_coupling, tmpl.JointNames());
-  }
   skinning_ = std::make_unique<Skinning>(tmpl);
   subsets_[0] = MakeFitSubset(tmpl, options.max_fit_vertices);
   int tracking = options.tracking_max_fit_vertices;

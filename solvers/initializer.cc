@@ -308,7 +308,8 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
 
   // 2b. Arm refinement of the best fit: each arm's best straight direction by score.
   if (best >= 0 && options.ranking_iterations == 0 && options.refine_arms) {
-    const InitHypothesis& from = result.hypotheses[best];
+    // A copy: the refined hypothesis is appended below, which may move the vector's elements.
+    const InitHypothesis from = result.hypotheses[best];
     Pose refined = from.pose;
     double refined_score = from.quality.score;
     bool changed = false;

@@ -269,9 +269,10 @@ TEST_F(FittingTermsTest, JointCouplingJacobianAndDifference) {
   const Eigen::VectorXd r = Residuals(term, Eigen::VectorXd::Zero(p_));
   EXPECT_LT((r.head<3>() - std::sqrt(2.0) * 2.0 * w).norm(), 1e-12);
   EXPECT_EQ(r.tail<3>().norm(), 0.0);
-  // A joint the template lacks, a pair of one joint.
-  options.pairs = {{names[1], "no_such_joint"}};
-  EXPECT_THROW(JointCouplingTerm(options, names), Error);
+  // A pair with a joint the template lacks is skipped (and named), a pair of one joint invalid.
+  options.pairs = {{names[1], "no_such_joint"}, {names[1], names[2]}};
+  EXPECT_EQ(JointCouplingTerm(options, names).num_residuals(), 3);
+  EXPECT_EQ(JointCouplingTerm::MissingJoints(options, names), "no_such_joint");
   options.pairs = {{names[1], names[1]}};
   EXPECT_FALSE(options.IsValid(nullptr));
   options.pairs = {{names[1], names[2]}};

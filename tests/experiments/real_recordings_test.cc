@@ -200,9 +200,14 @@ TEST(RealRecordingsTest, SkeltrackWithTheSubjectsShapeUprightAndClose) {
   if (!fs::exists(Recording("skeltrack") / "depth.txt")) {
     GTEST_SKIP() << "real recordings absent (" << Recording("skeltrack") << ")";
   }
+  // The twelve stills are twelve poses: every accepted frame calibrates (stride 1). With the
+  // default stride 2 the three rounds need 9 of the 12 frames accepted after the scale settled,
+  // which is knife-edge: with the neck and head coupled (fitting.joint_coupling) one frame
+  // fewer was accepted and the shape never calibrated.
   const TrackedRun run = Track("skeltrack", {{"pipeline.reinitialise_on", "doubtful"},
                                              {"shape.mode", "bones_girth"},
-                                             {"shape.retrack", "true"}});
+                                             {"shape.retrack", "true"},
+                                             {"shape.calibration_stride", "1"}});
   ASSERT_EQ(run.result.frames.size(), 12u);
   ASSERT_TRUE(fs::exists(run.out / "shape_pass" / "subject.glb"));
   ASSERT_TRUE(fs::exists(run.out / "shape_pass" / "frames.csv"));
