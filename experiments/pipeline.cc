@@ -202,7 +202,8 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
           ResolveJointLimits(fit.joint_limits, tmpl.JointNames()), tmpl.num_joints()));
     }
     if (fit.joint_coupling.weight > 0.0) {
-      priors.push_back(std::make_shared<JointCouplingTerm>(fit.joint_coupling, tmpl.JointNames()));
+      auto coupling = std::make_shared<JointCouplingTerm>(fit.joint_coupling, tmpl.JointNames());
+      if (coupling->num_residuals() > 0) priors.push_back(std::move(coupling));
       const std::string missing =
           JointCouplingTerm::MissingJoints(fit.joint_coupling, tmpl.JointNames());
       if (!missing.empty()) {

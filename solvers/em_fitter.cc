@@ -457,7 +457,7 @@ EMIterationInfo EMFitter::Iterate() {
   if (silhouette_term) problem.terms.push_back(silhouette_term.get());
   if (unobserved_term) problem.terms.push_back(unobserved_term.get());
   if (options_.joint_limits.weight > 0.0) problem.terms.push_back(&joint_limits);
-  if (couple) problem.terms.push_back(&joint_coupling);
+  if (couple && joint_coupling.num_residuals() > 0) problem.terms.push_back(&joint_coupling);
   if (options_.upright.weight > 0.0 &&
       (!options_.upright.only_out_of_view || !st.held_parameters.empty())) {
     problem.terms.push_back(&upright);
