@@ -193,25 +193,15 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
     truth.to_truth_world = world.to_calibration_world;
   }
   ShapeEstimator shape(tmpl, options.shape);
-  {
-    // The joint solve minimises the tracker's energy: its pose priors apply to every frame.
-    std::vector<std::shared_ptr<const FittingTerm>> priors;
-    const EMFitterOptions& fit = options.fitting;
-    if (fit.joint_limits.weight > 0.0) {
-      priors.push_back(std::make_shared<JointLimitTerm>(
-          ResolveJointLimits(fit.joint_limits, tmpl.JointNames()), tmpl.num_joints()));
-    }
-    if (fit.joint_coupling.weight > 0.0) {
-      auto coupling = std::make_shared<JointCouplingTerm>(fit.joint_coupling, tmpl.JointNames());
-      if (coupling->num_residuals() > 0) priors.push_back(std::move(coupling));
-      const std::string missing =
-          JointCouplingTerm::MissingJoints(fit.joint_coupling, tmpl.JointNames());
-      if (!missing.empty()) {
-        result.warnings.push_back("fitting.joint_coupling: the template has no joint " + missing +
-                                  "; those pairs are not coupled");
-      }
-    }
-    shape.SetPosePriors(std::move(priors));
+  // The joint solve minimises the tracker's energy: its pose priors apply to every frame.
+  shape.SetPosePriors(fitter.pose_priors());
+  const std::string uncoupled =
+      options.fitting.joint_coupling.weight > 0.0
+          ? JointCouplingTerm::MissingJoints(options.fitting.joint_coupling, tmpl.JointNames())
+          : std::string();
+  if (!uncoupled.empty()) {
+    result.warnings.push_back("fitting.joint_coupling: the template has no joint " + uncoupled +
+                              "; those pairs are not coupled");
   }
   shape.SetCameraCenter(calibration.depth.world_to_camera.inverse().translation());
   TrackStage track(options, calibration, &preprocessor, &fitter);

@@ -79,6 +79,16 @@ EMFitter::EMFitter(const Template& tmpl, const EMFitterOptions& options) : optio
   if (!options_.joint_limits.IsValid(tmpl.num_joints(), &error)) {
     throw Error("fitting options: joint_limits." + error);
   }
+  // The pose priors that need no skinning, in the M-step's order: joint limits, coupled joints
+  // (a coupling with no pair on this template is left out).
+  if (options_.joint_limits.weight > 0.0) {
+    pose_priors_.push_back(
+        std::make_shared<JointLimitTerm>(options_.joint_limits, tmpl.num_joints()));
+  }
+  if (options_.joint_coupling.weight > 0.0) {
+    auto coupling = std::make_shared<JointCouplingTerm>(options_.joint_coupling, tmpl.JointNames());
+    if (coupling->num_residuals() > 0) pose_priors_.push_back(std::move(coupling));
+  }
   skinning_ = std::make_unique<Skinning>(tmpl);
   subsets_[0] = MakeFitSubset(tmpl, options.max_fit_vertices);
   int tracking = options.tracking_max_fit_vertices;
@@ -439,11 +449,6 @@ EMIterationInfo EMFitter::Iterate() {
   }
   TikhonovTerm tikhonov(tikhonov_options, model.num_joints(),
                         st.has_previous ? &st.previous : nullptr);
-  JointLimitTerm joint_limits(options_.joint_limits, model.num_joints());
-  const bool couple = options_.joint_coupling.weight > 0.0;
-  JointCouplingTerm joint_coupling =
-      couple ? JointCouplingTerm(options_.joint_coupling, model.JointNames())
-             : JointCouplingTerm(JointCouplingOptions{0.0, {}}, {});
   UprightTerm upright(options_.upright, 0);  // joint 0: the root joint (the pelvis)
   const bool prior_scale = options_.scale_mode == ScaleMode::kEstimateThenPrior &&
                            scale_samples() >= options_.scale_estimation_frames;
@@ -456,8 +461,7 @@ EMIterationInfo EMFitter::Iterate() {
   problem.terms.push_back(&tikhonov);
   if (silhouette_term) problem.terms.push_back(silhouette_term.get());
   if (unobserved_term) problem.terms.push_back(unobserved_term.get());
-  if (options_.joint_limits.weight > 0.0) problem.terms.push_back(&joint_limits);
-  if (couple && joint_coupling.num_residuals() > 0) problem.terms.push_back(&joint_coupling);
+  for (const auto& prior : pose_priors_) problem.terms.push_back(prior.get());
   if (options_.upright.weight > 0.0 &&
       (!options_.upright.only_out_of_view || !st.held_parameters.empty())) {
     problem.terms.push_back(&upright);

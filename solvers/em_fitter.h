@@ -234,6 +234,11 @@ class EMFitter {
 
   const EMFitterOptions& options() const { return options_; }
   const Skinning& skinning() const { return *skinning_; }
+  // The enabled pose priors that need no skinning (joint limits, coupled joints), built once:
+  // every M-step adds them, and the shape estimator's joint solve applies them to its frames.
+  const std::vector<std::shared_ptr<const FittingTerm>>& pose_priors() const {
+    return pose_priors_;
+  }
   // Template vertex indices the fit uses (all, or the max_fit_vertices subset); tracking: those
   // of tracking frames (the tracking_max_fit_vertices subset).
   const std::vector<int>& fit_vertices(bool tracking = false) const {
@@ -332,6 +337,7 @@ class EMFitter {
 
   EMFitterOptions options_;
   std::unique_ptr<Skinning> skinning_;
+  std::vector<std::shared_ptr<const FittingTerm>> pose_priors_;
   FitSubset subsets_[2];  // [0]: max_fit_vertices; [1]: tracking frames (null skinning: use [0])
   // The frame's subset (BeginFrame): skinning_ or a subset's, and its template indices.
   const Skinning* fit_skinning_ = nullptr;
