@@ -86,10 +86,15 @@ struct PipelineOptions {
   // (solvers/initializer.h): the last pose or it moved onto the scan, fitted with wider radii.
   // 0: tracked as any frame (the prediction from before the gap).
   int gap_refit_frames = 3;
-  // Its options: radii and iterations_per_stage from pipeline.gap_refit_radii and
-  // .gap_refit_iterations_per_stage, coarse_iterations and quality from fitting.init and
-  // fitting.quality (LoadPipelineOptions).
+  // Its options: radii, iterations_per_stage and leg_stride_deg from pipeline.gap_refit_radii,
+  // .gap_refit_iterations_per_stage and .gap_refit_leg_stride_deg, coarse_iterations and
+  // quality from fitting.init and fitting.quality (LoadPipelineOptions).
   GapRefitOptions gap_refit;
+  // pipeline.gap_refit_stride_frames: the refit's starts with the legs in stride
+  // (gap_refit.leg_stride_deg) only after a gap of at least this many frames (a third of a
+  // second at 30 Hz: shorter gaps rarely change which leg is ahead, and the two more fits
+  // would widen the next gap).
+  int gap_refit_stride_frames = 10;
   // With ground truth: novel-view texture quality (texture/texture_quality.h) every n-th frame
   // and at the last frame; 0: off.
   int texture_quality_every = 10;

@@ -460,7 +460,8 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
                "export_textured_mesh", "mesh_up_axis", "lost_threshold_mm",
                "texture_doubtful_frames", "texture_every", "reinitialise_on", "reinitialise_after_doubtful",
                "reinitialise_auto_wins", "reinitialise_auto_window", "gap_refit_frames",
-               "gap_refit_radii", "gap_refit_iterations_per_stage",
+               "gap_refit_radii", "gap_refit_iterations_per_stage", "gap_refit_leg_stride_deg",
+               "gap_refit_stride_frames",
                "texture_quality_every", "texture_quality_yaws_deg", "texture_quality_height",
                "export_atlases", "stream", "stream_estimate", "concurrency", "queue_depth", "live",
                "live_queue_depth", "live_rate_hz", "colour_delay_frames", "live_texture_skip",
@@ -487,6 +488,8 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("gap_refit_frames", &o->gap_refit_frames);
   c.Get("gap_refit_radii", &o->gap_refit.radii);
   c.Get("gap_refit_iterations_per_stage", &o->gap_refit.iterations_per_stage);
+  c.Get("gap_refit_leg_stride_deg", &o->gap_refit.leg_stride_deg);
+  c.Get("gap_refit_stride_frames", &o->gap_refit_stride_frames);
   c.Get("texture_quality_every", &o->texture_quality_every);
   c.Get("texture_quality_yaws_deg", &o->held_out.yaws_deg);
   c.Get("texture_quality_height", &o->held_out.height);
@@ -583,6 +586,8 @@ bool PipelineOptions::IsValid(std::string* error) const {
         << reinitialise_after_doubtful;
   else if (gap_refit_frames < 0)
     msg << "pipeline.gap_refit_frames: expected >= 0 (0: off), found " << gap_refit_frames;
+  else if (gap_refit_stride_frames < 0)
+    msg << "pipeline.gap_refit_stride_frames: expected >= 0, found " << gap_refit_stride_frames;
   else if (!gap_refit.IsValid(&inner))
     msg << "pipeline.gap_refit_" << inner;
   else if (reinitialise_auto_wins < 1 || reinitialise_auto_window < reinitialise_auto_wins)

@@ -1,5 +1,6 @@
 // The schedules of the pipeline's stages (experiments/pipeline_stages.h): sequential or one
 // thread per stage with bounded queues, the live frame clock, and the realtime record.
+#include <pthread.h>
 #include <sys/resource.h>
 #include <time.h>
 
@@ -36,6 +37,9 @@ double ThreadCpuSeconds() {
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
   return t.tv_sec + 1e-9 * t.tv_nsec;
 }
+
+// The stage's name on its thread (at most 15 characters: top -H, perf --sort comm, gdb).
+void NameThisThread(const char* name) { pthread_setname_np(pthread_self(), name); }
 
 double Percentile(std::vector<double> values, double q) {
   if (values.empty()) return std::numeric_limits<double>::quiet_NaN();
@@ -214,6 +218,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
     };
     std::atomic<int> dropped{0};
     std::thread reader([&] {
+      NameThisThread("artex-read");
       try {
         int frame = 0, missed = 0;
         PipelineClock::time_point at;
@@ -245,8 +250,9 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
     // A middle stage's thread: takes frames from `in`, processes each, passes it to `out`, and
     // closes `out` when `in` is done or a stage failed.
     const auto relay = [&](BoundedQueue<FrameWork>* in, BoundedQueue<FrameWork>* out,
-                           const std::function<void(FrameWork*)>& process) {
-      return std::thread([&abort, in, out, process] {
+                           const std::function<void(FrameWork*)>& process, const char* name) {
+      return std::thread([&abort, in, out, process, name] {
+        NameThisThread(name);
         try {
           FrameWork work;
           while (in->Pop(&work)) {
@@ -265,7 +271,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
       work->sequence = sequence++;
       take_colours(work->sequence);
       track_clock.Time([&] { track->Process(work); });
-    });
+    }, "artex-track");
     std::atomic<int> texture_skipped{0};
     std::thread pooler = relay(&to_pool, &to_texture, [&](FrameWork* work) {
       if (options.live && options.live_texture_skip && work->texture_frame &&
@@ -275,8 +281,8 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
         ++texture_skipped;
       }
       pool_clock.Time([&] { pool->Process(work); });
-    });
-    std::thread texturer = relay(&to_texture, &to_output, run_texture);
+    }, "artex-pool");
+    std::thread texturer = relay(&to_texture, &to_output, run_texture, "artex-texture");
     try {
       FrameWork work;
       while (to_output.Pop(&work)) finish(&work);

@@ -180,8 +180,9 @@ void TrackStage::Process(FrameWork* work) {
   } else if (options_.gap_refit_frames > 0 && record.gap_frames >= options_.gap_refit_frames &&
              fitter_->tracking() && enough_points) {
     // Frames were dropped (live): the subject may have moved beyond the tracking radii.
-    record.fit =
-        RefitFromPose(fitter_, scan_, calibration_.depth, fitter_->pose(), options_.gap_refit);
+    GapRefitOptions refit = options_.gap_refit;
+    if (record.gap_frames < options_.gap_refit_stride_frames) refit.leg_stride_deg = 0.0;
+    record.fit = RefitFromPose(fitter_, scan_, calibration_.depth, fitter_->pose(), refit);
     record.gap_refit = true;
     fit_seconds += record.fit.total_seconds;
     ++tracked_frames;

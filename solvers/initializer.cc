@@ -389,6 +389,9 @@ bool GapRefitOptions::IsValid(std::string* error) const {
   } else if (std::any_of(radii.begin(), radii.end(),
                          [](double r) { return !(r > 0.0) || !std::isfinite(r); })) {
     msg << "radii: expected finite radii > 0 (m)";
+  } else if (!(leg_stride_deg >= 0.0 && leg_stride_deg < 90.0)) {
+    msg << "leg_stride_deg: expected an angle in [0, 90) degrees (0: off), found "
+        << leg_stride_deg;
   } else if (!icp.IsValid(error)) {
     return false;
   } else {
@@ -410,6 +413,11 @@ FitSummary RefitFromPose(EMFitter* fitter, const Scan& scan, const PinholeCamera
                 " joints, found " + std::to_string(start.num_joints()));
   }
   if (fitter->depth_camera() == nullptr) fitter->SetDepthCamera(depth_camera);
+  const auto score = [&](const Pose& p) {
+    Eigen::MatrixX3d posed;
+    skinning.Apply(p, &posed);
+    return EvaluateFitQuality(posed, model.triangles, scan, depth_camera, options.quality).score;
+  };
   Pose pose = start;
   if (options.coarse_iterations > 0 && scan.size() > 0 && scan.points.allFinite() &&
       start.AllFinite()) {
@@ -430,20 +438,64 @@ FitSummary RefitFromPose(EMFitter* fitter, const Scan& scan, const PinholeCamera
       icp.estimate_scale = false;
       moved = AlignByIcp(skinning, moved, scan, icp).pose;
     }
-    const auto score = [&](const Pose& p) {
-      Eigen::MatrixX3d posed;
-      skinning.Apply(p, &posed);
-      return EvaluateFitQuality(posed, model.triangles, scan, depth_camera, options.quality).score;
-    };
     if (shift.allFinite() && score(moved) > score(start)) pose = moved;
   }
-  fitter->Reset(/*keep_scale=*/true);
-  if (!options.radii.empty()) {
-    fitter->SetNextFrameSchedule(options.radii, options.iterations_per_stage);
+  // The starts: the better one, and with legs in stride (template +X: the left-right axis).
+  std::vector<Pose> starts = {pose};
+  const int l_hip = FindJoint(model, "l_hip"), r_hip = FindJoint(model, "r_hip");
+  if (options.leg_stride_deg > 0.0 && l_hip >= 0 && r_hip >= 0) {
+    const double swing = options.leg_stride_deg * kDegToRad;
+    for (const double sign : {1.0, -1.0}) {
+      Pose p = pose;
+      p.joint_rotations[l_hip] = ExpSO3(Eigen::Vector3d(sign * swing, 0.0, 0.0)) *
+                                 pose.joint_rotations[l_hip];
+      p.joint_rotations[r_hip] = ExpSO3(Eigen::Vector3d(-sign * swing, 0.0, 0.0)) *
+                                 pose.joint_rotations[r_hip];
+      starts.push_back(p);
+    }
   }
-  fitter->BeginFrame(scan, pose);
-  while (!fitter->frame_done()) fitter->Iterate();
-  return fitter->EndFrame();
+  fitter->Reset(/*keep_scale=*/true);
+  const auto begin = [&](const Pose& from) {
+    if (!options.radii.empty()) {
+      fitter->SetNextFrameSchedule(options.radii, options.iterations_per_stage);
+    }
+    fitter->BeginFrame(scan, from);
+    while (!fitter->frame_done()) fitter->Iterate();
+  };
+  if (starts.size() == 1) {
+    begin(pose);
+    return fitter->EndFrame();
+  }
+  // Every start fitted and discarded; the best by score is accepted.
+  FitSummary best;
+  Pose best_pose;
+  Eigen::MatrixXd best_information;
+  double best_score = -std::numeric_limits<double>::infinity();
+  int iterations = 0;
+  double seconds = 0.0;
+  for (const Pose& from : starts) {
+    begin(from);
+    Pose fitted;
+    const FitSummary fit = fitter->DiscardFrame(&fitted);
+    iterations += fit.iterations;
+    seconds += fit.total_seconds;
+    if (!fit.ok()) continue;
+    const double s = score(fitted);
+    if (s > best_score) {
+      best_score = s;
+      best = fit;
+      best_pose = fitted;
+      best_information = fitter->frame_information();
+    }
+  }
+  if (!(best_score > -std::numeric_limits<double>::infinity())) {
+    begin(pose);  // no fit succeeded: the better start's, recorded as it fails
+    return fitter->EndFrame();
+  }
+  fitter->AcceptPose(scan, best_pose, best_information);
+  best.iterations = iterations;
+  best.total_seconds = seconds;
+  return best;
 }
 
 }  // namespace artex

@@ -132,7 +132,13 @@ struct GapRefitOptions {
     o.max_iterations = 30;
     return o;
   }();
-  FitQualityOptions quality;  // ranks the two starts
+  FitQualityOptions quality;  // ranks the starts and the fits
+  // Two more fits, from the better start with the legs in stride: one hip swung forward and
+  // the other back by this angle (degrees, about the template's left-right axis), each way
+  // round; the fit with the best quality score is kept (0: the one fit of the better start).
+  // A subject that stepped during the gap otherwise often ends up with both template legs in
+  // one scan leg, a fit the quality labels still take for good.
+  double leg_stride_deg = 20.0;
 
   bool IsValid(std::string* error) const;
 };
@@ -144,9 +150,11 @@ struct GapRefitOptions {
 // template vertices facing the camera and inside the depth image matches the scan centroid (the
 // initialiser's coarse placement: it follows a subject that walked on, but is biased by a few
 // centimetres, so a subject that stayed keeps `start`). The better is fitted as a first frame
-// with options.radii; the fitter's history restarts from this frame (Reset, the scale estimate
-// kept: the motion before the gap says little about the speed after it); no ICP, no other
-// hypotheses. Throws artex::Error for a pose with the wrong joint count or invalid options.
+// with options.radii, and with options.leg_stride_deg also that start with its legs in stride
+// both ways round; the fit with the best quality score is kept. The fitter's history restarts
+// from this frame (Reset, the scale estimate kept: the motion before the gap says little about
+// the speed after it). The summary is the kept fit's, with the EM iterations and time of all
+// the fits. Throws artex::Error for a pose with the wrong joint count or invalid options.
 FitSummary RefitFromPose(EMFitter* fitter, const Scan& scan, const PinholeCamera& depth_camera,
                          const Pose& start, const GapRefitOptions& options);
 
