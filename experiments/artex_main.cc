@@ -6,10 +6,12 @@
 #include <CLI/CLI.hpp>
 
 #include "experiments/commands.h"
+#include "experiments/heap_retention.h"
 #include "experiments/runner.h"
 #include "models/error.h"
 
 int main(int argc, char** argv) {
+  artex::RememberProgramArguments(argv);  // pipeline.huge_pages (experiments/heap_retention.h)
   CLI::App app{"artex: articulated 3D model tracking with on-the-fly texturing"};
   app.require_subcommand(1);
   // "artex 0.1.0 (<git revision of the source tree>)"; --version works without a subcommand.

@@ -19,4 +19,27 @@ namespace artex {
 // allocator that ignores mallopt (the sanitizers'), or a value glibc refused.
 bool RetainFreedHeap(int megabytes);
 
+// Transparent huge pages for glibc's heap (pipeline.huge_pages, docs/realtime.md, "Huge pages
+// for the heap"). The heap's first touch of the pool's images, colours and raster buffers
+// costs ~95,000 page faults over the first 60 frames of the default walk with 4 KB pages;
+// glibc's tunable glibc.malloc.hugetlb=1 (glibc >= 2.35) makes the allocator advise the kernel
+// to back its heaps with 2 MB pages where the kernel's transparent_hugepage mode is `madvise`.
+// Tunables are read when the process starts, so this re-executes the running program
+// (/proc/self/exe with `argv`) with GLIBC_TUNABLES extended by it. It returns (nothing
+// changed) when the tunable is already set, the C library is not glibc 2.35 or later, the
+// kernel's mode is `always` (huge pages already) or `never`, the process runs under a
+// sanitizer (its allocator ignores the tunable), or the exec fails; on success it does not
+// return. Flushes stdout and stderr first.
+void ReexecWithHugePageHeap(char** argv);
+
+// Whether glibc's heap is on transparent huge pages in this process: the kernel's mode is
+// `always`, or it is `madvise` and glibc.malloc.hugetlb is set (glibc >= 2.35, no sanitizer).
+bool HugePageHeapActive();
+// Whether ReexecWithHugePageHeap can make it so (or it is so already).
+bool HugePageHeapAvailable();
+
+// The program's argv for ReexecWithHugePageHeap from within a subcommand (set by main).
+void RememberProgramArguments(char** argv);
+char** ProgramArguments();  // null before RememberProgramArguments
+
 }  // namespace artex

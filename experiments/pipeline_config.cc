@@ -465,7 +465,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
                "texture_quality_every", "texture_quality_yaws_deg", "texture_quality_height",
                "export_atlases", "stream", "stream_estimate", "concurrency", "queue_depth", "live",
                "live_queue_depth", "live_rate_hz", "colour_delay_frames", "live_texture_skip",
-               "threads", "heap_retain_mb"});
+               "threads", "heap_retain_mb", "huge_pages"});
   c.Get("texture", &o->texture);
   c.Get("colour_term", &o->colour_term);
   c.Get("first_frame", &o->first_frame);
@@ -505,6 +505,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("colour_delay_frames", &o->realtime.colour_delay_frames);
   c.Get("threads", &o->realtime.threads);
   c.Get("heap_retain_mb", &o->realtime.heap_retain_mb);
+  c.Get("huge_pages", &o->realtime.huge_pages);
 }
 
 void BindStream(const Config& c, StreamOptions* o) {

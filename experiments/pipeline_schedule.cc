@@ -17,6 +17,7 @@
 
 #include "experiments/atomic_output.h"
 #include "experiments/bounded_queue.h"
+#include "experiments/heap_retention.h"
 #include "experiments/pipeline_stages.h"
 #include "models/error.h"
 #include "models/mesh_export.h"
@@ -139,6 +140,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
                         TextureStage* texture, OutputStage* output) {
   RealtimeStats stats;
   stats.concurrency = options.concurrency;
+  stats.huge_page_heap = HugePageHeapActive();
   stats.live = options.live;
   stats.rate_hz = options.live ? rate_hz : 0.0;
   FrameClock clock(options.live, rate_hz, begin, end);
@@ -347,6 +349,7 @@ void WriteRealtimeJson(const std::string& path, const RealtimeStats& s) {
   j["latency_p95_ms"] = finite(s.latency_p95_ms);
   j["latency_max_ms"] = finite(s.latency_max_ms);
   j["cpu_utilisation"] = s.cpu_utilisation;
+  j["huge_page_heap"] = s.huge_page_heap;
   nlohmann::json stages = nlohmann::json::array();
   for (const StageTiming& t : s.stages) {
     stages.push_back({{"name", t.name},

@@ -49,6 +49,10 @@ struct RealtimeOptions {
   // next frame's buffers instead of going back to the kernel (experiments/heap_retention.h;
   // process-wide, applied when a run starts and kept after it); 0: the allocator's defaults.
   int heap_retain_mb = 512;
+  // pipeline.huge_pages: `artex track` restarts itself once with glibc's heap on transparent
+  // huge pages (experiments/heap_retention.h: where glibc >= 2.35 and the kernel's mode is
+  // `madvise`; the library's RunPipeline does not); false: the ordinary 4 KB pages.
+  bool huge_pages = true;
 
   bool IsValid(std::string* error) const;
 };
@@ -80,6 +84,7 @@ struct RealtimeStats {
   // Capture (read start; live: the frame's arrival time) to textured model, ms.
   double latency_median_ms = 0.0, latency_p95_ms = 0.0, latency_max_ms = 0.0;
   double cpu_utilisation = 0.0;  // process CPU time / wall over the frame loop (1.0 = one core)
+  bool huge_page_heap = false;   // the heap on transparent huge pages (pipeline.huge_pages)
   std::vector<StageTiming> stages;
 };
 

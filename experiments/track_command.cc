@@ -14,6 +14,7 @@
 #include "experiments/commands.h"
 #include "experiments/stream_server.h"
 #include "experiments/config.h"
+#include "experiments/heap_retention.h"
 #include "experiments/pipeline.h"
 #include "models/error.h"
 #include "sensors/frame_source.h"
@@ -141,6 +142,8 @@ void RegisterTrackCommand(CLI::App* app) {
     if (!args->intrinsics.empty())
       config.Set("input.intrinsics", IntrinsicsConfigValue(args->intrinsics));
     const PipelineOptions options = LoadPipelineOptions(config);
+    // Before any output: the process may start again, with the same arguments.
+    if (options.realtime.huge_pages) ReexecWithHugePageHeap(ProgramArguments());
     const bool quiet = args->quiet;
     if (!quiet) {
       const std::string what = OpenFrameSource(args->sequence, options.input)->Description();

@@ -15,6 +15,7 @@
 #include <sstream>
 #include <string>
 
+#include "experiments/heap_retention.h"
 #include "sensors/frame_source.h"
 #include "sensors/sequence.h"
 #include "sensors/virtual_kinect.h"
@@ -284,6 +285,33 @@ TEST_F(InputCliTest, TrackRunsOnATumFolder) {
                             "' --no-texture -s input.max_time_difference=0.001");
   EXPECT_EQ(narrow.status, 1);
   EXPECT_NE(narrow.err.find("unpaired"), std::string::npos) << narrow.err;
+}
+
+// pipeline.huge_pages: `artex track` restarts itself once with glibc's heap on transparent
+// huge pages where the C library and the kernel allow it (experiments/heap_retention.h), and
+// realtime.json says whether the run had them; off, it runs on the ordinary heap (unless the
+// kernel puts every heap on huge pages).
+TEST_F(InputCliTest, TrackPutsTheHeapOnHugePagesWhereAvailable) {
+  const std::string tum = WriteTum("tum_huge_pages");
+  const auto huge_page_heap = [&](const std::string& on, const std::string& name) {
+    const std::string out = Path(name);
+    const Result r = Run("track -q '" + tum + "' -o '" + out + "' --intrinsics '" + tum +
+                         "/camera.yaml' --no-texture -s pipeline.export_glb=false "
+                         "-s pipeline.huge_pages=" + on);
+    EXPECT_EQ(r.status, 0) << r.err;
+    const std::string json = ReadFileBytes(fs::path(out) / "realtime.json");
+    EXPECT_NE(json.find("\"huge_page_heap\""), std::string::npos) << json;
+    // The run's output appears once: the restart happens before anything is written.
+    EXPECT_NE(r.out.find("results in"), std::string::npos) << r.out;
+    EXPECT_EQ(r.out.find("results in"), r.out.rfind("results in")) << r.out;
+    return json.find("\"huge_page_heap\": true") != std::string::npos;
+  };
+  const std::string mode = fs::exists("/sys/kernel/mm/transparent_hugepage/enabled")
+                               ? ReadFileBytes("/sys/kernel/mm/transparent_hugepage/enabled")
+                               : std::string();
+  const bool everywhere = mode.find("[always]") != std::string::npos;
+  EXPECT_EQ(huge_page_heap("true", "huge_pages_on"), HugePageHeapAvailable());
+  EXPECT_EQ(huge_page_heap("false", "huge_pages_off"), everywhere);
 }
 
 TEST_F(InputCliTest, ExperimentRunsARecordedTumFolder) {
