@@ -1,10 +1,15 @@
 #include "solvers/initializer.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/partitioner.h>
+
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <numeric>
 #include <sstream>
 
@@ -168,6 +173,18 @@ void PlaceAtVisibleCentroid(const Eigen::MatrixX3d& x, const Eigen::MatrixX3d& x
   }
 }
 
+// body(i) for every i in [0, n), each as its own oneTBB task (concurrently, in no fixed order;
+// the parallel loops inside body share the same workers).
+template <typename Body>
+void ForEachConcurrently(int n, const Body& body) {
+  tbb::parallel_for(
+      tbb::blocked_range<int>(0, n, 1),
+      [&](const tbb::blocked_range<int>& r) {
+        for (int i = r.begin(); i != r.end(); ++i) body(i);
+      },
+      tbb::simple_partitioner());
+}
+
 }  // namespace
 
 InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera& depth_camera,
@@ -183,13 +200,17 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
   const Eigen::VectorXi parts =
       by_part ? FitQualityParts(model.vertex_joint, model.JointNames(), options.quality)
               : Eigen::VectorXi();
-  const auto evaluate = [&](const Pose& pose) {
-    const auto t0 = Clock::now();
+  // quality_of is thread-safe; evaluate adds its time to quality_seconds (one thread at a time;
+  // the concurrent batch of quality_of is timed as a whole).
+  const auto quality_of = [&](const Pose& pose) {
     Eigen::MatrixX3d posed;
     skinning.Apply(pose, &posed);
-    const FitQuality q =
-        EvaluateFitQuality(posed, model.triangles, scan, depth_camera, options.quality,
-                           by_part ? &parts : nullptr);
+    return EvaluateFitQuality(posed, model.triangles, scan, depth_camera, options.quality,
+                              by_part ? &parts : nullptr);
+  };
+  const auto evaluate = [&](const Pose& pose) {
+    const auto t0 = Clock::now();
+    const FitQuality q = quality_of(pose);
     result.quality_seconds += SecondsSince(t0);
     return q;
   };
@@ -232,15 +253,26 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
   icp.coarse_alignment = false;
   icp.estimate_scale = icp.estimate_scale && fitter->ScaleIsFree();
 
-  // 1. Coarse placement and similarity ICP of every hypothesis.
+  // 1. Coarse placement and similarity ICP of every hypothesis (arm pose major, yaw minor),
+  // concurrently: each writes only its own hypothesis, so the result does not depend on the
+  // order or the number of threads.
   const auto icp_start = Clock::now();
-  for (const auto& [arm_angle, arm_pose] : arm_poses) {
+  const int num_arms = static_cast<int>(arm_poses.size());
+  const int num_yaws = static_cast<int>(options.yaws_deg.size());
+  {
     // Posed once per arm pose, shared by its facings' coarse placements and ICP alignments.
-    const IcpTemplate target(skinning, arm_pose);
-    const Eigen::MatrixX3d& x = target.vertices();
-    const Eigen::MatrixX3d& xn = target.normals();
-    for (double yaw_deg : options.yaws_deg) {
-      InitHypothesis h;
+    std::vector<std::unique_ptr<IcpTemplate>> targets(num_arms);
+    ForEachConcurrently(num_arms, [&](int a) {
+      targets[a] = std::make_unique<IcpTemplate>(skinning, arm_poses[a].second);
+    });
+    result.hypotheses.resize(num_arms * num_yaws);
+    ForEachConcurrently(num_arms * num_yaws, [&](int i) {
+      const auto& [arm_angle, arm_pose] = arm_poses[i / num_yaws];
+      const IcpTemplate& target = *targets[i / num_yaws];
+      const Eigen::MatrixX3d& x = target.vertices();
+      const Eigen::MatrixX3d& xn = target.normals();
+      const double yaw_deg = options.yaws_deg[i % num_yaws];
+      InitHypothesis& h = result.hypotheses[i];
       h.yaw_deg = yaw_deg;
       h.arm_angle_deg = arm_angle;
       Pose pose = arm_pose;
@@ -254,14 +286,16 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
                              options.coarse_iterations, &pose.translation);
       h.icp = AlignByIcp(target, pose, scan, icp);
       h.pose = h.icp.pose;
-      result.hypotheses.push_back(std::move(h));
-    }
-  }
+    });
+  }  // the posed ICP templates are freed here
   result.icp_seconds = SecondsSince(icp_start);
-  for (InitHypothesis& h : result.hypotheses) {
-    h.icp_quality = evaluate(h.pose);
+  const auto icp_quality_start = Clock::now();
+  ForEachConcurrently(static_cast<int>(result.hypotheses.size()), [&](int i) {
+    InitHypothesis& h = result.hypotheses[i];
+    h.icp_quality = quality_of(h.pose);
     h.quality = h.icp_quality;
-  }
+  });
+  result.quality_seconds += SecondsSince(icp_quality_start);
 
   // 2. EM fits of the best candidates.
   std::vector<int> order(result.hypotheses.size());
