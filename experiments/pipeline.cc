@@ -194,7 +194,17 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
   }
   ShapeEstimator shape(tmpl, options.shape);
   // The joint solve minimises the tracker's energy: its pose priors apply to every frame.
-  shape.SetPosePriors(fitter.pose_priors());
+  {
+    std::vector<std::shared_ptr<const FittingTerm>> priors = fitter.pose_priors();
+    if (options.shape_joint_limits.weight > 0.0) {
+      const JointLimitOptions limits =
+          ResolveJointLimits(options.shape_joint_limits, tmpl.JointNames());
+      std::string why;
+      if (!limits.IsValid(tmpl.num_joints(), &why)) throw Error("shape.joint_limits." + why);
+      priors.push_back(std::make_shared<JointLimitTerm>(limits, tmpl.num_joints()));
+    }
+    shape.SetPosePriors(std::move(priors));
+  }
   const std::string uncoupled =
       options.fitting.joint_coupling.weight > 0.0
           ? JointCouplingTerm::MissingJoints(options.fitting.joint_coupling, tmpl.JointNames())

@@ -89,6 +89,9 @@ struct PipelineOptions {
   // Its options: radii, iterations_per_stage and leg_stride_deg from pipeline.gap_refit_radii,
   // .gap_refit_iterations_per_stage and .gap_refit_leg_stride_deg, coarse_iterations and
   // quality from fitting.init and fitting.quality (LoadPipelineOptions).
+  // shape.joint_limits: joint limits added to the pose priors of the shape solve only (not to
+  // tracking), in fitting.joint_limits' form; weight 0 (default): none.
+  JointLimitOptions shape_joint_limits;
   GapRefitOptions gap_refit;
   // pipeline.gap_refit_stride_frames: the refit's starts with the legs in stride
   // (gap_refit.leg_stride_deg) only after a gap of at least this many frames (a third of a

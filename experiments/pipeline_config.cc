@@ -617,7 +617,7 @@ void BindShape(const Config& c, ShapeOptions* o) {
                "scan_to_model_voxel", "scan_to_model_max_distance", "scan_to_model_girth",
                "chain_prior_weight", "prior_weight", "pose_damping", "bone_min", "bone_max",
                "girth_min", "girth_max", "refine_every", "refine_prior_weight",
-               "max_fit_vertices"});
+               "max_fit_vertices", "joint_limits"});
   c.GetEnum("mode", ShapeModeNames(), &o->mode);
   c.Get("retrack", &o->retrack);
   c.Get("symmetric", &o->symmetric);
@@ -674,6 +674,7 @@ PipelineOptions LoadPipelineOptions(const Config& config) {
   BindPipeline(config.Section("pipeline"), &o);
   BindStream(config.Section("stream"), &o.stream);
   BindShape(config.Section("shape"), &o.shape);
+  BindJointLimits(config.Section("shape").Section("joint_limits"), &o.shape_joint_limits);
   o.shape.estep = o.fitting.estep;  // the tracker's correspondence weights
   std::string why;
   if (!o.IsValid(&why)) throw Error(config.Path("") + " " + why);

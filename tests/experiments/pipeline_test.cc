@@ -594,6 +594,46 @@ TEST(PipelineTest, ShapeCalibrationWritesTheSubjectTemplate) {
   EXPECT_NE(msg.find("shape.mode"), std::string::npos) << msg;
 }
 
+// shape.joint_limits: limits added to the shape solve's pose priors only. The frames tracked
+// before the calibration are the same with and without them; the solve's result is not.
+TEST(PipelineTest, ShapeJointLimitsApplyToTheShapeSolveOnly) {
+  const auto run = [&](const std::string& name, bool limits) {
+    Config config = SmallShapeConfig();
+    if (limits) {
+      config.Set("shape.joint_limits",
+                 "{weight: 0.1, joints: {neck: {min_deg: [0, 0, 0], max_deg: [0, 0, 0]},"
+                 " head: {min_deg: [0, 0, 0], max_deg: [0, 0, 0]}}}");
+    }
+    const fs::path out = OutDir(name);
+    Track(TestData().sequence, out.string(), config);
+    std::ifstream in(out / "summary.json");
+    const nlohmann::json shape = nlohmann::json::parse(in).at("shape");
+    std::ifstream poses(out / "poses.csv");
+    std::vector<std::string> rows;
+    for (std::string line; std::getline(poses, line);) rows.push_back(line);
+    return std::make_pair(shape, rows);
+  };
+  const auto [plain, plain_rows] = run("run_shape_plain", false);
+  const auto [limited, limited_rows] = run("run_shape_limited", true);
+  ASSERT_TRUE(plain.at("calibrated").get<bool>());
+  ASSERT_TRUE(limited.at("calibrated").get<bool>());
+  const int calibrated = plain.at("calibrated_after_frame").get<int>();
+  EXPECT_EQ(limited.at("calibrated_after_frame").get<int>(), calibrated);
+  ASSERT_GT(static_cast<int>(plain_rows.size()), calibrated + 1);
+  ASSERT_EQ(limited_rows.size(), plain_rows.size());
+  for (int row = 0; row <= calibrated + 1; ++row) {  // the header and the frames before
+    EXPECT_EQ(limited_rows[row], plain_rows[row]) << "poses.csv row " << row;
+  }
+  EXPECT_NE(limited.at("parameters").dump(), plain.at("parameters").dump());
+
+  Config bad = SmallShapeConfig();
+  bad.Set("shape.joint_limits",
+          "{weight: 0.1, joints: {neck: {min_deg: [10, 0, 0], max_deg: [0, 0, 0]}}}");
+  const std::string msg =
+      ErrorOf([&] { Track(TestData().sequence, OutDir("run_shape_bad").string(), bad); });
+  EXPECT_NE(msg.find("shape.joint_limits"), std::string::npos) << msg;
+}
+
 // The ground-truth joint error after a shape swap is scored with the subject's joint centres
 // (the shaped template the poses were fitted with), not the template's rest centres: each
 // frame's figure is recomputed here from poses.csv, subject.glb and the sequence's ground
