@@ -17,6 +17,9 @@
 #include <CLI/CLI.hpp>
 
 #include "experiments/commands.h"
+#include "experiments/config.h"
+#include "experiments/heap_retention.h"
+#include "experiments/pipeline.h"
 #include "experiments/progress_display.h"
 #include "experiments/runner.h"
 #include "experiments/slurm_backend.h"
@@ -199,6 +202,11 @@ void RegisterExperimentCommand(CLI::App* app) {
   run_sub->add_option("--out", run->out)->required();
   run_sub->add_option("--threads", run->threads);
   run_sub->callback([run]() {
+    // pipeline.huge_pages, as `artex track` (experiments/heap_retention.h): the run's process
+    // restarts itself once, before it writes anything.
+    if (LoadPipelineOptions(Config::Load(run->config)).realtime.huge_pages) {
+      ReexecWithHugePageHeap(ProgramArguments());
+    }
     RunSingle(run->config, run->sequence, run->template_path, run->out, run->threads, PrintProgress);
   });
 

@@ -49,9 +49,10 @@ struct RealtimeOptions {
   // next frame's buffers instead of going back to the kernel (experiments/heap_retention.h;
   // process-wide, applied when a run starts and kept after it); 0: the allocator's defaults.
   int heap_retain_mb = 512;
-  // pipeline.huge_pages: `artex track` restarts itself once with glibc's heap on transparent
-  // huge pages (experiments/heap_retention.h: where glibc >= 2.35 and the kernel's mode is
-  // `madvise`; the library's RunPipeline does not); false: the ordinary 4 KB pages.
+  // pipeline.huge_pages: `artex track` and each run of `artex experiment` restart themselves
+  // once with glibc's heap on transparent huge pages (experiments/heap_retention.h: where
+  // glibc >= 2.35 and the kernel's mode is `madvise`; the library's RunPipeline does not);
+  // false: the ordinary 4 KB pages.
   bool huge_pages = true;
 
   bool IsValid(std::string* error) const;

@@ -329,6 +329,11 @@ TEST_F(InputCliTest, ExperimentRunsARecordedTumFolder) {
     if (e.path().filename() == "poses.csv") {
       EXPECT_EQ(CountLines(ReadFileBytes(e.path())), kFrames + 1);
       found = true;
+      // The run's process put its heap on huge pages as `artex track` does (pipeline.huge_pages).
+      const std::string realtime = ReadFileBytes(e.path().parent_path() / "realtime.json");
+      EXPECT_EQ(realtime.find("\"huge_page_heap\": true") != std::string::npos,
+                HugePageHeapAvailable())
+          << realtime;
     }
   }
   EXPECT_TRUE(found);
