@@ -99,7 +99,8 @@ void ReexecWithHugePageHeap(char** argv) {
 #if defined(__GLIBC__)
   if (argv == nullptr || argv[0] == nullptr || !GlibcHasHugeTlbTunable()) return;
   const char* tunables = std::getenv("GLIBC_TUNABLES");
-  const std::string current = tunables ? tunables : "";
+  const bool had_tunables = tunables != nullptr;
+  const std::string current = had_tunables ? tunables : "";  // a copy: setenv may replace it
   if (current.find(kTunable) != std::string::npos) return;  // set (by us or the user)
   if (TransparentHugePageMode() != "madvise") return;
   const std::string value = current.empty() ? std::string(kTunable) + "=1"
@@ -109,8 +110,8 @@ void ReexecWithHugePageHeap(char** argv) {
   std::fflush(stderr);
   execv("/proc/self/exe", argv);
   // The exec failed: carry on with the ordinary heap, the environment as it was.
-  if (tunables) {
-    setenv("GLIBC_TUNABLES", tunables, 1);
+  if (had_tunables) {
+    setenv("GLIBC_TUNABLES", current.c_str(), 1);
   } else {
     unsetenv("GLIBC_TUNABLES");
   }
