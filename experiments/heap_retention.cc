@@ -108,7 +108,16 @@ void ReexecWithHugePageHeap(char** argv) {
   if (setenv("GLIBC_TUNABLES", value.c_str(), 1) != 0) return;
   std::fflush(stdout);
   std::fflush(stderr);
-  execv("/proc/self/exe", argv);
+  // The program's own path, so that the process keeps its name (ps, top: /proc/self/exe would
+  // name it "exe"); /proc/self/exe itself when the path is unknown or the file was replaced.
+  char path[4096];
+  const ssize_t n = readlink("/proc/self/exe", path, sizeof(path) - 1);
+  std::string program = "/proc/self/exe";
+  if (n > 0) {
+    path[n] = '\0';
+    if (access(path, X_OK) == 0) program = path;
+  }
+  execv(program.c_str(), argv);
   // The exec failed: carry on with the ordinary heap, the environment as it was.
   if (had_tunables) {
     setenv("GLIBC_TUNABLES", current.c_str(), 1);

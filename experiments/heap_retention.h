@@ -24,12 +24,12 @@ bool RetainFreedHeap(int megabytes);
 // costs ~95,000 page faults over the first 60 frames of the default walk with 4 KB pages;
 // glibc's tunable glibc.malloc.hugetlb=1 (glibc >= 2.35) makes the allocator advise the kernel
 // to back its heaps with 2 MB pages where the kernel's transparent_hugepage mode is `madvise`.
-// Tunables are read when the process starts, so this re-executes the running program
-// (/proc/self/exe with `argv`) with GLIBC_TUNABLES extended by it. It returns (nothing
-// changed) when the tunable is already set, the C library is not glibc 2.35 or later, the
-// kernel's mode is `always` (huge pages already) or `never`, the process runs under a
-// sanitizer (its allocator ignores the tunable), or the exec fails; on success it does not
-// return. Flushes stdout and stderr first.
+// Tunables are read when the process starts, so this re-executes the running program (its
+// own path, read from /proc/self/exe, so that the process keeps its name; `argv`) with
+// GLIBC_TUNABLES extended by it. It returns (nothing changed) when the tunable is already set,
+// the C library is not glibc 2.35 or later, the kernel's mode is `always` (huge pages already)
+// or `never`, the process runs under a sanitizer (its allocator ignores the tunable), or the
+// exec fails; on success it does not return. Flushes stdout and stderr first.
 void ReexecWithHugePageHeap(char** argv);
 
 // Whether glibc's heap is on transparent huge pages in this process: the kernel's mode is
