@@ -23,12 +23,6 @@ namespace artex {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-int FindJoint(const Template& model, const char* name) {
-  for (int j = 0; j < model.num_joints(); ++j) {
-    if (model.joints[j].name == name) return j;
-  }
-  return -1;
-}
 
 // `base` with both upper arms at `elevation_deg` below the horizontal (rotation about the axis
 // that raises the rest-pose upper arm), or false when the template has no such joints.
@@ -36,7 +30,7 @@ bool WithArms(const Template& model, const Pose& base, double elevation_deg, Pos
   *out = base;
   const char* const arms[2][2] = {{"l_shoulder", "l_elbow"}, {"r_shoulder", "r_elbow"}};
   for (const auto& arm : arms) {
-    const int shoulder = FindJoint(model, arm[0]), elbow = FindJoint(model, arm[1]);
+    const int shoulder = model.FindJoint(arm[0]), elbow = model.FindJoint(arm[1]);
     if (shoulder < 0 || elbow < 0) return false;
     const Eigen::Vector3d upper = model.joints[elbow].center - model.joints[shoulder].center;
     const Eigen::Vector3d axis = upper.cross(Eigen::Vector3d::UnitY());
@@ -350,8 +344,8 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
     const char* const arms[2][3] = {{"l_shoulder", "l_elbow", "l_wrist"},
                                     {"r_shoulder", "r_elbow", "r_wrist"}};
     for (const auto& arm : arms) {
-      const int shoulder = FindJoint(model, arm[0]), elbow = FindJoint(model, arm[1]);
-      const int wrist = FindJoint(model, arm[2]);
+      const int shoulder = model.FindJoint(arm[0]), elbow = model.FindJoint(arm[1]);
+      const int wrist = model.FindJoint(arm[2]);
       if (shoulder < 0 || elbow < 0) continue;
       for (int forwards = 0; forwards < 2; ++forwards) {
         for (double angle :
@@ -476,7 +470,7 @@ FitSummary RefitFromPose(EMFitter* fitter, const Scan& scan, const PinholeCamera
   }
   // The starts: the better one, and with legs in stride (template +X: the left-right axis).
   std::vector<Pose> starts = {pose};
-  const int l_hip = FindJoint(model, "l_hip"), r_hip = FindJoint(model, "r_hip");
+  const int l_hip = model.FindJoint("l_hip"), r_hip = model.FindJoint("r_hip");
   if (options.leg_stride_deg > 0.0 && l_hip >= 0 && r_hip >= 0) {
     const double swing = options.leg_stride_deg * kDegToRad;
     for (const double sign : {1.0, -1.0}) {
