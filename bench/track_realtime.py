@@ -5,13 +5,16 @@ live replay at the recording's 30 Hz (frames dropped), and peak RSS against sequ
 
   bench/track_realtime.py [--artex build/experiments/artex] [--baseline OTHER/artex]
                           [--frames 60] [--long 300] [--work /tmp/artex-rt-bench]
-                          [--set key=value ...]
+                          [--color-size 640x480] [--set key=value ...]
 
 --baseline: every run is also made with a second build (e.g. the previous version), the two
 alternating run by run, so the two columns of a row share the machine's load.
 
-Sequences are synthesised once into --work (artex synth --motion walk --seed 1, 640x480).
-Prints one table and writes WORK/results.json. The machine is shared: `uptime` is printed
+Sequences are synthesised once into --work (artex synth --motion walk --seed 1: depth 640x480,
+colour at the virtual Kinect's default 800x1016, or --color-size WxH, e.g. 640x480 as the
+Kinect v1 and the real recordings deliver it).
+Prints one table and writes WORK/results.json (results_WxH.json with --color-size). The machine
+is shared: `uptime` is printed
 before and after, and every figure of one table comes from the same invocation.
 """
 import argparse
@@ -26,10 +29,20 @@ def sh(cmd):
     return subprocess.run(cmd, check=True, capture_output=True, text=True)
 
 
-def synth(artex, frames, out):
+def synth(artex, frames, out, color_size):
     if not os.path.exists(os.path.join(out, "calibration.yaml")):
-        sh([artex, "synth", "--motion", "walk", "--frames", str(frames), "--seed", "1", "-o", out])
+        cmd = [artex, "synth", "--motion", "walk", "--frames", str(frames), "--seed", "1"]
+        if color_size:
+            cmd += ["--color-width", str(color_size[0]), "--color-height", str(color_size[1])]
+        sh(cmd + ["-o", out])
     return out
+
+
+def parse_size(text):
+    m = re.fullmatch(r"(\d+)x(\d+)", text)
+    if not m or int(m.group(1)) < 1 or int(m.group(2)) < 1:
+        raise argparse.ArgumentTypeError("expected WIDTHxHEIGHT (e.g. 640x480), found " + text)
+    return int(m.group(1)), int(m.group(2))
 
 
 def track(artex, seq, out, config, sets):
@@ -65,13 +78,18 @@ def main():
     ap.add_argument("--work", default="/tmp/artex-rt-bench")
     ap.add_argument("--set", action="append", default=[], help="extra --set for every run")
     ap.add_argument("--no-live", action="store_true")
+    ap.add_argument("--color-size", type=parse_size, default=None,
+                    help="colour camera WIDTHxHEIGHT of the synthesised walks (default: the "
+                         "virtual Kinect's 800x1016)")
     ap.add_argument("--baseline", default="", help="a second artex binary, run alternately")
     ap.add_argument("--baseline-config", default="",
                     help="its configuration (default: configs/default.yaml of its source tree, "
                          "two levels above the binary's folder)")
     args = ap.parse_args()
     os.makedirs(args.work, exist_ok=True)
-    seq = synth(args.artex, args.frames, os.path.join(args.work, "walk%d" % args.frames))
+    suffix = "_%dx%d" % args.color_size if args.color_size else ""
+    seq = synth(args.artex, args.frames, os.path.join(args.work, "walk%d%s" % (args.frames, suffix)),
+                args.color_size)
     runs = [
         ("sequential", seq, ["pipeline.concurrency=sequential"]),
         ("pipelined", seq, ["pipeline.concurrency=pipelined"]),
@@ -79,7 +97,8 @@ def main():
     if not args.no_live:
         runs.append(("pipelined live 30 Hz", seq, ["pipeline.live=true"]))
     if args.long > 0:
-        long_seq = synth(args.artex, args.long, os.path.join(args.work, "walk%d" % args.long))
+        long_seq = synth(args.artex, args.long,
+                         os.path.join(args.work, "walk%d%s" % (args.long, suffix)), args.color_size)
         runs.append(("pipelined %d frames" % args.long, long_seq, ["pipeline.concurrency=pipelined"]))
         if not args.no_live:
             runs.append(("pipelined live 30 Hz, %d frames" % args.long, long_seq,
@@ -93,9 +112,15 @@ def main():
         binaries.append(("baseline ", args.baseline, config))
     for name, s, sets in runs:
         for label, binary, config in binaries:
-            out = os.path.join(args.work, "run_" + re.sub(r"[^a-z0-9]+", "_", label + name))
+            out = os.path.join(args.work,
+                               "run_" + re.sub(r"[^a-z0-9]+", "_", label + name) + suffix)
             results[label + name] = track(binary, s, out, config, sets + args.set)
     after = uptime()
+    with open(os.path.join(seq, "calibration.yaml")) as f:
+        calibration = f.read()
+    color = re.search(r"color:\s*\n\s*width: (\d+).*\n\s*height: (\d+)", calibration)
+    color_size = "%sx%s" % color.groups() if color else "unknown"
+    print("colour camera: " + color_size + " (depth 640x480)")
     print("load before: " + before)
     print("load after:  " + after)
     head = ("%-34s %7s %7s %8s %8s %6s %5s %8s %8s %7s %7s"
@@ -122,8 +147,9 @@ def main():
         print("  %-32s %s" % (name, ", ".join("%s %.1f" % (s["name"],
                                                            s.get("cpu_ms_per_frame", float("nan")))
                                               for s in r["realtime"]["stages"])))
-    with open(os.path.join(args.work, "results.json"), "w") as f:
-        json.dump({"uptime_before": before, "uptime_after": after, "runs": results}, f, indent=2)
+    with open(os.path.join(args.work, "results%s.json" % suffix), "w") as f:
+        json.dump({"uptime_before": before, "uptime_after": after, "color_size": color_size,
+                   "runs": results}, f, indent=2)
 
 
 if __name__ == "__main__":
