@@ -66,6 +66,11 @@ class PointCloudIndex {
   int size() const;
   // Index of the nearest point (-1 when empty) and its squared distance.
   int Nearest(const Eigen::Vector3d& query, double* distance2) const;
+  // The same nearest point when its squared distance is below `bound2`, else -1 (distance2:
+  // +inf): the search skips every part of the tree farther than the bound, so a tight bound
+  // (e.g. the distance to last iteration's nearest point) makes it faster. Ties resolve as in
+  // Nearest.
+  int NearestWithin(const Eigen::Vector3d& query, double bound2, double* distance2) const;
   // Up to k nearest, ascending; returns how many were written.
   int KNearest(const Eigen::Vector3d& query, int k, int* indices, double* distances2) const;
   // Replaces *out with (index, squared distance) of the points within `radius` (unsorted).

@@ -148,16 +148,28 @@ IcpInitResult AlignByIcp(const IcpTemplate& target, const Pose& initial, const S
   IcpInitResult result;
   result.num_samples = static_cast<int>(sample.size());
   const double max_d2 = options.max_distance * options.max_distance;
+  // Each sample's nearest template vertex of the previous iteration (-1: none in range).
+  std::vector<int> previous(sample.size(), -1);
   for (int it = 0; it < options.max_iterations; ++it) {
     // Scan points into the template frame: q = R^T (v - t) / s.
     Eigen::Matrix3Xd src(3, sample.size()), dst(3, sample.size());
     int pairs = 0;
     double sum_d2 = 0.0;
-    for (int s : sample) {
+    for (std::size_t k = 0; k < sample.size(); ++k) {
+      const int s = sample[k];
       const Eigen::Vector3d v = scan.points.row(s).transpose();
       const Eigen::Vector3d q = rotation.transpose() * (v - translation) / scale;
+      // The nearest vertex, searched no farther than a pair is accepted (a hair more, for
+      // rounding: the test below decides) nor than the previous iteration's nearest vertex,
+      // which has moved little: the same vertex as an unbounded search, found sooner.
+      double bound2 = max_d2 / (scale * scale) * (1.0 + 1e-9);
+      if (previous[k] >= 0) {
+        bound2 = std::min(
+            bound2, (x.row(previous[k]).transpose() - q).squaredNorm() * (1.0 + 1e-9) + 1e-300);
+      }
       double d2 = 0.0;
-      const int t = index.Nearest(q, &d2);
+      const int t = index.NearestWithin(q, bound2, &d2);
+      previous[k] = t;
       const double world_d2 = d2 * scale * scale;
       if (t < 0 || world_d2 > max_d2) continue;
       if ((rotation * xn.row(t).transpose()).dot(scan.normals.row(s).transpose()) <

@@ -19,6 +19,28 @@ struct RowMajorCloud {
     return false;
   }
 };
+// nanoflann result set of the one nearest point below a squared-distance bound. It keeps the
+// first of equal distances and prunes with its current best, as KNNResultSet(1) does, so
+// whatever it finds is what KNNResultSet(1) finds.
+class BoundedNearest {
+ public:
+  explicit BoundedNearest(double bound2) : worst_(bound2) {}
+  bool addPoint(double distance2, int index) {
+    if (distance2 < worst_) {
+      worst_ = distance2;
+      index_ = index;
+    }
+    return true;
+  }
+  double worstDist() const { return worst_; }
+  bool full() const { return index_ >= 0; }
+  int index() const { return index_; }
+
+ private:
+  double worst_;
+  int index_ = -1;
+};
+
 using KdTree =
     nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, RowMajorCloud>,
                                         RowMajorCloud, 3, int>;
@@ -50,6 +72,19 @@ int PointCloudIndex::Nearest(const Eigen::Vector3d& query, double* distance2) co
   double d2 = std::numeric_limits<double>::infinity();
   if (size() > 0) KNearest(query, 1, &index, &d2);
   if (distance2) *distance2 = d2;
+  return index;
+}
+
+int PointCloudIndex::NearestWithin(const Eigen::Vector3d& query, double bound2,
+                                   double* distance2) const {
+  BoundedNearest result(bound2);
+  if (size() > 0 && bound2 > 0.0) {
+    impl_->tree->findNeighbors(result, query.data(), nanoflann::SearchParams());
+  }
+  const int index = result.index();
+  if (distance2) {
+    *distance2 = index >= 0 ? result.worstDist() : std::numeric_limits<double>::infinity();
+  }
   return index;
 }
 

@@ -381,6 +381,41 @@ TEST(EStepTest, PointCloudIndexMatchesBruteForce) {
   }
 }
 
+TEST(EStepTest, NearestWithinABoundFindsTheNearestOrNone) {
+  const PointSets sets = MakePointSets(700, 50, 17);
+  PointCloudIndex index(sets.scan.points, 10);
+  int found_within = 0, found_none = 0;
+  for (int t = 0; t < 50; ++t) {
+    const Eigen::Vector3d q = sets.vertices.row(t).transpose();
+    double nearest_d2 = 0.0;
+    const int nearest = index.Nearest(q, &nearest_d2);
+    ASSERT_GE(nearest, 0);
+    // Bounds below, at and above the nearest distance; a bound at another point's distance (as
+    // the ICP's previous nearest point gives it) finds the nearest too.
+    const Eigen::Vector3d other = sets.scan.points.row((7 * t) % sets.scan.size()).transpose();
+    for (const double bound2 : {0.5 * nearest_d2, nearest_d2, nearest_d2 * (1.0 + 1e-9),
+                                4.0 * nearest_d2, (other - q).squaredNorm() * (1.0 + 1e-9)}) {
+      double d2 = -1.0;
+      const int i = index.NearestWithin(q, bound2, &d2);
+      if (nearest_d2 < bound2) {
+        EXPECT_EQ(i, nearest) << "query " << t << ", bound " << bound2;
+        EXPECT_EQ(d2, nearest_d2);
+        ++found_within;
+      } else {
+        EXPECT_EQ(i, -1) << "query " << t << ", bound " << bound2;
+        EXPECT_TRUE(std::isinf(d2));
+        ++found_none;
+      }
+    }
+  }
+  EXPECT_GT(found_within, 100);
+  EXPECT_GT(found_none, 50);
+  double d2 = 0.0;
+  EXPECT_EQ(index.NearestWithin(Eigen::Vector3d::Zero(), 0.0, &d2), -1);
+  EXPECT_EQ(PointCloudIndex(Eigen::MatrixX3d(0, 3)).NearestWithin(Eigen::Vector3d::Zero(), 1.0, &d2),
+            -1);
+}
+
 TEST(EStepTest, RejectsBadInput) {
   const PointSets sets = MakePointSets(10, 5, 16);
   EStepOptions options;
