@@ -152,13 +152,13 @@ struct EMFitterOptions {
   // this many (and at most max_fit_vertices; 0: max_fit_vertices alone). First frames, the
   // initialiser's hypotheses and refits after a gap (SetNextFrameSchedule) keep
   // max_fit_vertices: on the real recordings the initialisation needs the denser subset, the
-  // tracking does not (docs/realtime.md, "Tracking frames on a smaller subset").
+  // tracking does not (docs/fitting-speed.md, "Tracking frames on a smaller subset").
   int tracking_max_fit_vertices = 2000;
   // Radius E-step, tracking frames (as tracking_max_fit_vertices): one voxel cloud (cell
   // voxel_fraction x the widest tracking radius) and one candidate gather at that radius serve
   // every tracking radius (EStepOptions::voxel_cell, list_radius), instead of a cloud and a
   // gather per radius: a fifth less CPU per tracking frame at the same accuracy
-  // (docs/realtime.md, "One cloud per tracking frame"). false: per radius (before).
+  // (docs/fitting-speed.md, "One cloud per tracking frame"). false: per radius (before).
   bool tracking_shared_cloud = true;
   FitVertexSelection fit_vertex_selection = FitVertexSelection::kVoxel;
   // Template normals (for n_s . n'_t of eq. 4) are recomputed on the whole posed mesh at the

@@ -217,7 +217,7 @@ TEST(RealRecordingsTest, SkeltrackWithTheSubjectsShapeUprightAndClose) {
   // scale_sample_max_scan_points 1490, init.icp.max_scan_points 1490) gave 4 to 9 good frames,
   // with the E-step's clouds per tracking radius as with one per frame
   // (fitting.tracking_shared_cloud), and the defaults 7 and 6; the frames' mean depth residual
-  // stayed within 35.8-38.4 mm in all ten runs (docs/realtime.md, "One cloud per tracking
+  // stayed within 35.8-38.4 mm in all ten runs (docs/fitting-speed.md, "One cloud per tracking
   // frame"). So the mean residual is bounded, and a third of the frames must be good.
   double residual = 0.0;
   for (const FrameRecord& f : run.result.frames) residual += f.quality.depth_residual_m;
