@@ -7,7 +7,8 @@
 //   BM_FitFrame*: one hard tracking frame starting ~50 mm mean vertex error from the truth.
 //   BM_InitializeFit: the multi-hypothesis first frame (solvers/initializer.h, default options:
 //                 12 hypotheses, 4 EM fits) on a virtual Kinect frame (640 x 480, default
-//                 noise, the subject facing away); counters: chosen yaw, ICP / EM / quality ms.
+//                 noise, the subject facing away); counters: chosen yaw, ICP / EM / quality ms, the ICP
+//                 iterations per hypothesis and how many converged before the cap.
 //   BM_FitQuality: EvaluateFitQuality of the fitted (posed) template on that frame.
 // Variants side by side: truncated-radius E-step + Gauss-Newton (default options), the same
 // with other E-step candidate margins (BM_TrackCandidateMargin/<mm>) and work budgets
@@ -403,6 +404,16 @@ void BM_InitializeFit(benchmark::State& state) {
   state.counters["chosen_yaw_deg"] = r.chosen >= 0 ? r.hypotheses[r.chosen].yaw_deg : -1.0;
   state.counters["score"] = r.quality.score;
   state.counters["scan_points"] = f.data.scans[0].size();
+  double icp_iterations = 0.0, converged = 0.0;
+  int aligned = 0;
+  for (const InitHypothesis& h : r.hypotheses) {
+    if (h.icp.iterations == 0) continue;
+    icp_iterations += h.icp.iterations;
+    converged += h.icp.converged;
+    ++aligned;
+  }
+  state.counters["icp_iterations"] = aligned > 0 ? icp_iterations / aligned : 0.0;
+  state.counters["icp_converged"] = converged;
 }
 BENCHMARK(BM_InitializeFit)->Unit(benchmark::kMillisecond)->UseRealTime();
 
