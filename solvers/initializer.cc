@@ -347,19 +347,29 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
       const int shoulder = model.FindJoint(arm[0]), elbow = model.FindJoint(arm[1]);
       const int wrist = model.FindJoint(arm[2]);
       if (shoulder < 0 || elbow < 0) continue;
+      // The arm's directions replace its shoulder and elbow rotations whatever they were, so
+      // they are all made from the pose as this arm's turn starts and scored concurrently; the
+      // best is then taken in their order (the first of equal scores), as one after another.
+      std::vector<Pose> tried;
       for (int forwards = 0; forwards < 2; ++forwards) {
         for (double angle :
              forwards ? options.refine_front_angles_deg : options.refine_side_angles_deg) {
           for (ForearmBend bend : options.refine_forearm_bends) {
-            const Pose p =
-                WithArmDirection(model, refined, shoulder, elbow, wrist, angle, forwards, bend);
-            const double score = evaluate(p).score;
-            if (score > refined_score) {
-              refined_score = score;
-              refined = p;
-              changed = true;
-            }
+            tried.push_back(
+                WithArmDirection(model, refined, shoulder, elbow, wrist, angle, forwards, bend));
           }
+        }
+      }
+      std::vector<double> scores(tried.size());
+      const auto scoring_start = Clock::now();
+      ForEachConcurrently(static_cast<int>(tried.size()),
+                          [&](int k) { scores[k] = quality_of(tried[k]).score; });
+      result.quality_seconds += SecondsSince(scoring_start);
+      for (size_t k = 0; k < tried.size(); ++k) {
+        if (scores[k] > refined_score) {
+          refined_score = scores[k];
+          refined = tried[k];
+          changed = true;
         }
       }
     }
