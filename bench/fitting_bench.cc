@@ -7,8 +7,8 @@
 //   BM_FitFrame*: one hard tracking frame starting ~50 mm mean vertex error from the truth.
 //   BM_InitializeFit: the multi-hypothesis first frame (solvers/initializer.h, default options:
 //                 12 hypotheses, 4 EM fits) on a virtual Kinect frame (640 x 480, default
-//                 noise, the subject facing away); counters: chosen yaw, ICP / EM / quality ms, the ICP
-//                 iterations per hypothesis and how many converged before the cap.
+//                 noise, the subject facing away); counters: chosen yaw, ICP / EM / quality
+//                 ms, the ICP iterations per hypothesis and how many converged before the cap.
 //   BM_FitQuality: EvaluateFitQuality of the fitted (posed) template on that frame.
 // Variants side by side: truncated-radius E-step + Gauss-Newton (default options), the same
 // with other E-step candidate margins (BM_TrackCandidateMargin/<mm>) and work budgets

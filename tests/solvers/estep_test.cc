@@ -412,8 +412,9 @@ TEST(EStepTest, NearestWithinABoundFindsTheNearestOrNone) {
   EXPECT_GT(found_none, 50);
   double d2 = 0.0;
   EXPECT_EQ(index.NearestWithin(Eigen::Vector3d::Zero(), 0.0, &d2), -1);
-  EXPECT_EQ(PointCloudIndex(Eigen::MatrixX3d(0, 3)).NearestWithin(Eigen::Vector3d::Zero(), 1.0, &d2),
-            -1);
+  const PointCloudIndex empty{Eigen::MatrixX3d(0, 3)};
+  EXPECT_EQ(empty.NearestWithin(Eigen::Vector3d::Zero(), 1.0, &d2), -1);
+  EXPECT_TRUE(std::isinf(d2));
 }
 
 TEST(EStepTest, RejectsBadInput) {
