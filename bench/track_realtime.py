@@ -5,10 +5,13 @@ live replay at the recording's 30 Hz (frames dropped), and peak RSS against sequ
 
   bench/track_realtime.py [--artex build/experiments/artex] [--baseline OTHER/artex]
                           [--frames 60] [--long 300] [--work /tmp/artex-rt-bench]
-                          [--color-size 640x480] [--set key=value ...]
+                          [--color-size 640x480] [--repeat 3] [--set key=value ...]
 
 --baseline: every run is also made with a second build (e.g. the previous version), the two
 alternating run by run, so the two columns of a row share the machine's load.
+--repeat N: the whole list of runs N times over (still alternating run by run); the table shows
+each figure's median over the N, a second table their ranges. This machine's speed drifts by
+10-20 % within minutes, more than many changes are worth: one invocation decides little.
 
 Sequences are synthesised once into --work (artex synth --motion walk --seed 1: depth 640x480,
 colour at the virtual Kinect's default 800x1016, or --color-size WxH, e.g. 640x480 as the
@@ -65,6 +68,34 @@ def track(artex, seq, out, config, sets):
             "realtime": rt, "metrics": metrics}
 
 
+def median_result(reps):
+    """One result whose numbers are the medians over the repetitions (of the same run): every
+    numeric field of realtime.json and metrics.json, the stages' figures, RSS and CPU."""
+    if len(reps) == 1:
+        return reps[0]
+
+    def median(values):
+        values = sorted(values)
+        n = len(values)
+        return values[n // 2] if n % 2 else 0.5 * (values[n // 2 - 1] + values[n // 2])
+
+    def merge(items):
+        first = items[0]
+        if isinstance(first, bool) or first is None or isinstance(first, str):
+            return first
+        if isinstance(first, (int, float)):
+            numbers = [x for x in items if isinstance(x, (int, float))]
+            return median(numbers) if len(numbers) == len(items) else first
+        if isinstance(first, dict):
+            return {k: merge([x.get(k) for x in items]) for k in first}
+        if isinstance(first, list) and all(isinstance(x, list) and len(x) == len(first)
+                                           for x in items):
+            return [merge([x[i] for x in items]) for i in range(len(first))]
+        return first
+
+    return merge(reps)
+
+
 def uptime():
     return sh(["uptime"]).stdout.strip()
 
@@ -78,6 +109,8 @@ def main():
     ap.add_argument("--work", default="/tmp/artex-rt-bench")
     ap.add_argument("--set", action="append", default=[], help="extra --set for every run")
     ap.add_argument("--no-live", action="store_true")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="make every run this many times (alternating); report medians and ranges")
     ap.add_argument("--color-size", type=parse_size, default=None,
                     help="colour camera WIDTHxHEIGHT of the synthesised walks (default: the "
                          "virtual Kinect's 800x1016)")
@@ -86,6 +119,8 @@ def main():
                     help="its configuration (default: configs/default.yaml of its source tree, "
                          "two levels above the binary's folder)")
     args = ap.parse_args()
+    if args.repeat < 1:
+        ap.error("--repeat: expected >= 1, found %d" % args.repeat)
     os.makedirs(args.work, exist_ok=True)
     suffix = "_%dx%d" % args.color_size if args.color_size else ""
     seq = synth(args.artex, args.frames, os.path.join(args.work, "walk%d%s" % (args.frames, suffix)),
@@ -104,17 +139,21 @@ def main():
             runs.append(("pipelined live 30 Hz, %d frames" % args.long, long_seq,
                          ["pipeline.live=true"]))
     before = uptime()
-    results = {}
     binaries = [("", args.artex, args.config)]
     if args.baseline:
         config = args.baseline_config or os.path.join(
             os.path.dirname(os.path.abspath(args.baseline)), "..", "..", "configs", "default.yaml")
         binaries.append(("baseline ", args.baseline, config))
-    for name, s, sets in runs:
-        for label, binary, config in binaries:
-            out = os.path.join(args.work,
-                               "run_" + re.sub(r"[^a-z0-9]+", "_", label + name) + suffix)
-            results[label + name] = track(binary, s, out, config, sets + args.set)
+    repetitions = {}
+    for rep in range(args.repeat):
+        for name, s, sets in runs:
+            for label, binary, config in binaries:
+                out = os.path.join(args.work,
+                                   "run_" + re.sub(r"[^a-z0-9]+", "_", label + name) + suffix +
+                                   ("_%d" % rep if args.repeat > 1 else ""))
+                r = track(binary, s, out, config, sets + args.set)
+                repetitions.setdefault(label + name, []).append(r)
+    results = {key: median_result(reps) for key, reps in repetitions.items()}
     after = uptime()
     with open(os.path.join(seq, "calibration.yaml")) as f:
         calibration = f.read()
@@ -136,6 +175,18 @@ def main():
                  rt["frames_dropped_after_first"], r["rss_mb"],
                  m["mean_vertex_error_mm"] or float("nan"),
                  m["mean_novel_view_psnr_db"] or float("nan")))
+    if args.repeat > 1:
+        print("ranges over the %d repetitions (min-max):" % args.repeat)
+        for key, reps in repetitions.items():
+            def span(get, fmt):
+                values = sorted(get(r) for r in reps)
+                return (fmt + "-" + fmt) % (values[0], values[-1])
+            rt = lambda r: r["realtime"]
+            print("  %-32s fps %s, fps>1 %s, lat med %s ms, drop %s"
+                  % (key, span(lambda r: rt(r)["frames_per_second"], "%.1f"),
+                     span(lambda r: rt(r)["steady_frames_per_second"], "%.1f"),
+                     span(lambda r: rt(r)["latency_median_ms"] or 0, "%.0f"),
+                     span(lambda r: rt(r)["frames_dropped"], "%d")))
     # Stages by name (the two builds may have different stages: the pool stage is newer).
     print("stage busy ms/frame:")
     for name, r in results.items():
@@ -149,7 +200,8 @@ def main():
                                               for s in r["realtime"]["stages"])))
     with open(os.path.join(args.work, "results%s.json" % suffix), "w") as f:
         json.dump({"uptime_before": before, "uptime_after": after, "color_size": color_size,
-                   "runs": results}, f, indent=2)
+                   "repeat": args.repeat, "runs": results,
+                   "repetitions": repetitions if args.repeat > 1 else {}}, f, indent=2)
 
 
 if __name__ == "__main__":
