@@ -177,16 +177,17 @@ def main():
                  m["mean_novel_view_psnr_db"] or float("nan")))
     if args.repeat > 1:
         print("ranges over the %d repetitions (min-max):" % args.repeat)
+
+        def span(reps, field, fmt):
+            values = sorted(r["realtime"][field] or 0 for r in reps)
+            return (fmt + "-" + fmt) % (values[0], values[-1])
+
         for key, reps in repetitions.items():
-            def span(get, fmt):
-                values = sorted(get(r) for r in reps)
-                return (fmt + "-" + fmt) % (values[0], values[-1])
-            rt = lambda r: r["realtime"]
             print("  %-32s fps %s, fps>1 %s, lat med %s ms, drop %s"
-                  % (key, span(lambda r: rt(r)["frames_per_second"], "%.1f"),
-                     span(lambda r: rt(r)["steady_frames_per_second"], "%.1f"),
-                     span(lambda r: rt(r)["latency_median_ms"] or 0, "%.0f"),
-                     span(lambda r: rt(r)["frames_dropped"], "%d")))
+                  % (key, span(reps, "frames_per_second", "%.1f"),
+                     span(reps, "steady_frames_per_second", "%.1f"),
+                     span(reps, "latency_median_ms", "%.0f"),
+                     span(reps, "frames_dropped", "%d")))
     # Stages by name (the two builds may have different stages: the pool stage is newer).
     print("stage busy ms/frame:")
     for name, r in results.items():

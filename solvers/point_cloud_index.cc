@@ -68,11 +68,7 @@ int PointCloudIndex::size() const {
 }
 
 int PointCloudIndex::Nearest(const Eigen::Vector3d& query, double* distance2) const {
-  int index = -1;
-  double d2 = std::numeric_limits<double>::infinity();
-  if (size() > 0) KNearest(query, 1, &index, &d2);
-  if (distance2) *distance2 = d2;
-  return index;
+  return NearestWithin(query, std::numeric_limits<double>::infinity(), distance2);
 }
 
 int PointCloudIndex::NearestWithin(const Eigen::Vector3d& query, double bound2,

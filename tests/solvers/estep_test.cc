@@ -387,9 +387,12 @@ TEST(EStepTest, NearestWithinABoundFindsTheNearestOrNone) {
   int found_within = 0, found_none = 0;
   for (int t = 0; t < 50; ++t) {
     const Eigen::Vector3d q = sets.vertices.row(t).transpose();
+    // The nearest point by brute force; its squared distance as the index computes it
+    // (Nearest is NearestWithin without a bound).
+    Eigen::Index nearest = -1;
+    (sets.scan.points.rowwise() - q.transpose()).rowwise().squaredNorm().minCoeff(&nearest);
     double nearest_d2 = 0.0;
-    const int nearest = index.Nearest(q, &nearest_d2);
-    ASSERT_GE(nearest, 0);
+    ASSERT_EQ(index.Nearest(q, &nearest_d2), nearest);
     // Bounds below, at and above the nearest distance; a bound at another point's distance (as
     // the ICP's previous nearest point gives it) finds the nearest too.
     const Eigen::Vector3d other = sets.scan.points.row((7 * t) % sets.scan.size()).transpose();
