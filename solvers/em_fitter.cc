@@ -108,6 +108,40 @@ EMFitter::EMFitter(const Template& tmpl, const EMFitterOptions& options) : optio
 
 EMFitter::~EMFitter() = default;
 
+EMFitter::EMFitter(const EMFitter& other)
+    : options_(other.options_),
+      skinning_(std::make_unique<Skinning>(*other.skinning_)),
+      pose_priors_(other.pose_priors_),  // immutable terms, shared
+      solver_(FitSolver::Create(other.options_.solver)),
+      template_colors_(other.template_colors_),
+      initial_pose_(other.initial_pose_),
+      next_radii_(other.next_radii_),
+      next_iterations_per_stage_(other.next_iterations_per_stage_),
+      pose_(other.pose_),
+      camera_(other.camera_),
+      has_camera_(other.has_camera_),
+      history_(other.history_),
+      frame_(other.frame_),
+      accepted_frames_(other.accepted_frames_),
+      scale_estimate_(other.scale_estimate_),
+      scale_samples_(other.scale_samples_),
+      predictor_(other.predictor_->Clone()),
+      frame_information_(other.frame_information_) {
+  for (int i = 0; i < 2; ++i) {
+    subsets_[i].vertices = other.subsets_[i].vertices;
+    if (other.subsets_[i].skinning) {
+      subsets_[i].skinning = std::make_unique<Skinning>(*other.subsets_[i].skinning);
+    }
+  }
+  fit_skinning_ = subsets_[0].skinning ? subsets_[0].skinning.get() : skinning_.get();
+  fit_vertices_ = &subsets_[0].vertices;
+}
+
+std::unique_ptr<EMFitter> EMFitter::Clone() const {
+  if (state_) throw Error("EMFitter::Clone: a frame is in progress (BeginFrame without EndFrame)");
+  return std::unique_ptr<EMFitter>(new EMFitter(*this));
+}
+
 EMFitter::FitSubset EMFitter::MakeFitSubset(const Template& tmpl, int max_vertices) const {
   FitSubset result;
   const int v = tmpl.num_vertices();

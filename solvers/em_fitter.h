@@ -314,6 +314,15 @@ class EMFitter {
   // iterations_per_stage < 1.
   void SetNextFrameSchedule(const std::vector<double>& radii, int iterations_per_stage);
 
+  // An independent copy of this fitter between frames: options, template and rest shape, fitted
+  // vertex subsets, depth camera, template colours, history, scale estimate, predictor state and
+  // a pending SetNextFrameSchedule. A frame begun on the copy fits exactly as on this fitter, so
+  // several hypotheses of one frame can be fitted concurrently, one copy each
+  // (solvers/initializer.h). The iteration callback is not copied. Thread-safe as long as this
+  // fitter is not modified meanwhile. Throws artex::Error while a frame is in progress (after
+  // BeginFrame, before EndFrame or DiscardFrame).
+  std::unique_ptr<EMFitter> Clone() const;
+
   // Progress hook, called after every EM iteration (never prints).
   void SetIterationCallback(std::function<void(const EMIterationInfo&)> callback) {
     callback_ = std::move(callback);
@@ -321,6 +330,8 @@ class EMFitter {
 
  private:
   struct FrameState;
+  EMFitter(const EMFitter& other);  // Clone
+  EMFitter& operator=(const EMFitter&) = delete;
   // Robustness checks and summary of the frame begun by BeginFrame; sets *ok.
   FitSummary FinishFrame(bool* ok);
   // History, scale estimate and frame counter for an accepted pose (scan: of its frame).

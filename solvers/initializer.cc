@@ -316,19 +316,26 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
   const int candidates = std::min<int>(options.em_candidates, static_cast<int>(order.size()));
   const auto em_start = Clock::now();
   const double quality_before_em = result.quality_seconds;
-  int best = -1;
-  for (int c = 0; c < candidates; ++c) {
+  // Concurrently, each in its own copy of the fitter: a candidate's fit depends only on the
+  // fitter's state between frames, which the copies share, so the fits (and the choice below,
+  // in candidate order) are those of one fitter fitting them one after another.
+  ForEachConcurrently(candidates, [&](int c) {
     InitHypothesis& h = result.hypotheses[order[c]];
-    fitter->BeginFrame(scan, h.icp.pose);
+    const std::unique_ptr<EMFitter> copy = fitter->Clone();
+    copy->BeginFrame(scan, h.icp.pose);
     int iterations = 0;
-    while (!fitter->frame_done() &&
+    while (!copy->frame_done() &&
            (options.ranking_iterations == 0 || iterations < options.ranking_iterations)) {
-      fitter->Iterate();
+      copy->Iterate();
       ++iterations;
     }
-    h.fit = fitter->DiscardFrame(&h.pose);
+    h.fit = copy->DiscardFrame(&h.pose);
     h.fitted = true;
-    h.quality = evaluate(h.pose);
+    h.quality = quality_of(h.pose);
+  });
+  int best = -1;
+  for (int c = 0; c < candidates; ++c) {
+    const InitHypothesis& h = result.hypotheses[order[c]];
     if (h.fit.ok() && (best < 0 || h.quality.score > result.hypotheses[best].quality.score)) {
       best = order[c];
     }

@@ -103,6 +103,8 @@ struct InitResult {
   Pose pose;           // the accepted pose (fitter->pose())
   FitQuality quality;  // its quality
   FitSummary fit;      // its EM summary (the frame's)
+  // Wall times: the hypotheses' ICP; the EM fits (the candidates' quality scores, computed
+  // alongside their concurrent fits, included); the other quality scores; the whole call.
   double icp_seconds = 0.0, em_seconds = 0.0, quality_seconds = 0.0, total_seconds = 0.0;
 
   std::string BriefReport() const;

@@ -15,6 +15,9 @@ namespace {
 class PreviousPredictor : public PosePredictor {
  public:
   std::string name() const override { return "previous"; }
+  std::unique_ptr<PosePredictor> Clone() const override {
+    return std::make_unique<PreviousPredictor>(*this);
+  }
   void Reset() override { has_last_ = false; }
   void Observe(const Pose& pose, const Eigen::MatrixXd&) override {
     last_ = pose;
@@ -35,6 +38,9 @@ class PreviousPredictor : public PosePredictor {
 class ConstantVelocityPredictor : public PosePredictor {
  public:
   std::string name() const override { return "constant_velocity"; }
+  std::unique_ptr<PosePredictor> Clone() const override {
+    return std::make_unique<ConstantVelocityPredictor>(*this);
+  }
   void Reset() override { history_.clear(); }
   void Observe(const Pose& pose, const Eigen::MatrixXd&) override {
     history_.push_back(pose);
@@ -55,6 +61,9 @@ class KalmanPredictor : public PosePredictor {
  public:
   explicit KalmanPredictor(const KalmanOptions& options) : filter_(options) {}
   std::string name() const override { return "kalman"; }
+  std::unique_ptr<PosePredictor> Clone() const override {
+    return std::make_unique<KalmanPredictor>(*this);
+  }
   void Reset() override { filter_.Reset(); }
   void Observe(const Pose& pose, const Eigen::MatrixXd& information) override {
     filter_.Observe(pose, information);

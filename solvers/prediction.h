@@ -91,6 +91,8 @@ class PosePredictor {
   virtual void ObserveMissing(const Pose& kept) = 0;
   // The next frame's pose; requires at least one observation.
   virtual Pose Predict() const = 0;
+  // An independent copy in the same state.
+  virtual std::unique_ptr<PosePredictor> Clone() const = 0;
 };
 
 }  // namespace artex

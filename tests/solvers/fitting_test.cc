@@ -9,6 +9,7 @@
 #include <cmath>
 #include <iostream>
 #include <limits>
+#include <memory>
 #include <random>
 
 #include "energies/one_to_many_correspondence.h"
@@ -402,6 +403,57 @@ TEST_F(FittingTest, DiscardFrameLeavesNoTraceAndAcceptPoseCommits) {
   EXPECT_LT(MeanVertexError(skinning_, direct.pose(), fitted), 1e-9);
   EXPECT_THROW(fitter.AcceptPose(scan_, Pose::Identity(2)), Error);
   EXPECT_THROW(fitter.DiscardFrame(), Error);  // no frame begun
+}
+
+// A copy between frames fits the next frames exactly as the original: history, scale estimate,
+// the Kalman predictor's state, a subject rest shape and the tracking vertex subset carry over.
+TEST_F(FittingTest, CloneFitsTheNextFramesLikeTheOriginal) {
+  EMFitterOptions options = DefaultOptions();
+  options.scale_mode = ScaleMode::kEstimateThenFix;
+  options.scale_estimation_frames = 3;
+  options.prediction.model = PredictionModel::kKalman;
+  options.tracking_max_fit_vertices = model_.num_vertices() / 2;
+  Template shaped = model_;  // 1 % taller and wider, the same rig
+  shaped.vertices *= 1.01;
+  for (Joint& joint : shaped.joints) joint.center *= 1.01;
+  EMFitter fitter(model_, options);
+  fitter.SetRestShape(shaped);
+  fitter.SetInitialPose(start_);
+  ASSERT_TRUE(fitter.FitFrame(scan_).ok());
+  std::vector<Scan> next;
+  for (int k = 1; k <= 2; ++k) {
+    Pose moved = truth_;
+    moved.translation += Eigen::Vector3d(0.01 * k, 0.0, -0.005 * k);
+    Eigen::MatrixX3d posed;
+    skinning_.Apply(moved, &posed);
+    next.push_back(
+        testing_util::SampleScan(posed, model_.triangles, camera_, 6000.0, 0.003, &rng_));
+  }
+  const std::unique_ptr<EMFitter> copy = fitter.Clone();
+  EXPECT_EQ(copy->frames_fitted(), 1);
+  EXPECT_EQ(copy->scale_samples(), 1);
+  Eigen::MatrixX3d a, b;
+  for (const Scan& scan : next) {
+    const FitSummary original = fitter.FitFrame(scan);
+    const FitSummary copied = copy->FitFrame(scan);
+    ASSERT_TRUE(original.ok());
+    EXPECT_EQ(copied.iterations, original.iterations);
+    fitter.skinning().Apply(fitter.pose(), &a);
+    copy->skinning().Apply(copy->pose(), &b);
+    EXPECT_TRUE(a == b) << "max difference " << (a - b).cwiseAbs().maxCoeff() << " m";
+    EXPECT_EQ(copy->pose().scale, fitter.pose().scale);
+  }
+  EXPECT_EQ(copy->scale_estimate(), fitter.scale_estimate());
+  fitter.skinning().Apply(fitter.PredictNextPose(), &a);
+  copy->skinning().Apply(copy->PredictNextPose(), &b);
+  EXPECT_TRUE(a == b);
+  // Independent: fitting on the original leaves the copy alone; no copy in mid-frame.
+  fitter.Reset();
+  EXPECT_EQ(copy->frames_fitted(), 3);
+  copy->BeginFrame(scan_, copy->PredictNextPose());
+  EXPECT_THROW(copy->Clone(), Error);
+  copy->DiscardFrame();
+  EXPECT_NO_THROW(copy->Clone());
 }
 
 TEST_F(FittingTest, ScaleSamplesByIcpMedianAndResetKeepingTheScale) {
