@@ -172,7 +172,7 @@ void BindPreprocess(const Config& c, PreprocessOptions* o) {
 void BindIcpInit(const Config& c, IcpInitOptions* o) {
   c.CheckKeys({"coarse_alignment", "facing_camera", "estimate_scale", "scale_from_extent",
                "max_iterations", "max_distance", "min_normal_dot", "max_scan_points", "tolerance",
-               "extent_quantile"});
+               "extent_quantile", "kd_leaf_size"});
   c.Get("coarse_alignment", &o->coarse_alignment);
   c.Get("facing_camera", &o->facing_camera);
   c.Get("estimate_scale", &o->estimate_scale);
@@ -183,6 +183,7 @@ void BindIcpInit(const Config& c, IcpInitOptions* o) {
   c.Get("max_scan_points", &o->max_scan_points);
   c.Get("tolerance", &o->tolerance);
   c.Get("extent_quantile", &o->extent_quantile);
+  c.Get("kd_leaf_size", &o->kd_leaf_size);
 }
 
 void BindQuality(const Config& c, FitQualityOptions* o) {

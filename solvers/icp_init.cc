@@ -26,6 +26,8 @@ bool IcpInitOptions::IsValid(std::string* error) const {
     msg << "tolerance: expected a finite value >= 0, found " << tolerance;
   } else if (!(extent_quantile >= 0.0 && extent_quantile < 0.5)) {
     msg << "extent_quantile: expected a value in [0, 0.5), found " << extent_quantile;
+  } else if (kd_leaf_size < 1) {
+    msg << "kd_leaf_size: expected >= 1, found " << kd_leaf_size;
   } else {
     return true;
   }
@@ -71,7 +73,7 @@ void CheckInputs(const Pose& initial, int num_joints, const Scan& scan,
 
 }  // namespace
 
-IcpTemplate::IcpTemplate(const Skinning& skinning, const Pose& articulation) {
+IcpTemplate::IcpTemplate(const Skinning& skinning, const Pose& articulation, int kd_leaf_size) {
   const Template& model = skinning.model();
   num_joints_ = model.num_joints();
   if (articulation.num_joints() != num_joints_) {
@@ -86,7 +88,10 @@ IcpTemplate::IcpTemplate(const Skinning& skinning, const Pose& articulation) {
   local.rotation.setIdentity();
   skinning.Apply(local, &vertices_);
   ComputeVertexNormals(vertices_, model.triangles, &normals_);
-  index_ = std::make_unique<PointCloudIndex>(vertices_);
+  if (kd_leaf_size < 1) {
+    throw Error("ICP template: kd_leaf_size: expected >= 1, found " + std::to_string(kd_leaf_size));
+  }
+  index_ = std::make_unique<PointCloudIndex>(vertices_, kd_leaf_size);
 }
 
 IcpTemplate::~IcpTemplate() = default;
@@ -94,7 +99,7 @@ IcpTemplate::~IcpTemplate() = default;
 IcpInitResult AlignByIcp(const Skinning& skinning, const Pose& initial, const Scan& scan,
                          const IcpInitOptions& options) {
   CheckInputs(initial, skinning.model().num_joints(), scan, options);
-  return AlignByIcp(IcpTemplate(skinning, initial), initial, scan, options);
+  return AlignByIcp(IcpTemplate(skinning, initial, options.kd_leaf_size), initial, scan, options);
 }
 
 IcpInitResult AlignByIcp(const IcpTemplate& target, const Pose& initial, const Scan& scan,

@@ -257,7 +257,7 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
     // Posed once per arm pose, shared by its facings' coarse placements and ICP alignments.
     std::vector<std::unique_ptr<IcpTemplate>> targets(num_arms);
     ForEachConcurrently(num_arms, [&](int a) {
-      targets[a] = std::make_unique<IcpTemplate>(skinning, arm_poses[a].second);
+      targets[a] = std::make_unique<IcpTemplate>(skinning, arm_poses[a].second, icp.kd_leaf_size);
     });
     result.hypotheses.resize(num_arms * num_yaws);
     ForEachConcurrently(num_arms * num_yaws, [&](int i) {
@@ -511,26 +511,43 @@ FitSummary RefitFromPose(EMFitter* fitter, const Scan& scan, const PinholeCamera
     begin(pose);
     return fitter->EndFrame();
   }
-  // Every start fitted and discarded; the best by score is accepted.
+  // Every start fitted and discarded, concurrently, each in its own copy of the fitter (as
+  // InitializeFit's candidates); the best by score is accepted, the first of equal scores.
+  struct StartFit {
+    FitSummary fit;
+    Pose pose;
+    Eigen::MatrixXd information;
+    double score = -std::numeric_limits<double>::infinity();
+  };
+  std::vector<StartFit> fits(starts.size());
+  ForEachConcurrently(static_cast<int>(starts.size()), [&](int k) {
+    const std::unique_ptr<EMFitter> copy = fitter->Clone();
+    if (!options.radii.empty()) {
+      copy->SetNextFrameSchedule(options.radii, options.iterations_per_stage);
+    }
+    copy->BeginFrame(scan, starts[k]);
+    while (!copy->frame_done()) copy->Iterate();
+    StartFit& f = fits[k];
+    f.fit = copy->DiscardFrame(&f.pose);
+    if (!f.fit.ok()) return;
+    f.information = copy->frame_information();
+    f.score = score(f.pose);
+  });
   FitSummary best;
   Pose best_pose;
   Eigen::MatrixXd best_information;
   double best_score = -std::numeric_limits<double>::infinity();
   int iterations = 0;
   double seconds = 0.0;
-  for (const Pose& from : starts) {
-    begin(from);
-    Pose fitted;
-    const FitSummary fit = fitter->DiscardFrame(&fitted);
-    iterations += fit.iterations;
-    seconds += fit.total_seconds;
-    if (!fit.ok()) continue;
-    const double s = score(fitted);
-    if (s > best_score) {
-      best_score = s;
-      best = fit;
-      best_pose = fitted;
-      best_information = fitter->frame_information();
+  for (const StartFit& f : fits) {
+    iterations += f.fit.iterations;
+    seconds += f.fit.total_seconds;
+    if (!f.fit.ok()) continue;
+    if (f.score > best_score) {
+      best_score = f.score;
+      best = f.fit;
+      best_pose = f.pose;
+      best_information = f.information;
     }
   }
   if (!(best_score > -std::numeric_limits<double>::infinity())) {
