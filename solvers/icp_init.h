@@ -35,7 +35,7 @@ struct IcpInitOptions {
   double extent_quantile = 0.01;  // scale_from_extent: extent between this quantile, 1 - it
   // Points per leaf of the template's kd-tree (IcpTemplate). Speed only: the nearest vertex is
   // the same. 24 rather than nanoflann's usual 10: the first frame's ICP 11-13 % faster
-  // (docs/realtime.md, "Candidate fits side by side").
+  // (docs/fitting-speed.md, "The first frame: candidate fits side by side").
   int kd_leaf_size = 24;
 
   bool IsValid(std::string* error) const;
