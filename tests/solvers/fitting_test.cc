@@ -588,6 +588,21 @@ TEST_F(FittingTest, IcpInitialisationRecoversTheSimilarity) {
     EXPECT_TRUE(r.pose.joint_rotations[j].isIdentity(0.0));
   }
   EXPECT_THROW(AlignByIcp(skinning_, Pose::Identity(2), scan, IcpInitOptions()), Error);
+  // The kd-tree's leaf size changes the speed only: the same pairs, the same alignment.
+  for (int leaf : {1, 10, 64}) {
+    IcpInitOptions options;
+    options.kd_leaf_size = leaf;
+    const IcpInitResult other =
+        AlignByIcp(skinning_, Pose::Identity(model_.num_joints()), scan, options);
+    EXPECT_EQ(other.iterations, r.iterations) << leaf;
+    EXPECT_EQ(other.rms, r.rms) << leaf;
+    EXPECT_EQ(other.pose.translation, r.pose.translation) << leaf;
+    EXPECT_EQ(other.pose.rotation, r.pose.rotation) << leaf;
+    EXPECT_EQ(other.pose.scale, r.pose.scale) << leaf;
+  }
+  IcpInitOptions no_leaf;
+  no_leaf.kd_leaf_size = 0;
+  EXPECT_THROW(AlignByIcp(skinning_, Pose::Identity(model_.num_joints()), scan, no_leaf), Error);
 }
 
 TEST_F(FittingTest, FirstFrameFromRestPoseWithIcp) {
