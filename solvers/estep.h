@@ -58,6 +58,7 @@ struct EStepOptions {
 // kd-tree over an N x 3 point set (copied). Queries are thread-safe.
 class PointCloudIndex {
  public:
+  // Throws artex::Error for leaf_size < 1.
   explicit PointCloudIndex(const Eigen::MatrixX3d& points, int leaf_size = 10);
   ~PointCloudIndex();
   PointCloudIndex(const PointCloudIndex&) = delete;

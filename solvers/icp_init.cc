@@ -88,9 +88,6 @@ IcpTemplate::IcpTemplate(const Skinning& skinning, const Pose& articulation, int
   local.rotation.setIdentity();
   skinning.Apply(local, &vertices_);
   ComputeVertexNormals(vertices_, model.triangles, &normals_);
-  if (kd_leaf_size < 1) {
-    throw Error("ICP template: kd_leaf_size: expected >= 1, found " + std::to_string(kd_leaf_size));
-  }
   index_ = std::make_unique<PointCloudIndex>(vertices_, kd_leaf_size);
 }
 

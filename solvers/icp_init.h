@@ -58,8 +58,8 @@ class PointCloudIndex;
 // several facings of each arm pose).
 class IcpTemplate {
  public:
-  // Throws artex::Error for a pose with the wrong joint count.
-  // kd_leaf_size: IcpInitOptions::kd_leaf_size.
+  // Throws artex::Error for a pose with the wrong joint count or kd_leaf_size < 1
+  // (IcpInitOptions::kd_leaf_size).
   IcpTemplate(const Skinning& skinning, const Pose& articulation, int kd_leaf_size = 24);
   ~IcpTemplate();
   const Eigen::MatrixX3d& vertices() const { return vertices_; }

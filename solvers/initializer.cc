@@ -500,15 +500,16 @@ FitSummary RefitFromPose(EMFitter* fitter, const Scan& scan, const PinholeCamera
     }
   }
   fitter->Reset(/*keep_scale=*/true);
-  const auto begin = [&](const Pose& from) {
+  // Fits `from` on `f` (the fitter or a copy of it) up to ending the frame.
+  const auto begin = [&](EMFitter* f, const Pose& from) {
     if (!options.radii.empty()) {
-      fitter->SetNextFrameSchedule(options.radii, options.iterations_per_stage);
+      f->SetNextFrameSchedule(options.radii, options.iterations_per_stage);
     }
-    fitter->BeginFrame(scan, from);
-    while (!fitter->frame_done()) fitter->Iterate();
+    f->BeginFrame(scan, from);
+    while (!f->frame_done()) f->Iterate();
   };
   if (starts.size() == 1) {
-    begin(pose);
+    begin(fitter, pose);
     return fitter->EndFrame();
   }
   // Every start fitted and discarded, concurrently, each in its own copy of the fitter (as
@@ -522,11 +523,7 @@ FitSummary RefitFromPose(EMFitter* fitter, const Scan& scan, const PinholeCamera
   std::vector<StartFit> fits(starts.size());
   ForEachConcurrently(static_cast<int>(starts.size()), [&](int k) {
     const std::unique_ptr<EMFitter> copy = fitter->Clone();
-    if (!options.radii.empty()) {
-      copy->SetNextFrameSchedule(options.radii, options.iterations_per_stage);
-    }
-    copy->BeginFrame(scan, starts[k]);
-    while (!copy->frame_done()) copy->Iterate();
+    begin(copy.get(), starts[k]);
     StartFit& f = fits[k];
     f.fit = copy->DiscardFrame(&f.pose);
     if (!f.fit.ok()) return;
@@ -551,7 +548,7 @@ FitSummary RefitFromPose(EMFitter* fitter, const Scan& scan, const PinholeCamera
     }
   }
   if (!(best_score > -std::numeric_limits<double>::infinity())) {
-    begin(pose);  // no fit succeeded: the better start's, recorded as it fails
+    begin(fitter, pose);  // no fit succeeded: the better start's, recorded as it fails
     return fitter->EndFrame();
   }
   fitter->AcceptPose(scan, best_pose, best_information);

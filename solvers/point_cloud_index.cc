@@ -2,9 +2,11 @@
 #include <limits>
 #include <memory>
 #include <nanoflann.hpp>
+#include <string>
 #include <utility>
 #include <vector>
 
+#include "models/error.h"
 #include "solvers/estep.h"
 
 namespace artex {
@@ -52,6 +54,9 @@ struct PointCloudIndex::Impl {
 };
 
 PointCloudIndex::PointCloudIndex(const Eigen::MatrixX3d& points, int leaf_size) : impl_(new Impl) {
+  if (leaf_size < 1) {
+    throw Error("point cloud index: leaf_size: expected >= 1, found " + std::to_string(leaf_size));
+  }
   impl_->cloud.xyz.resize(3 * points.rows());
   for (Eigen::Index i = 0; i < points.rows(); ++i) {
     for (int d = 0; d < 3; ++d) impl_->cloud.xyz[3 * i + d] = points(i, d);

@@ -418,6 +418,7 @@ TEST(EStepTest, NearestWithinABoundFindsTheNearestOrNone) {
   const PointCloudIndex empty{Eigen::MatrixX3d(0, 3)};
   EXPECT_EQ(empty.NearestWithin(Eigen::Vector3d::Zero(), 1.0, &d2), -1);
   EXPECT_TRUE(std::isinf(d2));
+  EXPECT_THROW(PointCloudIndex(sets.scan.points, 0), Error);  // no leaf
 }
 
 TEST(EStepTest, RejectsBadInput) {

@@ -317,10 +317,20 @@ TEST(InitializerTest, RefitAfterAGapFindsTheSteppingLegs) {
   EXPECT_THROW(RefitFromPose(&fitter, scan, data.depth_camera, before_gap, bad), Error);
 }
 
+// The same pose bit for bit.
+bool SamePose(const Pose& a, const Pose& b) {
+  bool same = a.scale == b.scale && a.translation == b.translation && a.rotation == b.rotation &&
+              a.num_joints() == b.num_joints();
+  for (int j = 0; same && j < a.num_joints(); ++j) {
+    same = a.joint_rotations[j] == b.joint_rotations[j];
+  }
+  return same;
+}
+
 // The hypotheses' ICP alignments, their quality and the EM candidates' fits (each in its own
 // copy of the fitter) run as concurrent oneTBB tasks; each writes only its own hypothesis, so
-// every figure of the initialisation is the same bit for bit as with one thread. (Under ThreadSanitizer, scripts/test: the tasks share the scan, the
-// skinning and the options.)
+// every figure of the initialisation is the same bit for bit as with one thread. (Under
+// ThreadSanitizer, scripts/test: the tasks share the scan, the skinning and the options.)
 TEST(InitializerTest, ConcurrentHypothesesEqualOneThread) {
   const testing_util::KinectScans data =
       testing_util::SynthesizeScans(testing_util::TestSynthOptions(1), "initializer_concurrent");
@@ -334,18 +344,11 @@ TEST(InitializerTest, ConcurrentHypothesesEqualOneThread) {
     EMFitter fitter(tmpl, EMFitterOptions());
     return InitializeFit(&fitter, data.scans[0], data.depth_camera, InitializerOptions());
   };
-  const auto same_pose = [](const Pose& a, const Pose& b) {
-    bool same = a.scale == b.scale && a.translation == b.translation && a.rotation == b.rotation &&
-                a.num_joints() == b.num_joints();
-    for (int j = 0; same && j < a.num_joints(); ++j)
-      same = a.joint_rotations[j] == b.joint_rotations[j];
-    return same;
-  };
   const InitResult one = run(1), all = run(0);
   ASSERT_TRUE(one.ok);
   EXPECT_EQ(all.ok, one.ok);
   EXPECT_EQ(all.chosen, one.chosen);
-  EXPECT_TRUE(same_pose(all.pose, one.pose));
+  EXPECT_TRUE(SamePose(all.pose, one.pose));
   EXPECT_EQ(all.quality.score, one.quality.score);
   ASSERT_EQ(all.hypotheses.size(), one.hypotheses.size());
   for (size_t i = 0; i < one.hypotheses.size(); ++i) {
@@ -353,9 +356,9 @@ TEST(InitializerTest, ConcurrentHypothesesEqualOneThread) {
     EXPECT_EQ(a.yaw_deg, b.yaw_deg) << i;
     EXPECT_EQ(a.icp.iterations, b.icp.iterations) << i;
     EXPECT_EQ(a.icp.rms, b.icp.rms) << i;
-    EXPECT_TRUE(same_pose(a.icp.pose, b.icp.pose)) << i;
+    EXPECT_TRUE(SamePose(a.icp.pose, b.icp.pose)) << i;
     EXPECT_EQ(a.icp_quality.score, b.icp_quality.score) << i;
-    EXPECT_TRUE(same_pose(a.pose, b.pose)) << i;
+    EXPECT_TRUE(SamePose(a.pose, b.pose)) << i;
     EXPECT_EQ(a.quality.score, b.quality.score) << i;
   }
 }
@@ -388,12 +391,7 @@ TEST(InitializerTest, ConcurrentRefitStartsEqualOneThread) {
   ASSERT_TRUE(fit_one.ok());
   EXPECT_EQ(fit_all.ok(), fit_one.ok());
   EXPECT_EQ(fit_all.iterations, fit_one.iterations);
-  EXPECT_EQ(all.scale, one.scale);
-  EXPECT_EQ(all.translation, one.translation);
-  EXPECT_EQ(all.rotation, one.rotation);
-  for (int j = 0; j < one.num_joints(); ++j) {
-    EXPECT_EQ(all.joint_rotations[j], one.joint_rotations[j]) << j;
-  }
+  EXPECT_TRUE(SamePose(all, one));
 }
 
 TEST(InitializerTest, TooFewPointsFailsAsAFrame) {
