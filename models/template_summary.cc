@@ -1,13 +1,13 @@
 // SummarizeTemplate (models/template_io.h): counts, topology and UV coverage of a template.
 #include <Eigen/Core>
 #include <algorithm>
-#include <cmath>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include "models/error.h"
 #include "models/template_io.h"
+#include "models/uv_raster.h"
 
 namespace artex {
 
@@ -91,34 +91,12 @@ TemplateSummary SummarizeTemplate(const Template& tmpl, const TemplateSummaryOpt
     const int n = options.uv_grid;
     std::vector<unsigned char> count(static_cast<size_t>(n) * n, 0);
     for (int f = 0; f < s.num_triangles; ++f) {
-      Eigen::Vector2d p[3];
-      for (int c = 0; c < 3; ++c) p[c] = tmpl.uvs.row(tmpl.uv_triangles(f, c)).transpose() * n;
-      const double area =
-          (p[1] - p[0]).x() * (p[2] - p[0]).y() - (p[1] - p[0]).y() * (p[2] - p[0]).x();
-      if (area == 0.0) continue;
-      const int x0 =
-          std::max(0, static_cast<int>(std::floor(std::min({p[0].x(), p[1].x(), p[2].x()}))));
-      const int x1 =
-          std::min(n - 1, static_cast<int>(std::ceil(std::max({p[0].x(), p[1].x(), p[2].x()}))));
-      const int y0 =
-          std::max(0, static_cast<int>(std::floor(std::min({p[0].y(), p[1].y(), p[2].y()}))));
-      const int y1 =
-          std::min(n - 1, static_cast<int>(std::ceil(std::max({p[0].y(), p[1].y(), p[2].y()}))));
-      const double sign = area > 0.0 ? 1.0 : -1.0;
-      for (int y = y0; y <= y1; ++y) {
-        for (int x = x0; x <= x1; ++x) {
-          const Eigen::Vector2d q(x + 0.5, y + 0.5);
-          bool inside = true;
-          for (int c = 0; c < 3 && inside; ++c) {
-            const Eigen::Vector2d e = p[(c + 1) % 3] - p[c], d = q - p[c];
-            inside = sign * (e.x() * d.y() - e.y() * d.x()) >= 0.0;
-          }
-          if (inside) {
-            unsigned char& cell = count[static_cast<size_t>(y) * n + x];
-            if (cell < 255) ++cell;
-          }
-        }
-      }
+      const UvTriangleCells t = UvTriangleOnGrid(tmpl, f, n);
+      if (t.area2 == 0.0) continue;
+      ForEachCellInside(t, [&](int x, int y) {
+        unsigned char& cell = count[static_cast<size_t>(y) * n + x];
+        if (cell < 255) ++cell;
+      });
     }
     size_t covered = 0, multiple = 0;
     for (unsigned char c : count) {

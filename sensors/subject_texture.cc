@@ -16,6 +16,7 @@
 
 #include "models/error.h"
 #include "models/numeric.h"
+#include "models/uv_raster.h"
 
 namespace artex {
 namespace {
@@ -366,35 +367,14 @@ cv::Mat GenerateSubjectTexture(const Template& subject, const SubjectTextureOpti
   tbb::parallel_for(size_t{0}, cover.size(),
                     [&](size_t i) { cover[i].store(kNone, std::memory_order_relaxed); });
   tbb::parallel_for(0, num_triangles, [&](int f) {
-    Eigen::Vector2d uv[3];
-    for (int k = 0; k < 3; ++k) uv[k] = subject.uvs.row(subject.uv_triangles(f, k)).transpose() * n;
-    const double area =
-        (uv[1] - uv[0]).x() * (uv[2] - uv[0]).y() - (uv[1] - uv[0]).y() * (uv[2] - uv[0]).x();
-    if (area == 0) return;
-    const int x0 =
-        std::max(0, static_cast<int>(std::floor(std::min({uv[0].x(), uv[1].x(), uv[2].x()}))));
-    const int x1 =
-        std::min(n - 1, static_cast<int>(std::ceil(std::max({uv[0].x(), uv[1].x(), uv[2].x()}))));
-    const int y0 =
-        std::max(0, static_cast<int>(std::floor(std::min({uv[0].y(), uv[1].y(), uv[2].y()}))));
-    const int y1 =
-        std::min(n - 1, static_cast<int>(std::ceil(std::max({uv[0].y(), uv[1].y(), uv[2].y()}))));
-    for (int y = y0; y <= y1; ++y) {
-      for (int x = x0; x <= x1; ++x) {
-        const Eigen::Vector2d q(x + 0.5, y + 0.5);
-        bool inside = true;
-        for (int k = 0; k < 3 && inside; ++k) {
-          const Eigen::Vector2d a = uv[k], b = uv[(k + 1) % 3];
-          const double e = (b - a).x() * (q - a).y() - (b - a).y() * (q - a).x();
-          inside = area > 0 ? e >= 0 : e <= 0;
-        }
-        if (!inside) continue;
-        std::atomic<int32_t>& c = cover[static_cast<size_t>(y) * n + x];
-        int32_t current = c.load(std::memory_order_relaxed);
-        while (f < current && !c.compare_exchange_weak(current, f, std::memory_order_relaxed)) {
-        }
+    const UvTriangleCells t = UvTriangleOnGrid(subject, f, n);
+    if (t.area2 == 0) return;
+    ForEachCellInside(t, [&](int x, int y) {
+      std::atomic<int32_t>& c = cover[static_cast<size_t>(y) * n + x];
+      int32_t current = c.load(std::memory_order_relaxed);
+      while (f < current && !c.compare_exchange_weak(current, f, std::memory_order_relaxed)) {
       }
-    }
+    });
   });
   std::vector<int32_t> owner(cover.size());
   tbb::parallel_for(size_t{0}, cover.size(), [&](size_t i) {

@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "models/error.h"
+#include "models/uv_raster.h"
 
 namespace artex {
 namespace {
@@ -388,21 +389,13 @@ AtlasMap::AtlasMap(const Template& tmpl, int size) : size_(size) {
   texel_triangle_.assign(total, -1);
   std::vector<Eigen::Vector3f> texel_bary(total, Eigen::Vector3f::Zero());
   for (int f = 0; f < f_count; ++f) {
-    Eigen::Vector2d p[3];
-    for (int c = 0; c < 3; ++c) p[c] = tmpl.uvs.row(tmpl.uv_triangles(f, c)).transpose() * size;
-    const double area =
-        (p[1] - p[0]).x() * (p[2] - p[0]).y() - (p[1] - p[0]).y() * (p[2] - p[0]).x();
+    const UvTriangleCells t = UvTriangleOnGrid(tmpl, f, size);
+    const Eigen::Vector2d* p = t.p;
+    const double area = t.area2;
     if (std::abs(area) < 1e-12) continue;
-    const int x0 =
-        std::max(0, static_cast<int>(std::floor(std::min({p[0].x(), p[1].x(), p[2].x()}))));
-    const int x1 =
-        std::min(size - 1, static_cast<int>(std::ceil(std::max({p[0].x(), p[1].x(), p[2].x()}))));
-    const int y0 =
-        std::max(0, static_cast<int>(std::floor(std::min({p[0].y(), p[1].y(), p[2].y()}))));
-    const int y1 =
-        std::min(size - 1, static_cast<int>(std::ceil(std::max({p[0].y(), p[1].y(), p[2].y()}))));
-    for (int y = y0; y <= y1; ++y) {
-      for (int x = x0; x <= x1; ++x) {
+    // Inside by the barycentrics it records (not CellCentreInside: they can differ at edges).
+    for (int y = t.y0; y <= t.y1; ++y) {
+      for (int x = t.x0; x <= t.x1; ++x) {
         const Eigen::Vector2d q(x + 0.5, y + 0.5);
         const double b1 =
             ((q - p[0]).x() * (p[2] - p[0]).y() - (q - p[0]).y() * (p[2] - p[0]).x()) / area;
