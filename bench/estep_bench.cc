@@ -12,12 +12,18 @@
 //   BM_MStepJacobian:    posing the fitted vertices with their skinning Jacobian (one
 //                        Gauss-Newton evaluation, PrepareFitEvaluation)
 //   BM_MStepNormalEquations: the data term's J^T J and J^T r on that evaluation
+//   BM_IndexNearestBuild: PointCloudIndex over the whole posed template (the ICP's and the scale
+//                        sample's target) and its first nearest-point query (which builds it)
+//   BM_IndexNearestWithin: the ICP's queries into that index, 1500 scan points (a fixed stride),
+//                        each bounded by the distance to its nearest vertex at the pose 1 cm
+//                        off (as an ICP iteration bounds its search by the previous one's)
 // Counters: cpu_ms (process CPU per iteration, all threads), candidates (visited per E-step)
 // and pairs (with p_st > 0). For one core run under `taskset -c 0` (oneTBB follows the
 // affinity mask).
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
 
+#include <algorithm>
 #include <memory>
 #include <random>
 #include <vector>
@@ -50,6 +56,7 @@ struct Fixture {
   Scan scan;
   Pose truth, guess;
   Eigen::MatrixX3d posed, normals;  // fitted vertices at `guess`
+  Eigen::MatrixX3d full_truth, full_guess;  // every template vertex at `truth`, `guess`
   EStepOptions estep;
   double radius = 0.0;
 };
@@ -98,6 +105,8 @@ Fixture& GetFixture() {
     f->guess = f->truth.Retracted(d);
     Eigen::MatrixX3d full_posed, full_normals;
     skinning.Apply(f->guess, &full_posed);
+    f->full_truth = posed;
+    f->full_guess = full_posed;
     ComputeVertexNormals(full_posed, f->model.triangles, &full_normals);
     f->posed.resize(n, 3);
     f->normals.resize(n, 3);
@@ -216,6 +225,52 @@ void BM_MStepNormalEquations(benchmark::State& state) {
   state.counters["jtj_trace"] = jtj.trace();
 }
 BENCHMARK(BM_MStepNormalEquations)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// The ICP's target: the posed template; its queries: a fixed-stride subsample of the scan.
+void BM_IndexNearestBuild(benchmark::State& state) {
+  const Fixture& f = GetFixture();
+  const double cpu_start = ProcessCpuSeconds();
+  for (auto _ : state) {
+    const PointCloudIndex index(f.full_guess, 24);
+    double d2 = 0.0;
+    benchmark::DoNotOptimize(index.Nearest(f.scan.points.row(0).transpose(), &d2));
+  }
+  ReportCpu(state, cpu_start);
+  state.counters["points"] = static_cast<double>(f.full_guess.rows());
+}
+BENCHMARK(BM_IndexNearestBuild)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+void BM_IndexNearestWithin(benchmark::State& state) {
+  const Fixture& f = GetFixture();
+  const PointCloudIndex index(f.full_guess, 24);
+  const int stride = std::max(1, f.scan.size() / 1500);
+  std::vector<int> sample, previous;
+  for (int s = 0; s < f.scan.size(); s += stride) sample.push_back(s);
+  {
+    // Each query's nearest vertex at the pose 1 cm off: the previous iteration's.
+    const PointCloudIndex other(f.full_truth, 24);
+    for (int s : sample) {
+      double d2 = 0.0;
+      previous.push_back(other.Nearest(f.scan.points.row(s).transpose(), &d2));
+    }
+  }
+  double d2 = 0.0;
+  index.Nearest(f.scan.points.row(0).transpose(), &d2);  // built outside the timing
+  long long found = 0;
+  const double cpu_start = ProcessCpuSeconds();
+  for (auto _ : state) {
+    for (size_t k = 0; k < sample.size(); ++k) {
+      const Eigen::Vector3d q = f.scan.points.row(sample[k]).transpose();
+      const double bound2 = (f.full_guess.row(previous[k]).transpose() - q).squaredNorm() *
+                                (1.0 + 1e-9) + 1e-300;
+      found += index.NearestWithin(q, bound2, &d2) >= 0;
+    }
+  }
+  ReportCpu(state, cpu_start);
+  state.counters["queries"] = static_cast<double>(sample.size());
+  benchmark::DoNotOptimize(found);
+}
+BENCHMARK(BM_IndexNearestWithin)->Unit(benchmark::kMicrosecond)->UseRealTime();
 
 }  // namespace
 }  // namespace artex

@@ -13,7 +13,8 @@
 // Variants side by side: truncated-radius E-step + Gauss-Newton (default options), the same
 // with other E-step candidate margins (BM_TrackCandidateMargin/<mm>) and work budgets
 // (BM_TrackBudget/<fitted vertices>/<voxel %>), a cloud and gather per tracking radius or one
-// per frame (BM_TrackSharedCloud/<0|1>), Ceres LM backend, dense
+// per frame (BM_TrackSharedCloud/<0|1>), the scale sample's ICP tolerance
+// (BM_TrackScaleTolerance/<1e-5 units>), Ceres LM backend, dense
 // exact E-step (single frame only: it takes seconds per EM iteration). For one core run under
 // `taskset -c 0` (oneTBB follows the affinity mask).
 // Counters: cpu_ms (process CPU per frame, all threads; wall times are unreliable on a shared
@@ -339,6 +340,20 @@ void BM_TrackSharedCloud(benchmark::State& state) {
   RunSequence(state, options, false);
 }
 BENCHMARK(BM_TrackSharedCloud)->Unit(benchmark::kMillisecond)->UseManualTime()->Arg(0)->Arg(1);
+
+// The scale sample's ICP tolerance (fitting.scale_sample_tolerance), in units of 1e-5 (0: the
+// pre-alignment's, 1e-5): the 4 scale frames' cost against the scale estimate (error_mm).
+void BM_TrackScaleTolerance(benchmark::State& state) {
+  EMFitterOptions options;
+  options.scale_sample_tolerance = 1e-5 * static_cast<double>(state.range(0));
+  RunSequence(state, options, false);
+}
+BENCHMARK(BM_TrackScaleTolerance)
+    ->Unit(benchmark::kMillisecond)
+    ->UseManualTime()
+    ->Arg(0)
+    ->Arg(10)
+    ->Arg(30);
 
 void BM_TrackCeresLm(benchmark::State& state) { RunSequence(state, CeresOptions(), false); }
 BENCHMARK(BM_TrackCeresLm)->Unit(benchmark::kMillisecond)->UseManualTime();

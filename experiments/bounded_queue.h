@@ -1,9 +1,11 @@
 // A first-in first-out queue of at most `capacity` items between two pipeline stages
 // (experiments/pipeline_stages.h): Push blocks while full, TryPush refuses, Pop blocks while
-// empty (PushDroppingOldest makes room instead). Close() wakes every waiter: Push/TryPush then refuse and Pop drains what is left
+// empty (PushDroppingOldest makes room instead; it and WaitUntilBelow can keep the queue under a
+// lower limit than its capacity). Close() wakes every waiter: Push/TryPush then refuse and Pop drains what is left
 // before it returns false. Thread-safe for any number of producers and consumers.
 #pragma once
 
+#include <algorithm>
 #include <condition_variable>
 #include <cstddef>
 #include <deque>
@@ -37,13 +39,17 @@ class BoundedQueue {
   // Never waits: when full, the oldest item is dropped to make room (a live source keeps
   // the newest frames). Returns the number of items dropped (0 or 1); closed: drops `item`
   // itself and returns 1.
-  int PushDroppingOldest(T&& item) {
+  int PushDroppingOldest(T&& item) { return PushDroppingOldest(std::move(item), capacity_); }
+  // The same with at most `limit` items (<= capacity) kept: drops the oldest until there is
+  // room under the limit; returns how many were dropped (closed: drops `item`, returns 1).
+  int PushDroppingOldest(T&& item, std::size_t limit) {
     std::lock_guard<std::mutex> lock(mutex_);
     if (closed_) return 1;
+    limit = std::max<std::size_t>(1, std::min(limit, capacity_));
     int dropped = 0;
-    if (items_.size() >= capacity_) {
+    while (items_.size() >= limit) {
       items_.pop_front();
-      dropped = 1;
+      ++dropped;
     }
     items_.push_back(std::move(item));
     not_empty_.notify_one();
@@ -71,9 +77,12 @@ class BoundedQueue {
   }
   std::size_t capacity() const { return capacity_; }
   // Blocks while the queue is full; false once it is closed.
-  bool WaitUntilNotFull() {
+  bool WaitUntilNotFull() { return WaitUntilBelow(capacity_); }
+  // Blocks while the queue holds `limit` (<= capacity) items or more; false once it is closed.
+  bool WaitUntilBelow(std::size_t limit) {
+    limit = std::max<std::size_t>(1, std::min(limit, capacity_));
     std::unique_lock<std::mutex> lock(mutex_);
-    not_full_.wait(lock, [&] { return closed_ || items_.size() < capacity_; });
+    not_full_.wait(lock, [&] { return closed_ || items_.size() < limit; });
     return !closed_;
   }
   std::size_t size() {

@@ -287,7 +287,8 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
                "solver_threads", "candidate_margin", "normal_refresh_iterations",
                "tracking_tikhonov",
                "fit_vertex_selection", "scale_estimator", "scale_sample_max_distance",
-               "scale_sample_min_pair_fraction", "scale_sample_max_scan_points", "icp_init",
+               "scale_sample_min_pair_fraction", "scale_sample_max_scan_points",
+               "scale_sample_tolerance", "icp_init",
                "init", "quality", "prediction", "kalman", "particle",
                "temporal_prior_on_prediction", "silhouette", "unobserved_joints", "upright",
                "out_of_view"});
@@ -368,6 +369,7 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   c.Get("scale_sample_max_distance", &o->scale_sample_max_distance);
   c.Get("scale_sample_min_pair_fraction", &o->scale_sample_min_pair_fraction);
   c.Get("scale_sample_max_scan_points", &o->scale_sample_max_scan_points);
+  c.Get("scale_sample_tolerance", &o->scale_sample_tolerance);
   BindIcpInit(c.Section("icp_init"), &o->icp);
 }
 
@@ -465,7 +467,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
                "gap_refit_stride_frames",
                "texture_quality_every", "texture_quality_yaws_deg", "texture_quality_height",
                "export_atlases", "stream", "stream_estimate", "concurrency", "queue_depth", "live",
-               "live_queue_depth", "live_rate_hz", "colour_delay_frames", "live_texture_skip",
+               "live_queue_depth", "live_init_queue_depth", "live_rate_hz", "colour_delay_frames", "live_texture_skip",
                "threads", "heap_retain_mb", "huge_pages"});
   c.Get("texture", &o->texture);
   c.Get("colour_term", &o->colour_term);
@@ -501,6 +503,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("queue_depth", &o->realtime.queue_depth);
   c.Get("live", &o->realtime.live);
   c.Get("live_queue_depth", &o->realtime.live_queue_depth);
+  c.Get("live_init_queue_depth", &o->realtime.live_init_queue_depth);
   c.Get("live_texture_skip", &o->realtime.live_texture_skip);
   c.Get("live_rate_hz", &o->realtime.live_rate_hz);
   c.Get("colour_delay_frames", &o->realtime.colour_delay_frames);

@@ -202,8 +202,16 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
     stats.frames_dropped = missed;
   } else {
     const std::size_t depth = static_cast<std::size_t>(options.queue_depth);
-    BoundedQueue<FrameWork> to_track(
-        options.live ? static_cast<std::size_t>(options.live_queue_depth) : depth);
+    // Live: the track stage's queue holds live_queue_depth frames, or more (the initialisation's
+    // backlog) from the start until the tracker has tracked the first frame and caught up.
+    const std::size_t live_depth = static_cast<std::size_t>(options.live_queue_depth);
+    const std::size_t init_depth =
+        std::max(live_depth, static_cast<std::size_t>(options.live_init_queue_depth));
+    BoundedQueue<FrameWork> to_track(options.live ? init_depth : depth);
+    std::atomic<bool> first_tracked{false};
+    std::atomic<bool> backlog{options.live && init_depth > live_depth};
+    std::size_t backlog_limit = init_depth;  // the reader's
+    bool backlog_started = false;            // the reader's: the first frame was tracked
     BoundedQueue<FrameWork> to_pool(depth), to_texture(depth), to_output(depth);
     std::mutex error_mutex;
     std::exception_ptr error;
@@ -227,7 +235,22 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
         while (true) {
           // Live: a frame is read (decoded) only once the track stage has room for it; the
           // frames that arrive meanwhile are dropped undecoded, as a sensor's would be.
-          if (options.live && !to_track.WaitUntilNotFull()) break;
+          // While the first frame is initialised the backlog keeps the newest init_depth
+          // frames, read as they arrive. Once the first frame is tracked its limit starts at
+          // the frames waiting (plus this one) and falls by one per frame, so the catching up
+          // ends within init_depth frame periods whether or not the tracker keeps up (frames
+          // beyond the limit are dropped, the oldest first).
+          std::size_t limit = live_depth;
+          if (backlog) {
+            if (first_tracked) {
+              backlog_limit = backlog_started ? backlog_limit - 1
+                                              : std::min(backlog_limit, to_track.size() + 1);
+              backlog_started = true;
+              if (backlog_limit <= live_depth) backlog = false;
+            }
+            limit = std::max(live_depth, backlog_limit);
+          }
+          if (options.live && !backlog && !to_track.WaitUntilBelow(limit)) break;
           const int missed_before = missed;
           if (!clock.Next(&frame, &at, &missed)) break;
           if (first_textured) dropped_after_first += missed - missed_before;
@@ -236,7 +259,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
             // A sensor does not wait: when the tracker has no room, the oldest waiting frame
             // is dropped (the newest is the one worth tracking).
             if (to_track.closed()) break;  // a stage failed
-            const int lost = to_track.PushDroppingOldest(std::move(work));
+            const int lost = to_track.PushDroppingOldest(std::move(work), limit);
             missed += lost;
             if (first_textured) dropped_after_first += lost;
           } else if (!to_track.Push(std::move(work))) {
@@ -273,12 +296,15 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
       work->sequence = sequence++;
       take_colours(work->sequence);
       track_clock.Time([&] { track->Process(work); });
+      first_tracked = true;
     }, "artex-track");
     std::atomic<int> texture_skipped{0};
     std::thread pooler = relay(&to_pool, &to_texture, [&](FrameWork* work) {
+      // A newer frame waits (to be textured, or in the backlog to be tracked): texture that one.
       if (options.live && options.live_texture_skip && work->texture_frame &&
-          !work->record.skipped && first_textured && to_pool.size() > 0) {
-        work->texture_frame = false;  // a newer frame waits: texture that one
+          !work->record.skipped && first_textured &&
+          (to_pool.size() > 0 || (backlog && to_track.size() > 0))) {
+        work->texture_frame = false;
         work->record.texture_skipped = true;
         ++texture_skipped;
       }

@@ -32,6 +32,13 @@ struct RealtimeOptions {
   // pipeline.live_queue_depth (>= 1): live, the frames waiting for the track stage (each adds
   // up to a frame period of latency when tracking is the slowest stage).
   int live_queue_depth = 1;
+  // pipeline.live_init_queue_depth (0: live_queue_depth): live, pipelined, the frames kept for
+  // the track stage while the first frame is initialised (the oldest dropped beyond) and until
+  // the tracker has caught up with them; meanwhile a frame with a newer one waiting for the
+  // track stage is tracked but not textured (live_texture_skip). The initialisation takes
+  // several frame periods; without this the frames that arrive during it are dropped and the
+  // next tracked frame comes after a gap (a refit, docs/realtime.md).
+  int live_init_queue_depth = 12;
   // pipeline.colour_delay_frames: the E-step's colour term of frame t uses the texture as it
   // was after frame t - 1 - this (0: after frame t-1, which makes fitting wait for texturing;
   // 1: fitting of t overlaps texturing of t-1). The same in both concurrency modes.

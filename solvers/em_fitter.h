@@ -134,6 +134,10 @@ struct EMFitterOptions {
   // kIcp: the scale sample's ICP pairs a fixed-stride subsample of at most this many scan
   // points (0: icp.max_scan_points, the first frame's pre-alignment budget).
   int scale_sample_max_scan_points = 1500;
+  // kIcp: the scale sample's ICP stops when the similarity changes less than this (relative;
+  // 0: icp.tolerance, the first frame's pre-alignment tolerance). It starts from the fitted
+  // pose, so its last iterations only refine the scale in the fourth digit.
+  double scale_sample_tolerance = 0.0;
   // Radius E-step: the scale is held during stages with a radius above this (m); at wide radii
   // mu_t lies inside curved surfaces (chord means), which biases a free scale downwards.
   double scale_max_radius = 0.05;

@@ -117,6 +117,9 @@ bool EMFitterOptions::IsValid(std::string* error) const {
   } else if (scale_sample_max_scan_points != 0 && scale_sample_max_scan_points < 3) {
     msg << "scale_sample_max_scan_points: expected 0 (icp_init.max_scan_points) or >= 3, found "
         << scale_sample_max_scan_points;
+  } else if (!(std::isfinite(scale_sample_tolerance) && scale_sample_tolerance >= 0.0)) {
+    msg << "scale_sample_tolerance: expected a finite value >= 0 (0: icp_init.tolerance), found "
+        << scale_sample_tolerance;
   } else if (tracking_max_fit_vertices < 0) {
     msg << "tracking_max_fit_vertices: expected >= 0 (0: max_fit_vertices), found "
         << tracking_max_fit_vertices;

@@ -654,6 +654,12 @@ TEST(FitOptionsTest, InvalidOptionsThrow) {
   EXPECT_THROW(EMFitter(model, options), Error);
   options.scale_sample_max_scan_points = 0;
   EXPECT_NO_THROW(EMFitter(model, options));
+  options.scale_sample_tolerance = -1e-4;  // 0 (icp_init's) or > 0
+  EXPECT_THROW(EMFitter(model, options), Error);
+  options.scale_sample_tolerance = std::nan("");
+  EXPECT_THROW(EMFitter(model, options), Error);
+  options.scale_sample_tolerance = 1e-4;
+  EXPECT_NO_THROW(EMFitter(model, options));
   FitSolverOptions solver;
   solver.num_threads = 0;
   EXPECT_THROW(FitSolver::Create(solver), Error);
