@@ -55,7 +55,7 @@ struct Fixture {
   std::unique_ptr<Skinning> subset_skinning;
   Scan scan;
   Pose truth, guess;
-  Eigen::MatrixX3d posed, normals;  // fitted vertices at `guess`
+  Eigen::MatrixX3d posed, normals;          // fitted vertices at `guess`
   Eigen::MatrixX3d full_truth, full_guess;  // every template vertex at `truth`, `guess`
   EStepOptions estep;
   double radius = 0.0;
@@ -261,8 +261,8 @@ void BM_IndexNearestWithin(benchmark::State& state) {
   for (auto _ : state) {
     for (size_t k = 0; k < sample.size(); ++k) {
       const Eigen::Vector3d q = f.scan.points.row(sample[k]).transpose();
-      const double bound2 = (f.full_guess.row(previous[k]).transpose() - q).squaredNorm() *
-                                (1.0 + 1e-9) + 1e-300;
+      const double bound2 =
+          (f.full_guess.row(previous[k]).transpose() - q).squaredNorm() * (1.0 + 1e-9) + 1e-300;
       found += index.NearestWithin(q, bound2, &d2) >= 0;
     }
   }

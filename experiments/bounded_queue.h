@@ -1,8 +1,9 @@
 // A first-in first-out queue of at most `capacity` items between two pipeline stages
 // (experiments/pipeline_stages.h): Push blocks while full, TryPush refuses, Pop blocks while
-// empty (PushDroppingOldest makes room instead; it and WaitUntilBelow can keep the queue under a
-// lower limit than its capacity). Close() wakes every waiter: Push/TryPush then refuse and Pop drains what is left
-// before it returns false. Thread-safe for any number of producers and consumers.
+// empty (PushDroppingOldest makes room instead; it and WaitUntilBelow can keep the queue under
+// a lower limit than its capacity). Close() wakes every waiter: Push/TryPush then refuse and
+// Pop drains what is left before it returns false. Thread-safe for any number of producers and
+// consumers.
 #pragma once
 
 #include <algorithm>

@@ -7,11 +7,11 @@
 #include <tbb/global_control.h>
 
 #include <atomic>
-#include <iostream>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <memory>
 #include <string>
 #include <thread>
@@ -296,8 +296,7 @@ TEST(PipelinedTrackingTest, LiveBacklogTracksTheFramesThatArriveDuringTheInitial
     EXPECT_EQ(all.gap_refits, 0);
   } else {
     std::cout << "[ INFO ] exact counts not checked: read " << read_seconds_per_frame
-              << " s/frame, first frame's initialisation " << all.frames[0].init_seconds
-              << " s\n";
+              << " s/frame, first frame's initialisation " << all.frames[0].init_seconds << " s\n";
   }
 
   config.Set("pipeline.live_init_queue_depth", "0");
