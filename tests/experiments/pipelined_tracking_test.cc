@@ -278,7 +278,9 @@ TEST(PipelinedTrackingTest, LiveBacklogTracksTheFramesThatArriveDuringTheInitial
   ASSERT_GE(s.frames_processed, 2);
   int untextured = 0;
   for (size_t i = 0; i < all.frames.size(); ++i) {
-    if (i > 0) EXPECT_LT(all.frames[i - 1].frame, all.frames[i].frame);
+    if (i > 0) {
+      EXPECT_LT(all.frames[i - 1].frame, all.frames[i].frame);
+    }
     untextured += all.frames[i].texture_skipped;
   }
   EXPECT_EQ(untextured, s.frames_texture_skipped);
