@@ -77,8 +77,6 @@ class BoundedQueue {
     return closed_;
   }
   std::size_t capacity() const { return capacity_; }
-  // Blocks while the queue is full; false once it is closed.
-  bool WaitUntilNotFull() { return WaitUntilBelow(capacity_); }
   // Blocks while the queue holds `limit` (<= capacity) items or more; false once it is closed.
   bool WaitUntilBelow(std::size_t limit) {
     limit = std::max<std::size_t>(1, std::min(limit, capacity_));
