@@ -23,6 +23,7 @@
 #include "experiments/pose_csv.h"
 #include "models/error.h"
 #include "models/skinning.h"
+#include "models/template_cache.h"
 #include "models/template_generator.h"
 #include "models/template_io.h"
 #include "sensors/frame_source.h"
@@ -110,7 +111,11 @@ void RunOverlay(const OverlayCli& cli) {
       fs::path(template_path).is_relative() && fs::exists(fs::path(run) / template_path)) {
     template_path = (fs::path(run) / template_path).string();
   }
-  const Template tmpl = template_path.empty() ? GenerateTemplate() : ReadTemplateGlb(template_path);
+  std::string cache_note;
+  const Template tmpl =
+      template_path.empty() ? DefaultTemplate(TemplateCacheOptions(), &cache_note)
+                            : ReadTemplateGlb(template_path);
+  if (!cache_note.empty()) std::fprintf(stderr, "artex: warning: %s\n", cache_note.c_str());
 
   std::map<int, Pose> poses;
   for (auto& [frame, pose] : ReadPoseCsv(run + "/poses.csv", tmpl.num_joints()))

@@ -28,6 +28,7 @@
 #include "models/mesh_export.h"
 #include "models/normals.h"
 #include "models/skinning.h"
+#include "models/template_cache.h"
 #include "models/template_generator.h"
 #include "models/template_io.h"
 #include "sensors/bvh_export.h"
@@ -127,7 +128,10 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
       ChooseWorldFrame(&reader, begin, end, options.preprocess, reader.gravity(), &result);
   const Calibration& calibration = world.calibration;
   // Not const: replaced by the subject's template after the shape calibration (section shape).
-  Template tmpl = template_path.empty() ? GenerateTemplate() : ReadTemplateGlb(template_path);
+  std::string cache_note;
+  Template tmpl = template_path.empty() ? DefaultTemplate(options.template_cache, &cache_note)
+                                        : ReadTemplateGlb(template_path);
+  if (!cache_note.empty()) result.warnings.push_back(cache_note);
   std::error_code ec;
   fs::create_directories(out_dir, ec);
   if (ec) throw Error(out_dir + ": cannot create the output folder: " + ec.message());

@@ -10,6 +10,7 @@
 
 #include "experiments/config.h"
 #include "experiments/realtime_options.h"
+#include "models/template_cache.h"
 #include "models/template_io.h"
 #include "models/textured_mesh_export.h"
 #include "sensors/frame_source.h"
@@ -47,6 +48,9 @@ struct PipelineOptions {
   int max_frames = 0;             // 0: all frames
   bool export_meshes = false;     // posed meshes per frame (meshes/NNNNNN.ply)
   bool export_foreground = false;  // foreground masks per frame (foreground/NNNNNN.png)
+  // The default template (no template file given) from the cache this build wrote
+  // (models/template_cache.h; pipeline.template_cache, template_cache_dir, template_cache_keep).
+  TemplateCacheOptions template_cache;
   bool export_glb = true;         // animated, textured tracked.glb at the end
   // tracked.glb reproduces artex's LBS+SLERP fitted geometry in any glTF viewer (one corrective
   // morph target per frame, models/template_io.h AnimatedGlbOptions); false: glTF's plain LBS

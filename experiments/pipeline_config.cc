@@ -468,7 +468,8 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
                "texture_quality_every", "texture_quality_yaws_deg", "texture_quality_height",
                "export_atlases", "stream", "stream_estimate", "concurrency", "queue_depth", "live",
                "live_queue_depth", "live_init_queue_depth", "live_rate_hz", "colour_delay_frames", "live_texture_skip",
-               "threads", "heap_retain_mb", "huge_pages"});
+               "threads", "heap_retain_mb", "huge_pages", "template_cache", "template_cache_dir",
+               "template_cache_keep"});
   c.Get("texture", &o->texture);
   c.Get("colour_term", &o->colour_term);
   c.Get("first_frame", &o->first_frame);
@@ -510,6 +511,9 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("threads", &o->realtime.threads);
   c.Get("heap_retain_mb", &o->realtime.heap_retain_mb);
   c.Get("huge_pages", &o->realtime.huge_pages);
+  c.Get("template_cache", &o->template_cache.enabled);
+  c.Get("template_cache_dir", &o->template_cache.directory);
+  c.Get("template_cache_keep", &o->template_cache.keep_files);
 }
 
 void BindStream(const Config& c, StreamOptions* o) {
@@ -581,6 +585,10 @@ bool PipelineOptions::IsValid(std::string* error) const {
   }
   if (!stream.IsValid(error)) return false;
   if (!realtime.IsValid(error)) return false;
+  if (!template_cache.IsValid(&inner)) {
+    if (error) *error = "pipeline." + inner;
+    return false;
+  }
   std::ostringstream msg;
   if (first_frame < 0)
     msg << "pipeline.first_frame: expected >= 0, found " << first_frame;
