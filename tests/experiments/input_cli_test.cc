@@ -14,6 +14,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "experiments/heap_retention.h"
 #include "sensors/frame_source.h"
@@ -312,6 +314,55 @@ TEST_F(InputCliTest, TrackPutsTheHeapOnHugePagesWhereAvailable) {
   const bool everywhere = mode.find("[always]") != std::string::npos;
   EXPECT_EQ(huge_page_heap("true", "huge_pages_on"), HugePageHeapAvailable());
   EXPECT_EQ(huge_page_heap("false", "huge_pages_off"), everywhere);
+}
+
+// Without a template file the default template comes from the cache folder: the first run of
+// this build writes it, later runs read it and track the same; off, nothing is written; a damaged
+// file is replaced with a warning naming it (models/template_cache.h).
+TEST_F(InputCliTest, TrackKeepsTheDefaultTemplateInTheCacheFolder) {
+  const std::string tum = WriteTum("tum_template_cache");
+  const auto track = [&](const std::string& name, const std::string& sets) {
+    const std::string out = Path(name);
+    const Result r = Run("track -q '" + tum + "' -o '" + out + "' --intrinsics '" + tum +
+                         "/camera.yaml' --no-texture -s pipeline.export_glb=false " + sets);
+    EXPECT_EQ(r.status, 0) << r.err;
+    return std::make_pair(r, ReadFileBytes(fs::path(out) / "poses.csv"));
+  };
+  const auto cached_files = [](const fs::path& dir) {
+    std::vector<fs::path> files;
+    if (!fs::exists(dir)) return files;
+    for (const auto& e : fs::directory_iterator(dir)) files.push_back(e.path());
+    return files;
+  };
+  const fs::path cache = Path("template_cache");
+  const std::string in_cache = "-s pipeline.template_cache_dir='" + cache.string() + "'";
+  const auto [first, poses] = track("template_cache_1", in_cache);
+  ASSERT_FALSE(poses.empty());
+  const std::vector<fs::path> files = cached_files(cache);
+  ASSERT_EQ(files.size(), 1u);
+  EXPECT_EQ(files[0].extension(), ".bin");
+  const auto written = fs::last_write_time(files[0]);
+  // Read back, not written again: the same poses.
+  EXPECT_EQ(track("template_cache_2", in_cache).second, poses);
+  EXPECT_EQ(fs::last_write_time(files[0]), written);
+  // Off: generated, nothing written, the same poses.
+  const fs::path unused = Path("template_cache_unused");
+  EXPECT_EQ(track("template_cache_off", "-s pipeline.template_cache=false "
+                                        "-s pipeline.template_cache_dir='" + unused.string() + "'")
+                .second,
+            poses);
+  EXPECT_TRUE(cached_files(unused).empty());
+  // Damaged: the run warns naming the file, tracks the same and repairs it.
+  std::ofstream(files[0], std::ios::binary | std::ios::trunc) << "ARTEXTPL damaged";
+  const auto [repaired, repaired_poses] = track("template_cache_damaged", in_cache);
+  EXPECT_EQ(repaired_poses, poses);
+  EXPECT_NE(repaired.err.find(files[0].filename().string()), std::string::npos) << repaired.err;
+  EXPECT_GT(fs::file_size(files[0]), 100000u);
+  // A bad value is an error naming the key.
+  const Result bad = Run("track -q '" + tum + "' -o '" + Path("template_cache_bad") +
+                         "' --intrinsics '" + tum + "/camera.yaml' -s pipeline.template_cache_keep=0");
+  EXPECT_NE(bad.status, 0);
+  EXPECT_NE(bad.err.find("pipeline.template_cache_keep"), std::string::npos) << bad.err;
 }
 
 TEST_F(InputCliTest, ExperimentRunsARecordedTumFolder) {
