@@ -1,6 +1,7 @@
 // The `artex` command-line tool: one subcommand per pipeline stage.
 #include <cstdio>
 #include <exception>
+#include <functional>
 #include <string>
 
 #include <CLI/CLI.hpp>
@@ -15,9 +16,14 @@ int main(int argc, char** argv) {
   CLI::App app{"artex: articulated 3D model tracking with on-the-fly texturing"};
   app.require_subcommand(1);
   // "artex 0.1.0 (<git revision of the source tree>)"; --version works without a subcommand.
-  app.set_version_flag("--version",
-                       std::string("artex ") + ARTEX_VERSION + " (" + artex::SourceRevision() + ")",
-                       "print the version and the source revision, then exit");
+  // Asked of git only when --version is given (every other start would run it twice, and
+  // `artex track` starts twice: pipeline.huge_pages).
+  app.set_version_flag(
+      "--version",
+      std::function<std::string()>([] {
+        return std::string("artex ") + ARTEX_VERSION + " (" + artex::SourceRevision() + ")";
+      }),
+      "print the version and the source revision, then exit");
   artex::RegisterTemplateCommands(&app);
   artex::RegisterSynthCommand(&app);
   artex::RegisterTrackCommand(&app);
