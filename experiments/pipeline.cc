@@ -16,6 +16,7 @@
 #include <optional>
 #include <sstream>
 #include <tbb/global_control.h>
+#include <tbb/task_group.h>
 
 #include "experiments/heap_retention.h"
 #include "experiments/pipeline_output.h"
@@ -138,28 +139,51 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
   WriteFileAtomically(out_dir + "/config.yaml", resolved_config.ToYaml() + "\n");
   WriteCalibration(calibration, out_dir + "/calibration.yaml");
 
+  // The stages' state, built concurrently (each from inputs it only reads; the ground truth's
+  // files are read meanwhile): about half the time of one after another on two cores.
   Preprocessor preprocessor(calibration, options.preprocess);
-  if (background.empty()) {
-    preprocessor.TrainWithoutBackground();
-    if (world.estimate) preprocessor.SetScenePlanes(world.estimate->planes);
-  } else {
-    preprocessor.Train(background);
-  }
-  EMFitter fitter(tmpl, options.fitting);
-  fitter.SetDepthCamera(calibration.depth);  // joints out of its view are held (out_of_view)
+  std::unique_ptr<EMFitter> fitter_owner;
   std::unique_ptr<Texturer> texturer;
-  if (options.texture) texturer = std::make_unique<Texturer>(tmpl, options.texturing);
-
   // Ground truth: the subject's mesh and skeleton (for surface and joint errors).
   result.has_ground_truth = sequence && sequence->has_ground_truth() &&
                             !sequence->GroundTruthSubjectPath().empty() &&
                             fs::exists(sequence->GroundTruthSubjectPath());
   std::unique_ptr<Template> subject;
   std::unique_ptr<Skinning> subject_skinning;
+  cv::Mat truth_texture;  // for the novel-view texture quality
+  {
+    tbb::task_group setup;
+    setup.run([&] {
+      if (background.empty()) {
+        preprocessor.TrainWithoutBackground();
+        if (world.estimate) preprocessor.SetScenePlanes(world.estimate->planes);
+      } else {
+        preprocessor.Train(background);
+      }
+    });
+    setup.run([&] {
+      fitter_owner = std::make_unique<EMFitter>(tmpl, options.fitting);
+      // Joints out of the depth camera's view are held (out_of_view).
+      fitter_owner->SetDepthCamera(calibration.depth);
+    });
+    if (options.texture) {
+      setup.run([&] { texturer = std::make_unique<Texturer>(tmpl, options.texturing); });
+    }
+    if (result.has_ground_truth) {
+      setup.run([&] {
+        subject = std::make_unique<Template>(ReadTemplateGlb(sequence->GroundTruthSubjectPath()));
+        subject_skinning = std::make_unique<Skinning>(*subject);
+        if (options.texture && options.texture_quality_every > 0 && subject->has_uvs() &&
+            !sequence->GroundTruthTexturePath().empty()) {
+          truth_texture = cv::imread(sequence->GroundTruthTexturePath(), cv::IMREAD_COLOR);
+        }
+      });
+    }
+    setup.wait();  // rethrows the first task's exception
+  }
+  EMFitter& fitter = *fitter_owner;
   std::vector<std::pair<int, int>> joint_pairs;  // (tracked joint, subject joint) by name
   if (result.has_ground_truth) {
-    subject = std::make_unique<Template>(ReadTemplateGlb(sequence->GroundTruthSubjectPath()));
-    subject_skinning = std::make_unique<Skinning>(*subject);
     for (int j = 0; j < tmpl.num_joints(); ++j) {
       const int s = subject->FindJoint(tmpl.joints[j].name);
       if (s >= 0) joint_pairs.emplace_back(j, s);
@@ -171,7 +195,7 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
       subject->has_uvs() && !sequence->GroundTruthTexturePath().empty()) {
     truth_scene = std::make_unique<TruthScene>();
     truth_scene->subject = subject.get();
-    truth_scene->texture = cv::imread(sequence->GroundTruthTexturePath(), cv::IMREAD_COLOR);
+    truth_scene->texture = truth_texture;
     truth_scene->camera = reader.calibration().color;
     if (truth_scene->texture.empty()) truth_scene.reset();
   }
