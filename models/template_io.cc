@@ -1,6 +1,7 @@
 // Template writing (models/template_io.h): the glTF model, the glb encoders and the writers.
 #include "models/template_io.h"
 
+#include <tbb/parallel_for.h>
 #include <tiny_gltf.h>
 
 #include <Eigen/Geometry>
@@ -609,46 +610,75 @@ void WriteAnimatedGlbTo(std::ostream& out, const Template& tmpl, const std::vect
     if (!spill) throw Error("cannot create a temporary file for the morph targets");
   }
   MorphTargetLayout layout;
-  std::vector<float> displacement(3 * pairs.size());
   double lbs_sum = 0.0, exact_sum = 0.0;
   long long count = 0;
-  for (std::size_t f = 0; f < poses.size(); ++f) {
-    if (poses[f].num_joints() != tmpl.num_joints() || !poses[f].AllFinite()) {
-      break;  // BuildModel reports the bad pose
-    }
-    Eigen::MatrixX3d artex_positions, lbs_positions;
-    skinning.Apply(poses[f], &artex_positions);
-    GltfSkinnedPositions(tmpl, poses[f], nullptr, &lbs_positions);
-    const Eigen::VectorXd lbs_error = (lbs_positions - artex_positions).rowwise().norm();
-    s.lbs_max_residual_mm = std::max(s.lbs_max_residual_mm, 1e3 * lbs_error.maxCoeff());
-    lbs_sum += lbs_error.sum();
-    count += lbs_error.size();
-    if (!options.exact) continue;
-    Eigen::MatrixX3d offsets;
-    GltfCorrectiveStats stats;
-    GltfCorrectiveOffsets(tmpl, poses[f], artex_positions, options.corrective, &offsets, &stats);
-    s.singular_vertices += stats.singular_vertices;
-    // The residual of what the file holds: offsets rounded to float as written.
-    const Eigen::MatrixX3f stored = offsets.cast<float>();
-    Eigen::MatrixX3d exact_positions;
-    const Eigen::MatrixX3d stored_d = stored.cast<double>();
-    GltfSkinnedPositions(tmpl, poses[f], &stored_d, &exact_positions);
-    const Eigen::VectorXd exact_error = (exact_positions - artex_positions).rowwise().norm();
-    s.exact_max_residual_mm = std::max(s.exact_max_residual_mm, 1e3 * exact_error.maxCoeff());
-    exact_sum += exact_error.sum();
-    Eigen::Vector3f lo = Eigen::Vector3f::Constant(std::numeric_limits<float>::infinity());
-    Eigen::Vector3f hi = -lo;
-    for (std::size_t i = 0; i < pairs.size(); ++i) {
-      const Eigen::Vector3f d = stored.row(pairs[i].first).transpose();
-      lo = lo.cwiseMin(d);
-      hi = hi.cwiseMax(d);
-      for (int c = 0; c < 3; ++c) displacement[3 * i + c] = d[c];
-    }
-    layout.min.push_back(lo);
-    layout.max.push_back(hi);
-    if (std::fwrite(displacement.data(), sizeof(float), displacement.size(), spill.get()) !=
-        displacement.size()) {
-      throw Error("cannot write the morph targets to a temporary file (disk full?)");
+  // Frames up to the first bad pose (BuildModel reports it), in batches: a batch's frames are
+  // evaluated concurrently, then summed and written in frame order (the same sums and file as
+  // one frame after another).
+  std::size_t frames = 0;
+  while (frames < poses.size() && poses[frames].num_joints() == tmpl.num_joints() &&
+         poses[frames].AllFinite()) {
+    ++frames;
+  }
+  struct FrameTargets {
+    double lbs_sum = 0.0, lbs_max = 0.0, exact_sum = 0.0, exact_max = 0.0;
+    long long count = 0;
+    int singular_vertices = 0;
+    Eigen::Vector3f lo, hi;
+    std::vector<float> displacement;  // 3 per glTF vertex
+  };
+  constexpr std::size_t kBatch = 16;  // frames in memory at once (~0.6 MB each, default template)
+  std::vector<FrameTargets> batch(kBatch);
+  for (std::size_t first = 0; first < frames; first += kBatch) {
+    const std::size_t n = std::min(kBatch, frames - first);
+    tbb::parallel_for(std::size_t{0}, n, [&](std::size_t k) {
+      const Pose& pose = poses[first + k];
+      FrameTargets& t = batch[k];
+      Eigen::MatrixX3d artex_positions, lbs_positions;
+      skinning.Apply(pose, &artex_positions);
+      GltfSkinnedPositions(tmpl, pose, nullptr, &lbs_positions);
+      const Eigen::VectorXd lbs_error = (lbs_positions - artex_positions).rowwise().norm();
+      t.lbs_max = lbs_error.maxCoeff();
+      t.lbs_sum = lbs_error.sum();
+      t.count = lbs_error.size();
+      if (!options.exact) return;
+      Eigen::MatrixX3d offsets;
+      GltfCorrectiveStats stats;
+      GltfCorrectiveOffsets(tmpl, pose, artex_positions, options.corrective, &offsets, &stats);
+      t.singular_vertices = stats.singular_vertices;
+      // The residual of what the file holds: offsets rounded to float as written.
+      const Eigen::MatrixX3f stored = offsets.cast<float>();
+      Eigen::MatrixX3d exact_positions;
+      const Eigen::MatrixX3d stored_d = stored.cast<double>();
+      GltfSkinnedPositions(tmpl, pose, &stored_d, &exact_positions);
+      const Eigen::VectorXd exact_error = (exact_positions - artex_positions).rowwise().norm();
+      t.exact_max = exact_error.maxCoeff();
+      t.exact_sum = exact_error.sum();
+      t.lo = Eigen::Vector3f::Constant(std::numeric_limits<float>::infinity());
+      t.hi = -t.lo;
+      t.displacement.resize(3 * pairs.size());
+      for (std::size_t i = 0; i < pairs.size(); ++i) {
+        const Eigen::Vector3f d = stored.row(pairs[i].first).transpose();
+        t.lo = t.lo.cwiseMin(d);
+        t.hi = t.hi.cwiseMax(d);
+        for (int c = 0; c < 3; ++c) t.displacement[3 * i + c] = d[c];
+      }
+    });
+    for (std::size_t k = 0; k < n; ++k) {
+      const FrameTargets& t = batch[k];
+      s.lbs_max_residual_mm = std::max(s.lbs_max_residual_mm, 1e3 * t.lbs_max);
+      lbs_sum += t.lbs_sum;
+      count += t.count;
+      if (!options.exact) continue;
+      s.singular_vertices += t.singular_vertices;
+      s.exact_max_residual_mm = std::max(s.exact_max_residual_mm, 1e3 * t.exact_max);
+      exact_sum += t.exact_sum;
+      layout.min.push_back(t.lo);
+      layout.max.push_back(t.hi);
+      if (std::fwrite(t.displacement.data(), sizeof(float), t.displacement.size(), spill.get()) !=
+          t.displacement.size()) {
+        throw Error("cannot write the morph targets to a temporary file (disk full?)");
+      }
     }
   }
   if (count > 0) s.lbs_mean_residual_mm = 1e3 * lbs_sum / static_cast<double>(count);
