@@ -16,6 +16,9 @@ each figure's median over the N, a second table their ranges. This machine's spe
 Sequences are synthesised once into --work (artex synth --motion walk --seed 1: depth 640x480,
 colour at the virtual Kinect's default 800x1016, or --color-size WxH, e.g. 640x480 as the
 Kinect v1 and the real recordings deliver it).
+Columns: fps over the frame loop (first read to last output) and after the first frame, latency,
+CPU, drops, peak RSS, errors, and "wall s": the whole process from start to exit as a user waits
+for it (/usr/bin/time: start-up, the default template, writing the outputs included).
 Prints one table and writes WORK/results.json (results_WxH.json with --color-size). The machine
 is shared: `uptime` is printed
 before and after, and every figure of one table comes from the same invocation.
@@ -147,7 +150,9 @@ def main():
     repetitions = {}
     for rep in range(args.repeat):
         for name, s, sets in runs:
-            for label, binary, config in binaries:
+            # Every other repetition the baseline goes first: a run that follows another on a
+            # warm machine (caches, frequency) is not always the same build's.
+            for label, binary, config in (binaries if rep % 2 == 0 else binaries[::-1]):
                 out = os.path.join(args.work,
                                    "run_" + re.sub(r"[^a-z0-9]+", "_", label + name) + suffix +
                                    ("_%d" % rep if args.repeat > 1 else ""))
@@ -162,19 +167,19 @@ def main():
     print("colour camera: " + color_size + " (depth 640x480)")
     print("load before: " + before)
     print("load after:  " + after)
-    head = ("%-34s %7s %7s %8s %8s %6s %5s %8s %8s %7s %7s"
+    head = ("%-34s %7s %7s %8s %8s %6s %5s %8s %8s %7s %7s %7s"
             % ("run", "fps", "fps>1", "lat med", "lat p95", "CPU", "drop", "drop>1", "RSS MB",
-               "err mm", "PSNR"))
+               "err mm", "PSNR", "wall s"))
     print(head)
     for name, r in results.items():
         rt, m = r["realtime"], r["metrics"]
-        print("%-34s %7.1f %7.1f %8.0f %8.0f %5.0f%% %5d %8d %8.0f %7.3f %7.3f"
+        print("%-34s %7.1f %7.1f %8.0f %8.0f %5.0f%% %5d %8d %8.0f %7.3f %7.3f %7.2f"
               % (name, rt["frames_per_second"], rt["steady_frames_per_second"],
                  rt["latency_median_ms"] or 0, rt["latency_p95_ms"] or 0,
                  100 * rt["cpu_utilisation"], rt["frames_dropped"],
                  rt["frames_dropped_after_first"], r["rss_mb"],
                  m["mean_vertex_error_mm"] or float("nan"),
-                 m["mean_novel_view_psnr_db"] or float("nan")))
+                 m["mean_novel_view_psnr_db"] or float("nan"), r["process_wall_s"]))
     if args.repeat > 1:
         print("ranges over the %d repetitions (min-max):" % args.repeat)
 
@@ -183,11 +188,12 @@ def main():
             return (fmt + "-" + fmt) % (values[0], values[-1])
 
         for key, reps in repetitions.items():
-            print("  %-32s fps %s, fps>1 %s, lat med %s ms, drop %s"
+            walls = sorted(r["process_wall_s"] for r in reps)
+            print("  %-32s fps %s, fps>1 %s, lat med %s ms, drop %s, wall %.2f-%.2f s"
                   % (key, span(reps, "frames_per_second", "%.1f"),
                      span(reps, "steady_frames_per_second", "%.1f"),
                      span(reps, "latency_median_ms", "%.0f"),
-                     span(reps, "frames_dropped", "%d")))
+                     span(reps, "frames_dropped", "%d"), walls[0], walls[-1]))
     # Stages by name (the two builds may have different stages: the pool stage is newer).
     print("stage busy ms/frame:")
     for name, r in results.items():
