@@ -11,6 +11,7 @@
 #include "models/pose.h"
 #include "models/skinning.h"
 #include "models/template.h"
+#include "models/template_cache.h"
 #include "models/template_generator.h"
 #include "models/template_io.h"
 #include "models/textured_mesh_export.h"
@@ -130,6 +131,26 @@ void BindModels(py::module_& m) {
       py::call_guard<py::gil_scoped_release>(),
       "The generated human template (A-pose, 17 joints). resolution 0: ~3k vertices (fast),\n"
       "1: ~12.5k (the tracking default). Parameters as `artex template generate`.");
+
+  m.def(
+      "default_template",
+      [](bool cache, const std::string& cache_dir) {
+        TemplateCacheOptions o;
+        o.enabled = cache;
+        o.directory = cache_dir;
+        std::string note;
+        Template t = DefaultTemplate(o, &note);
+        if (!note.empty()) {
+          py::gil_scoped_acquire gil;
+          PyErr_WarnEx(PyExc_RuntimeWarning, note.c_str(), 1);
+        }
+        return t;
+      },
+      py::arg("cache") = true, py::arg("cache_dir") = "",
+      py::call_guard<py::gil_scoped_release>(),
+      "generate_template() with its defaults (the tracker's default template), bit for bit, read\n"
+      "from this build's cache when it wrote it there (docs/template.md, \"The default template's\n"
+      "cache\"); cache_dir \"\": $ARTEX_CACHE_DIR, $XDG_CACHE_HOME/artex or ~/.cache/artex.");
 
   m.def(
       "read_glb",

@@ -69,3 +69,24 @@ def test_skinning_jacobian_matches_finite_differences(coarse_template):
     rest = skinning.apply(artex.Pose(17))
     assert np.allclose(rest, coarse_template.vertices)
     assert skinning.posed_joint_centers(artex.Pose(17)).shape == (17, 3)
+
+
+def test_default_template_is_the_generated_one_from_the_cache(tmp_path):
+    cache = tmp_path / "cache"
+    first = artex.default_template(cache_dir=str(cache))  # generated, then written
+    files = list(cache.glob("template-*.bin"))
+    assert len(files) == 1 and files[0].stat().st_size > 100000
+    second = artex.default_template(cache_dir=str(cache))  # read back
+    generated = artex.generate_template()
+    for t in (first, second):
+        assert np.array_equal(t.vertices, generated.vertices)
+        assert np.array_equal(t.lbs_weight, generated.lbs_weight)
+        assert np.array_equal(t.uvs, generated.uvs)
+        assert np.array_equal(t.joint_centers, generated.joint_centers)
+    off = tmp_path / "off"
+    artex.default_template(cache=False, cache_dir=str(off))
+    assert not off.exists()
+    files[0].write_bytes(b"ARTEXTPL damaged")
+    with pytest.warns(RuntimeWarning, match="checksum|truncated|header"):
+        artex.default_template(cache_dir=str(cache))
+    assert files[0].stat().st_size > 100000
