@@ -4,6 +4,8 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -79,8 +81,8 @@ class Reader {
   template <typename T>
   std::vector<T> GetArray(const char* field) {
     const std::uint64_t count = Count(field);
-    std::vector<T> out(count);
     Need(count * sizeof(T), field);
+    std::vector<T> out(count);
     if (count > 0) std::memcpy(out.data(), data_ + at_, count * sizeof(T));
     at_ += count * sizeof(T);
     return out;
@@ -176,20 +178,30 @@ int FindBuildId(dl_phdr_info* info, std::size_t, void* data) {
 }
 
 // Cached templates of other builds beyond `keep` (this build's included), oldest written first,
-// are removed; errors are ignored (another process may be doing the same).
+// are removed, and temporary files a crashed writer left (older than an hour). Best effort:
+// errors are ignored (another process may be doing the same).
 void PruneCache(const fs::path& dir, int keep) {
-  std::error_code ec;
-  std::vector<std::pair<fs::file_time_type, fs::path>> files;
-  for (const auto& entry : fs::directory_iterator(dir, ec)) {
-    const std::string name = entry.path().filename().string();
-    if (name.rfind("template-", 0) != 0 || entry.path().extension() != ".bin") continue;
-    std::error_code time_ec;
-    const auto time = fs::last_write_time(entry.path(), time_ec);
-    if (!time_ec) files.emplace_back(time, entry.path());
+  try {
+    std::error_code ec;
+    const auto stale = fs::file_time_type::clock::now() - std::chrono::hours(1);
+    std::vector<std::pair<fs::file_time_type, fs::path>> files;
+    for (const auto& entry : fs::directory_iterator(dir, ec)) {
+      const std::string name = entry.path().filename().string();
+      if (name.rfind("template-", 0) != 0) continue;
+      std::error_code time_ec;
+      const auto time = fs::last_write_time(entry.path(), time_ec);
+      if (time_ec) continue;
+      if (name.find(".bin.tmp.") != std::string::npos) {
+        if (time < stale) fs::remove(entry.path(), ec);
+      } else if (entry.path().extension() == ".bin") {
+        files.emplace_back(time, entry.path());
+      }
+    }
+    if (static_cast<int>(files.size()) <= keep) return;
+    std::sort(files.begin(), files.end());
+    for (std::size_t i = 0; i + keep < files.size(); ++i) fs::remove(files[i].second, ec);
+  } catch (const std::exception&) {
   }
-  if (static_cast<int>(files.size()) <= keep) return;
-  std::sort(files.begin(), files.end());
-  for (std::size_t i = 0; i + keep < files.size(); ++i) fs::remove(files[i].second, ec);
 }
 
 }  // namespace
@@ -246,7 +258,9 @@ void WriteTemplateBinary(const Template& tmpl, const std::string& path) {
 
   // A temporary file beside the target, then renamed over it: a reader sees the old file or
   // the whole new one, never a part.
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+  static std::atomic<int> serial{0};  // threads of one process write apart too
+  const std::string tmp =
+      path + ".tmp." + std::to_string(::getpid()) + "." + std::to_string(serial++);
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     if (!out) throw Error(tmp + ": cannot open for writing");

@@ -128,13 +128,19 @@ TEST(TemplateCacheTest, TheDefaultTemplateIsWrittenOnceAndReadBack) {
   TemplateCacheOptions options;
   options.directory = (dir / "cache").string();
   options.keep_files = 3;
-  // Other builds' files, older than this one's will be.
+  // Other builds' files, older than this one's will be, and two temporary files of crashed
+  // writers (the older than an hour is removed, the recent one may still be being written).
   for (int k = 0; k < 4; ++k) {
     const fs::path other = dir / "cache" / ("template-old" + std::to_string(k) + ".bin");
     fs::create_directories(other.parent_path());
     WriteBytes(other, "other build");
     fs::last_write_time(other, fs::file_time_type::clock::now() - std::chrono::hours(10 - k));
   }
+  const fs::path crashed = dir / "cache" / "template-old9.bin.tmp.12.0";
+  const fs::path writing = dir / "cache" / "template-old9.bin.tmp.13.0";
+  WriteBytes(crashed, "part");
+  WriteBytes(writing, "part");
+  fs::last_write_time(crashed, fs::file_time_type::clock::now() - std::chrono::hours(2));
   std::string note = "stale";
   const Template generated = DefaultTemplate(options, &note);
   EXPECT_EQ(note, "");
@@ -145,6 +151,8 @@ TEST(TemplateCacheTest, TheDefaultTemplateIsWrittenOnceAndReadBack) {
   EXPECT_FALSE(fs::exists(dir / "cache" / "template-old1.bin"));
   EXPECT_TRUE(fs::exists(dir / "cache" / "template-old2.bin"));
   EXPECT_TRUE(fs::exists(dir / "cache" / "template-old3.bin"));
+  EXPECT_FALSE(fs::exists(crashed));
+  EXPECT_TRUE(fs::exists(writing));
 
   // Read back: the generated template bit for bit, the file untouched.
   const auto written = fs::last_write_time(file);
