@@ -23,7 +23,7 @@ struct TemplateCacheOptions {
   // $HOME/.cache/artex (none of them set: no cache).
   std::string directory;
   // pipeline.template_cache_keep: cached templates kept in the folder, this build's included
-  // (other builds' least recently written are removed beyond this; each is about 1.9 MB).
+  // (other builds' least recently written are removed beyond this; each is about 1.4 MB).
   int keep_files = 8;
 
   bool IsValid(std::string* error) const;
