@@ -114,7 +114,7 @@ void RunOverlay(const OverlayCli& cli) {
   std::string cache_note;
   const Template tmpl =
       template_path.empty() ? DefaultTemplate(TemplateCacheOptions(), &cache_note)
-                            : ReadTemplateGlb(template_path);
+                            : ReadTemplateFile(template_path);
   if (!cache_note.empty()) std::fprintf(stderr, "artex: warning: %s\n", cache_note.c_str());
 
   std::map<int, Pose> poses;

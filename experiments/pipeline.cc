@@ -131,7 +131,7 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
   // Not const: replaced by the subject's template after the shape calibration (section shape).
   std::string cache_note;
   Template tmpl = template_path.empty() ? DefaultTemplate(options.template_cache, &cache_note)
-                                        : ReadTemplateGlb(template_path);
+                                        : ReadTemplateFile(template_path);
   if (!cache_note.empty()) result.warnings.push_back(cache_note);
   std::error_code ec;
   fs::create_directories(out_dir, ec);

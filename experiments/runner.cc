@@ -25,6 +25,7 @@
 #include "experiments/file_util.h"
 #include "experiments/runner_internal.h"
 #include "models/error.h"
+#include "models/template_cache.h"
 #include "models/template_generator.h"
 #include "models/template_io.h"
 #include "sensors/sequence.h"
@@ -217,16 +218,19 @@ ExperimentSummary RunExperiment(const Experiment& experiment, const std::string&
     throw Error(msg);
   }
 
-  // Tracking template: generated once per spec into OUT/templates/.
+  // Tracking template: generated once per spec into OUT/templates/: template-<hash>.bin, which
+  // the runs read (the generated template bit for bit, as `artex track` tracks with it), and a
+  // .glb of it to look at (its positions rounded to float).
   std::string template_path = experiment.template_path;
   std::string template_identity = experiment.template_path;
   if (template_path.empty()) {
     const fs::path dir = out / "templates";
     fs::create_directories(dir);
     template_identity = experiment.template_yaml;
-    const fs::path glb = dir / ("template-" + Hex(Fnv1a(experiment.template_yaml), 12) + ".glb");
-    template_path = glb.string();
-    if (!fs::exists(glb) && !options.dry_run) {
+    const std::string stem = "template-" + Hex(Fnv1a(experiment.template_yaml), 12);
+    const fs::path bin = dir / (stem + ".bin");
+    template_path = bin.string();
+    if (!fs::exists(bin) && !options.dry_run) {
       const Config c = Config::FromString(experiment.template_yaml, experiment.file + ": template");
       BodyShapeOptions shape;
       c.Get("resolution", &shape.resolution);
@@ -237,9 +241,12 @@ ExperimentSummary RunExperiment(const Experiment& experiment, const std::string&
       c.Get("arm_length", &shape.arm_length);
       c.Get("leg_length", &shape.leg_length);
       c.Get("atlas_size", &shape.atlas_size);
-      WriteTemplateGlb(glb.string(), GenerateTemplate(shape));
-      WriteFileAtomic((dir / ("template-" + Hex(Fnv1a(experiment.template_yaml), 12) + ".yaml")).string(),
-                      experiment.template_yaml + "\n");
+      // No template section: the default template, from this build's cache when it is there.
+      const Template tmpl =
+          experiment.template_yaml == "{}" ? DefaultTemplate() : GenerateTemplate(shape);
+      WriteTemplateGlb((dir / (stem + ".glb")).string(), tmpl);
+      WriteFileAtomic((dir / (stem + ".yaml")).string(), experiment.template_yaml + "\n");
+      WriteTemplateBinary(tmpl, bin.string());  // last: its presence means the folder is complete
     }
   }
 

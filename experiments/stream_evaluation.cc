@@ -19,6 +19,7 @@
 #include "models/error.h"
 #include "models/mesh_export.h"
 #include "models/skinning.h"
+#include "models/template_cache.h"
 #include "models/template_io.h"
 #include "sensors/calibration.h"
 #include "sensors/sequence.h"
@@ -97,7 +98,7 @@ void StreamLatency(double frame_rate, double link_kbps, std::vector<FrameTiming>
 StreamSummary EncodeRunStream(const std::string& run_dir, const std::string& template_path,
                               const std::string& stream_path, const StreamOptions& options) {
   const std::string glb = template_path.empty() ? run_dir + "/tracked.glb" : template_path;
-  const Template tmpl = ReadTemplateGlb(glb);
+  const Template tmpl = ReadTemplateFile(glb);
   const Calibration calibration = ReadCalibration(run_dir + "/calibration.yaml");
   const auto poses = ReadPoseCsv(run_dir + "/poses.csv", tmpl.num_joints());
   cv::Mat atlas;

@@ -73,7 +73,8 @@ void RegisterTrackCommand(CLI::App* app) {
                   "configuration file (YAML); default: built-in defaults");
   cmd->add_option("-o,--output", args->out, "output folder")->required();
   cmd->add_option("-t,--template", args->template_path,
-                  "tracking template (.glb); default: the generated default template");
+                  "tracking template (.glb, or .bin as artex experiment writes); default: the "
+                  "generated default template (from the build's cache)");
   cmd->add_option("-s,--set", args->overrides,
                   "override an option: key=value (e.g. texture.lambda=0)");
   cmd->add_flag("--export-meshes", args->export_meshes,

@@ -20,6 +20,7 @@
 
 #include "models/error.h"
 #include "models/template_generator.h"
+#include "models/template_io.h"
 
 namespace artex {
 namespace fs = std::filesystem;
@@ -331,6 +332,10 @@ Template ReadTemplateBinary(const std::string& path) {
   std::string why;
   if (!t.IsValid(&why)) body.Fail(why);
   return t;
+}
+
+Template ReadTemplateFile(const std::string& path) {
+  return fs::path(path).extension() == ".bin" ? ReadTemplateBinary(path) : ReadTemplateGlb(path);
 }
 
 Template DefaultTemplate(const TemplateCacheOptions& options, std::string* note) {

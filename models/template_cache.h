@@ -48,4 +48,8 @@ Template DefaultTemplate(const TemplateCacheOptions& options = TemplateCacheOpti
 void WriteTemplateBinary(const Template& tmpl, const std::string& path);
 Template ReadTemplateBinary(const std::string& path);
 
+// A template file by its extension: .bin as ReadTemplateBinary, anything else as a .glb
+// (ReadTemplateGlb). What `--template` and an experiment's runs read.
+Template ReadTemplateFile(const std::string& path);
+
 }  // namespace artex

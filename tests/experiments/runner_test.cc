@@ -17,6 +17,8 @@
 #include <vector>
 
 #include "models/error.h"
+#include "models/template_cache.h"
+#include "models/template_generator.h"
 #include "tests/error_of.h"
 #include "tests/testing_util.h"
 
@@ -323,6 +325,24 @@ TEST(ExperimentRunTest, KilledRunResumesWithIdenticalResultsAndRerunSkips) {
   EXPECT_NE(run_json.find("git_revision"), std::string::npos);
   EXPECT_TRUE(fs::exists(dir / "ref" / "runs" / "walk" / "texture.lambda=1" / "trace.csv"));
   EXPECT_TRUE(fs::exists(dir / "ref" / "runs" / "walk" / "texture.lambda=1" / "config.yaml"));
+  // The runs track with the generated template bit for bit (as `artex track` does): its .bin
+  // beside the .glb to look at, named in run.json.
+  int bins = 0;
+  for (const auto& e : fs::directory_iterator(dir / "ref" / "templates")) {
+    if (e.path().extension() != ".bin") continue;
+    ++bins;
+    BodyShapeOptions shape;
+    shape.resolution = 0;
+    shape.atlas_size = 256;
+    const Template generated = GenerateTemplate(shape);
+    const Template used = ReadTemplateFile(e.path().string());
+    EXPECT_TRUE(used.vertices == generated.vertices);
+    EXPECT_TRUE(used.lbs_weight == generated.lbs_weight);
+    EXPECT_TRUE(used.uvs == generated.uvs);
+    EXPECT_TRUE(fs::exists(fs::path(e.path()).replace_extension(".glb")));
+    EXPECT_NE(run_json.find(e.path().filename().string()), std::string::npos) << run_json;
+  }
+  EXPECT_EQ(bins, 1);
 
   // Interrupted: one run at a time, SIGKILL of the whole process group once a run is done.
   const fs::path out = dir / "killed";
