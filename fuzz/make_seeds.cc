@@ -10,6 +10,7 @@
 #include "fuzz/fuzz_input.h"
 #include "models/error.h"
 #include "models/template_generator.h"
+#include "models/template_cache.h"
 #include "models/template_io.h"
 #include "sensors/calibration.h"
 #include "sensors/sequence.h"
@@ -177,6 +178,9 @@ int main(int argc, char** argv) {
     texture.width = texture.height = 2;
     texture.rgb = {255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255};
     Put(out, "template_glb", "small_textured.glb", artex::EncodeTemplateGlb(small, &texture));
+    // The binary template file (the default template's cache): the small template's.
+    artex::WriteTemplateBinary(small, (scratch / "small.bin").string());
+    Put(out, "template_bin", "small.bin", Read(scratch / "small.bin"));
 
     // A 2-frame sequence of the fuzzers' 8 x 6 rig, with ground truth.
     artex::Calibration c;
