@@ -314,38 +314,53 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
 
   WritePoseCsv(out_dir + "/poses.csv", tmpl, output.pose_frames, poses);
 
-  GlbTexture texture;
+  // The files nothing else here reads (labels.png, tracked.bvh, tracked.obj / .ply) are written
+  // concurrently with texture.png and tracked.glb, which embeds the texture (the same files).
+  tbb::task_group side_outputs;
   if (texturer) {
-    texture.png = WritePngFile(out_dir + "/texture.png", texturer->Atlas());
-    WritePngFile(out_dir + "/labels.png", texturer->LabelMap());
-  }
-  if (options.export_glb && !poses.empty()) {
-    AnimatedGlbOptions glb;
-    glb.exact = options.glb_exact &&
-                (options.glb_exact_max_frames == 0 ||
-                 static_cast<int>(poses.size()) <= options.glb_exact_max_frames);
-    if (options.glb_exact && !glb.exact) {
-      result.warnings.push_back("tracked.glb: " + std::to_string(poses.size()) +
-                                " frames exceed pipeline.glb_exact_max_frames (" +
-                                std::to_string(options.glb_exact_max_frames) +
-                                "): written with glTF's plain LBS, without exact correctives");
-    }
-    WriteAnimatedGlb(out_dir + "/tracked.glb", tmpl, poses, calibration.frame_rate,
-                     texturer ? &texture : nullptr, glb, &result.glb);
-    result.glb_written = true;
+    side_outputs.run([&] { WritePngFile(out_dir + "/labels.png", texturer->LabelMap()); });
   }
   if (options.export_bvh && !poses.empty()) {
-    WriteBvh(out_dir + "/tracked.bvh", tmpl, poses, calibration.frame_rate);
+    side_outputs.run(
+        [&] { WriteBvh(out_dir + "/tracked.bvh", tmpl, poses, calibration.frame_rate); });
   }
   if (options.export_textured_mesh && !poses.empty()) {
-    Eigen::MatrixX3d last;
-    Skinning(tmpl).Apply(poses.back(), &last);
-    TexturedMeshOptions mesh;
-    mesh.up = options.mesh_up_axis;
-    mesh.texture_file = texturer ? "texture.png" : "";
-    WriteTexturedMesh(out_dir + "/tracked.obj", tmpl, last, mesh);
-    WriteTexturedMesh(out_dir + "/tracked.ply", tmpl, last, mesh);
+    side_outputs.run([&] {
+      Eigen::MatrixX3d last;
+      Skinning(tmpl).Apply(poses.back(), &last);
+      TexturedMeshOptions mesh;
+      mesh.up = options.mesh_up_axis;
+      mesh.texture_file = texturer ? "texture.png" : "";
+      WriteTexturedMesh(out_dir + "/tracked.obj", tmpl, last, mesh);
+      WriteTexturedMesh(out_dir + "/tracked.ply", tmpl, last, mesh);
+    });
   }
+  GlbTexture texture;
+  try {
+    if (texturer) texture.png = WritePngFile(out_dir + "/texture.png", texturer->Atlas());
+    if (options.export_glb && !poses.empty()) {
+      AnimatedGlbOptions glb;
+      glb.exact = options.glb_exact &&
+                  (options.glb_exact_max_frames == 0 ||
+                   static_cast<int>(poses.size()) <= options.glb_exact_max_frames);
+      if (options.glb_exact && !glb.exact) {
+        result.warnings.push_back("tracked.glb: " + std::to_string(poses.size()) +
+                                  " frames exceed pipeline.glb_exact_max_frames (" +
+                                  std::to_string(options.glb_exact_max_frames) +
+                                  "): written with glTF's plain LBS, without exact correctives");
+      }
+      WriteAnimatedGlb(out_dir + "/tracked.glb", tmpl, poses, calibration.frame_rate,
+                       texturer ? &texture : nullptr, glb, &result.glb);
+      result.glb_written = true;
+    }
+  } catch (...) {
+    try {
+      side_outputs.wait();  // not left running past this function's locals
+    } catch (...) {
+    }
+    throw;
+  }
+  side_outputs.wait();  // rethrows a side output's error
 
   PipelineOutputInfo info;
   // Absolute, so that `artex overlay RUN` and `artex render RUN` find the recording from any
