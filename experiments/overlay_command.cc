@@ -24,7 +24,6 @@
 #include "models/error.h"
 #include "models/skinning.h"
 #include "models/template_cache.h"
-#include "models/template_generator.h"
 #include "models/template_io.h"
 #include "sensors/frame_source.h"
 

@@ -30,7 +30,6 @@
 #include "models/normals.h"
 #include "models/skinning.h"
 #include "models/template_cache.h"
-#include "models/template_generator.h"
 #include "models/template_io.h"
 #include "sensors/bvh_export.h"
 #include "sensors/calibration.h"
@@ -150,7 +149,7 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
                             fs::exists(sequence->GroundTruthSubjectPath());
   std::unique_ptr<Template> subject;
   std::unique_ptr<Skinning> subject_skinning;
-  cv::Mat truth_texture;  // for the novel-view texture quality
+  cv::Mat truth_texture;  // read when the novel-view texture quality is measured
   {
     tbb::task_group setup;
     setup.run([&] {
@@ -189,15 +188,13 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
       if (s >= 0) joint_pairs.emplace_back(j, s);
     }
   }
-  // Novel-view texture quality needs the true texture as well.
+  // Novel-view texture quality needs the true texture as well (read above when measured).
   std::unique_ptr<TruthScene> truth_scene;
-  if (result.has_ground_truth && texturer && options.texture_quality_every > 0 &&
-      subject->has_uvs() && !sequence->GroundTruthTexturePath().empty()) {
+  if (!truth_texture.empty()) {
     truth_scene = std::make_unique<TruthScene>();
     truth_scene->subject = subject.get();
-    truth_scene->texture = truth_texture;
+    truth_scene->texture = std::move(truth_texture);
     truth_scene->camera = reader.calibration().color;
-    if (truth_scene->texture.empty()) truth_scene.reset();
   }
   FrameSinks sinks(options, tmpl, calibration, texturer.get(), out_dir);
   if (options.export_meshes) {

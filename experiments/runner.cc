@@ -241,9 +241,7 @@ ExperimentSummary RunExperiment(const Experiment& experiment, const std::string&
       c.Get("arm_length", &shape.arm_length);
       c.Get("leg_length", &shape.leg_length);
       c.Get("atlas_size", &shape.atlas_size);
-      // No template section: the default template, from this build's cache when it is there.
-      const Template tmpl =
-          experiment.template_yaml == "{}" ? DefaultTemplate() : GenerateTemplate(shape);
+      const Template tmpl = GenerateTemplate(shape);
       WriteTemplateGlb((dir / (stem + ".glb")).string(), tmpl);
       WriteFileAtomic((dir / (stem + ".yaml")).string(), experiment.template_yaml + "\n");
       WriteTemplateBinary(tmpl, bin.string());  // last: its presence means the folder is complete

@@ -14,19 +14,13 @@
 
 #include "experiments/config.h"
 #include "experiments/runner.h"
+#include "models/fnv1a.h"
 #include "sensors/virtual_kinect.h"
 
 namespace artex {
 namespace runner_internal {
 
-inline uint64_t Fnv1a(const std::string& s) {
-  uint64_t h = 1469598103934665603ull;
-  for (unsigned char c : s) {
-    h ^= c;
-    h *= 1099511628211ull;
-  }
-  return h;
-}
+using ::artex::Fnv1a;  // models/fnv1a.h
 
 // The last `digits` (<= 16) hexadecimal digits of v.
 inline std::string Hex(uint64_t v, int digits) {

@@ -9,6 +9,7 @@
 
 #include "fuzz/fuzz_input.h"
 #include "models/error.h"
+#include "models/fnv1a.h"
 #include "models/template_cache.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
@@ -16,11 +17,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   for (int pass = 0; pass < 2; ++pass) {
     if (pass == 1) {
       if (bytes.size() < 8) break;
-      std::uint64_t h = 1469598103934665603ull;  // FNV-1a, as the writer's checksum
-      for (std::size_t i = 0; i + 8 < bytes.size(); ++i) {
-        h ^= static_cast<unsigned char>(bytes[i]);
-        h *= 1099511628211ull;
-      }
+      const std::uint64_t h = artex::Fnv1a(bytes.data(), bytes.size() - 8);  // as the writer's
       std::memcpy(&bytes[bytes.size() - 8], &h, 8);
     }
     const std::string path = artex::fuzz::WriteFile("template.bin", bytes);

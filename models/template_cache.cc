@@ -1,26 +1,24 @@
 #include "models/template_cache.h"
 
 #include <link.h>
-#include <unistd.h>
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cstdint>
-#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
-#include <iterator>
 #include <sstream>
 #include <system_error>
 #include <utility>
 #include <vector>
 
 #include "models/error.h"
+#include "models/fnv1a.h"
+#include "models/mesh_export.h"
 #include "models/template_generator.h"
 #include "models/template_io.h"
+#include "models/template_io_internal.h"
 
 namespace artex {
 namespace fs = std::filesystem;
@@ -31,27 +29,18 @@ constexpr std::uint32_t kVersion = 1;
 // Counts above this are not a template (a damaged header would otherwise ask for terabytes).
 constexpr std::uint64_t kMaxCount = 1ull << 28;
 
-std::uint64_t Fnv1a(const char* data, std::size_t size) {
-  std::uint64_t h = 1469598103934665603ull;
-  for (std::size_t i = 0; i < size; ++i) {
-    h ^= static_cast<unsigned char>(data[i]);
-    h *= 1099511628211ull;
-  }
-  return h;
-}
-
 class Writer {
  public:
   template <typename T>
   void Put(const T& value) {
     const char* p = reinterpret_cast<const char*>(&value);
-    bytes_.insert(bytes_.end(), p, p + sizeof(T));
+    bytes_.append(p, sizeof(T));
   }
   template <typename T>
   void PutArray(const T* data, std::uint64_t count) {
     Put(count);
     const char* p = reinterpret_cast<const char*>(data);
-    bytes_.insert(bytes_.end(), p, p + count * sizeof(T));
+    bytes_.append(p, count * sizeof(T));
   }
   void PutString(const std::string& s) { PutArray(s.data(), s.size()); }
   // An Eigen matrix as rows, then its entries in storage order (column-major).
@@ -60,10 +49,10 @@ class Writer {
     Put(static_cast<std::uint64_t>(m.rows()));
     PutArray(m.data(), static_cast<std::uint64_t>(m.size()));
   }
-  std::vector<char>& bytes() { return bytes_; }
+  std::string& bytes() { return bytes_; }
 
  private:
-  std::vector<char> bytes_;
+  std::string bytes_;
 };
 
 class Reader {
@@ -187,14 +176,18 @@ void PruneCache(const fs::path& dir, int keep) {
     const auto stale = fs::file_time_type::clock::now() - std::chrono::hours(1);
     std::vector<std::pair<fs::file_time_type, fs::path>> files;
     for (const auto& entry : fs::directory_iterator(dir, ec)) {
+      // Temporary files are WriteFileAtomically's: ".<name>.tmp-<pid>-<thread>".
       const std::string name = entry.path().filename().string();
-      if (name.rfind("template-", 0) != 0) continue;
+      const bool temporary =
+          name.rfind(".template-", 0) == 0 && name.find(".bin.tmp-") != std::string::npos;
+      const bool cached = name.rfind("template-", 0) == 0 && entry.path().extension() == ".bin";
+      if (!temporary && !cached) continue;
       std::error_code time_ec;
       const auto time = fs::last_write_time(entry.path(), time_ec);
       if (time_ec) continue;
-      if (name.find(".bin.tmp.") != std::string::npos) {
+      if (temporary) {
         if (time < stale) fs::remove(entry.path(), ec);
-      } else if (entry.path().extension() == ".bin") {
+      } else {
         files.emplace_back(time, entry.path());
       }
     }
@@ -237,7 +230,7 @@ std::string ProgramBuildId() {
 
 void WriteTemplateBinary(const Template& tmpl, const std::string& path) {
   Writer w;
-  w.bytes().insert(w.bytes().end(), std::begin(kMagic), std::end(kMagic));
+  w.bytes().append(kMagic, sizeof(kMagic));
   w.Put(kVersion);
   w.PutMatrix(tmpl.vertices);
   w.PutMatrix(tmpl.triangles);
@@ -257,33 +250,12 @@ void WriteTemplateBinary(const Template& tmpl, const std::string& path) {
   const std::uint64_t checksum = Fnv1a(w.bytes().data(), w.bytes().size());
   w.Put(checksum);
 
-  // A temporary file beside the target, then renamed over it: a reader sees the old file or
-  // the whole new one, never a part.
-  static std::atomic<int> serial{0};  // threads of one process write apart too
-  const std::string tmp =
-      path + ".tmp." + std::to_string(::getpid()) + "." + std::to_string(serial++);
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) throw Error(tmp + ": cannot open for writing");
-    out.write(w.bytes().data(), static_cast<std::streamsize>(w.bytes().size()));
-    out.close();
-    if (!out) {
-      std::remove(tmp.c_str());
-      throw Error(tmp + ": cannot write the template (disk full?)");
-    }
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    throw Error(path + ": cannot replace it with " + tmp);
-  }
+  // A reader sees the old file or the whole new one, never a part.
+  WriteFileAtomically(path, w.bytes());
 }
 
 Template ReadTemplateBinary(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error(path + ": cannot open the template cache file");
-  const std::vector<char> bytes((std::istreambuf_iterator<char>(in)),
-                                std::istreambuf_iterator<char>());
-  if (in.bad()) throw Error(path + ": cannot read the template cache file");
+  const std::string bytes = template_io_internal::ReadFileBytes(path);
   Reader r(path, bytes.data(), bytes.size());
   if (bytes.size() < sizeof(kMagic) + sizeof(kVersion) + sizeof(std::uint64_t) ||
       std::memcmp(bytes.data(), kMagic, sizeof(kMagic)) != 0) {

@@ -43,8 +43,8 @@ Template DefaultTemplate(const TemplateCacheOptions& options = TemplateCacheOpti
                          std::string* note = nullptr);
 
 // The binary template file: every field of Template, doubles and ints as stored, with a
-// checksum. Write replaces `path` atomically (a temporary file renamed); Read throws Error
-// naming the file and the field that does not match.
+// checksum. Write replaces `path` atomically (WriteFileAtomically, models/mesh_export.h); Read
+// throws Error naming the file and the field that does not match.
 void WriteTemplateBinary(const Template& tmpl, const std::string& path);
 Template ReadTemplateBinary(const std::string& path);
 
