@@ -3,7 +3,7 @@
 // empty (PushDroppingOldest makes room instead; it and WaitUntilBelow can keep the queue under
 // a lower limit than its capacity). Close() wakes every waiter: Push/TryPush then refuse and
 // Pop drains what is left before it returns false. Thread-safe for any number of producers and
-// consumers.
+// consumers. InFlightLimit (below) bounds the items between a pipeline's first and last stage.
 #pragma once
 
 #include <algorithm>
@@ -94,6 +94,44 @@ class BoundedQueue {
   std::mutex mutex_;
   std::condition_variable not_full_, not_empty_;
   std::deque<T> items_;
+  bool closed_ = false;
+};
+
+// At most `limit` items out at once (the frames a pipeline's source has read and its last
+// stage not yet finished): Acquire waits while `limit` are out, Release returns one. Close()
+// wakes every waiter and makes Acquire refuse. Limit 0: no limit (Acquire never waits).
+class InFlightLimit {
+ public:
+  explicit InFlightLimit(std::size_t limit) : limit_(limit) {}
+  // Waits for room; false once closed.
+  bool Acquire() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    room_.wait(lock, [&] { return closed_ || limit_ == 0 || out_ < limit_; });
+    if (closed_) return false;
+    peak_ = std::max(peak_, ++out_);
+    return true;
+  }
+  // The most items out at once so far.
+  std::size_t peak() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return peak_;
+  }
+  void Release() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (out_ > 0) --out_;
+    room_.notify_one();
+  }
+  void Close() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    closed_ = true;
+    room_.notify_all();
+  }
+
+ private:
+  const std::size_t limit_;
+  std::mutex mutex_;
+  std::condition_variable room_;
+  std::size_t out_ = 0, peak_ = 0;
   bool closed_ = false;
 };
 

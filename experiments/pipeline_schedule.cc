@@ -200,6 +200,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
       ++sequence;
     }
     stats.frames_dropped = missed;
+    stats.frames_in_flight_max = sequence > 0 ? 1 : 0;
   } else {
     const std::size_t depth = static_cast<std::size_t>(options.queue_depth);
     // Live: the track stage's queue holds live_queue_depth frames, or more (the initialisation's
@@ -213,6 +214,8 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
     std::size_t backlog_limit = init_depth;  // the reader's
     bool backlog_started = false;            // the reader's: the first frame was tracked
     BoundedQueue<FrameWork> to_pool(depth), to_texture(depth), to_output(depth);
+    // Not live: the frames read and not yet textured (live: the track stage's queue bounds them).
+    InFlightLimit in_flight(options.live ? 0 : options.max_frames_in_flight);
     std::mutex error_mutex;
     std::exception_ptr error;
     const auto abort = [&](std::exception_ptr e) {
@@ -224,6 +227,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
       to_pool.Close();
       to_texture.Close();
       to_output.Close();
+      in_flight.Close();
       mailbox.Abort();
     };
     std::atomic<int> dropped{0};
@@ -251,6 +255,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
             limit = std::max(live_depth, backlog_limit);
           }
           if (options.live && !backlog && !to_track.WaitUntilBelow(limit)) break;
+          if (!in_flight.Acquire()) break;  // a stage failed
           const int missed_before = missed;
           if (!clock.Next(&frame, &at, &missed)) break;
           if (first_textured) dropped_after_first += missed - missed_before;
@@ -310,7 +315,10 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
       }
       pool_clock.Time([&] { pool->Process(work); });
     }, "artex-pool");
-    std::thread texturer = relay(&to_texture, &to_output, run_texture, "artex-texture");
+    std::thread texturer = relay(&to_texture, &to_output, [&](FrameWork* work) {
+      run_texture(work);
+      in_flight.Release();  // textured: its latency ends (the output queue bounds the rest)
+    }, "artex-texture");
     try {
       FrameWork work;
       while (to_output.Pop(&work)) finish(&work);
@@ -324,6 +332,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
     if (error) std::rethrow_exception(error);
     stats.frames_dropped = dropped;
     stats.frames_texture_skipped = texture_skipped;
+    stats.frames_in_flight_max = static_cast<int>(in_flight.peak());
   }
   stats.frames_texture_not_due = pool->frames_not_due;
   stats.wall_seconds = SecondsSince(start);
@@ -368,6 +377,7 @@ void WriteRealtimeJson(const std::string& path, const RealtimeStats& s) {
   j["frames_dropped_after_first"] = s.frames_dropped_after_first;
   j["frames_texture_skipped"] = s.frames_texture_skipped;
   j["frames_texture_not_due"] = s.frames_texture_not_due;
+  j["frames_in_flight_max"] = s.frames_in_flight_max;
   j["wall_seconds"] = s.wall_seconds;
   j["frames_per_second"] = s.frames_per_second;
   j["steady_frames_per_second"] = s.steady_frames_per_second;

@@ -63,6 +63,9 @@ bool RealtimeOptions::IsValid(std::string* error) const {
   std::string msg;
   if (queue_depth < 1) {
     msg = "pipeline.queue_depth: expected >= 1, found " + std::to_string(queue_depth);
+  } else if (max_frames_in_flight < 0) {
+    msg = "pipeline.max_frames_in_flight: expected >= 0 (0: no limit), found " +
+          std::to_string(max_frames_in_flight);
   } else if (!(live_rate_hz >= 0.0) || live_rate_hz > 1000.0) {
     msg = "pipeline.live_rate_hz: expected 0 (the recording's rate) or a rate in (0, 1000] Hz, "
           "found " + std::to_string(live_rate_hz);

@@ -23,6 +23,11 @@ struct RealtimeOptions {
   // Frames waiting between two stages (pipeline.queue_depth, >= 1): bounds the memory (one
   // frame ~1.2 MB of images at 640x480) and the added latency.
   int queue_depth = 2;
+  // pipeline.max_frames_in_flight (>= 0): not live, pipelined, the reader reads a frame only
+  // while fewer than this many are read and not yet textured. A batch run's
+  // reader otherwise runs ahead by every queue's depth, and each frame waiting adds a frame
+  // period to its latency (read to textured); 0: bounded by the queues alone.
+  int max_frames_in_flight = 2;
   // pipeline.live: frames arrive on a clock at live_rate_hz as from a sensor; a frame is read
   // only once the track stage's queue has room, the frames that arrived meanwhile are dropped
   // undecoded (counted): nothing queues without bound and a recent frame is tracked next.
@@ -59,8 +64,10 @@ struct RealtimeOptions {
   // pipeline.huge_pages: `artex track` and each run of `artex experiment` restart themselves
   // once with glibc's heap on transparent huge pages (experiments/heap_retention.h: where
   // glibc >= 2.35 and the kernel's mode is `madvise`; the library's RunPipeline does not);
-  // false: the ordinary 4 KB pages.
-  bool huge_pages = true;
+  // false: the ordinary 4 KB pages. Off by default: on a virtual machine that hands freed
+  // memory back to its host, a 2 MB page's first touch costs 10-20 times a 4 KB page's per
+  // byte (docs/realtime.md, "Huge pages: off by default").
+  bool huge_pages = false;
 
   bool IsValid(std::string* error) const;
 };
@@ -86,6 +93,7 @@ struct RealtimeStats {
   int frames_dropped_after_first = 0;  // live: dropped after the first frame was textured
   int frames_texture_skipped = 0;  // live: processed but not textured (live_texture_skip)
   int frames_texture_not_due = 0;  // not textured: too soon after the last (texture_every)
+  int frames_in_flight_max = 0;  // the most frames read and not yet textured at once
   double wall_seconds = 0.0;     // first read to last output
   double frames_per_second = 0.0;         // processed / wall_seconds
   double steady_frames_per_second = 0.0;  // after the first frame (its initialisation apart)

@@ -368,7 +368,7 @@ TEST_F(InputCliTest, TrackKeepsTheDefaultTemplateInTheCacheFolder) {
 TEST_F(InputCliTest, ExperimentRunsARecordedTumFolder) {
   const std::string tum = WriteTum("tum_experiment");
   const std::string file = Path("tum_experiment.yaml");
-  std::ofstream(file) << "base: {pipeline: {texture: false, export_glb: false}}\n"
+  std::ofstream(file) << "base: {pipeline: {texture: false, export_glb: false, huge_pages: true}}\n"
                       << "sequences:\n  - {name: lab, path: '" << tum << "'}\n";
   const std::string out = Path("tum_experiment_out");
   const Result r =
@@ -380,7 +380,8 @@ TEST_F(InputCliTest, ExperimentRunsARecordedTumFolder) {
     if (e.path().filename() == "poses.csv") {
       EXPECT_EQ(CountLines(ReadFileBytes(e.path())), kFrames + 1);
       found = true;
-      // The run's process put its heap on huge pages as `artex track` does (pipeline.huge_pages).
+      // The run's process put its heap on huge pages as `artex track` does with
+      // pipeline.huge_pages on.
       const std::string realtime = ReadFileBytes(e.path().parent_path() / "realtime.json");
       EXPECT_EQ(realtime.find("\"huge_page_heap\": true") != std::string::npos,
                 HugePageHeapAvailable())

@@ -7,6 +7,7 @@
 #include <tbb/global_control.h>
 
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -97,6 +98,10 @@ void ExpectSameRuns(const Config& config, const std::string& name, int* reinitia
   EXPECT_EQ(pip.realtime.frames_dropped, 0);
   ASSERT_EQ(pip.realtime.stages.size(), 5u);
   for (const StageTiming& s : pip.realtime.stages) EXPECT_EQ(s.frames, kFrames) << s.name;
+  // The reader kept at most max_frames_in_flight frames read and not yet textured.
+  const int in_flight = LoadPipelineOptions(config).realtime.max_frames_in_flight;
+  EXPECT_GE(pip.realtime.frames_in_flight_max, 1);
+  if (in_flight > 0) EXPECT_LE(pip.realtime.frames_in_flight_max, in_flight);
   if (reinitialised) {
     *reinitialised = 0;
     for (const FrameRecord& f : pip.frames) *reinitialised += f.reinitialised;
@@ -145,6 +150,15 @@ TEST(PipelinedTrackingTest, SameAsSequentialWithoutColourDelayAndDepthOneQueues)
   config.Set("pipeline.colour_delay_frames", "0");
   config.Set("pipeline.queue_depth", "1");
   ExpectSameRuns(config, "nodelay");
+}
+
+// One frame in flight (the stages take turns) and none limited but by the queues.
+TEST(PipelinedTrackingTest, SameAsSequentialWithOneOrUnlimitedFramesInFlight) {
+  Config config = BaseConfig();
+  config.Set("pipeline.max_frames_in_flight", "1");
+  ExpectSameRuns(config, "in_flight_1");
+  config.Set("pipeline.max_frames_in_flight", "0");
+  ExpectSameRuns(config, "in_flight_0");
 }
 
 TEST(PipelinedTrackingTest, SameAsSequentialWithDoubtfulReinitialisations) {
@@ -366,6 +380,7 @@ TEST(PipelinedTrackingTest, FramesAfterAGapAreRefitted) {
 TEST(PipelinedTrackingTest, RejectsInvalidOptions) {
   for (const auto& [key, value] :
        std::vector<std::pair<std::string, std::string>>{{"pipeline.queue_depth", "0"},
+                                                        {"pipeline.max_frames_in_flight", "-1"},
                                                         {"pipeline.live_queue_depth", "0"},
                                                         {"pipeline.live_rate_hz", "-1"},
                                                         {"pipeline.colour_delay_frames", "-1"},
@@ -453,6 +468,62 @@ TEST(ConcurrentQueueTest, CloseWakesABlockedProducer) {
   queue.Close();
   producer.join();
   EXPECT_TRUE(refused.load());
+}
+
+// A producer acquires before each item and the consumer releases after it: never more than
+// the limit out at once, the limit reached, and Close wakes a blocked Acquire.
+TEST(ConcurrentQueueTest, InFlightLimitBoundsTheItemsOut) {
+  InFlightLimit limit(2);
+  BoundedQueue<int> queue(8);  // roomier than the limit: the limit alone bounds
+  std::atomic<int> out{0}, most{0};
+  constexpr int kItems = 500;
+  std::thread producer([&] {
+    for (int i = 0; i < kItems; ++i) {
+      ASSERT_TRUE(limit.Acquire());
+      const int now = ++out;
+      int seen = most.load();
+      while (now > seen && !most.compare_exchange_weak(seen, now)) {
+      }
+      ASSERT_TRUE(queue.Push(int(i)));
+    }
+    queue.Close();
+  });
+  int item = 0, count = 0;
+  while (queue.Pop(&item)) {
+    EXPECT_EQ(item, count++);
+    --out;
+    limit.Release();
+  }
+  producer.join();
+  EXPECT_EQ(count, kItems);
+  EXPECT_LE(most.load(), 2);
+  EXPECT_LE(limit.peak(), 2u);
+
+  // Two out: a third Acquire waits for a Release.
+  InFlightLimit two(2);
+  ASSERT_TRUE(two.Acquire());
+  ASSERT_TRUE(two.Acquire());
+  EXPECT_EQ(two.peak(), 2u);
+  std::atomic<bool> third{false};
+  std::thread waiter([&] { third = two.Acquire(); });
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  EXPECT_FALSE(third.load());
+  two.Release();
+  waiter.join();
+  EXPECT_TRUE(third.load());
+  EXPECT_EQ(two.peak(), 2u);
+
+  InFlightLimit one(1);
+  ASSERT_TRUE(one.Acquire());
+  std::atomic<bool> refused{false};
+  std::thread blocked([&] { refused = !one.Acquire(); });
+  one.Close();
+  blocked.join();
+  EXPECT_TRUE(refused.load());
+
+  InFlightLimit none(0);  // no limit
+  for (int i = 0; i < 10; ++i) EXPECT_TRUE(none.Acquire());
+  EXPECT_EQ(none.peak(), 10u);
 }
 
 TEST(ConcurrentColourMailboxTest, TakesTheNewestColoursUpToTheAskedFrame) {
