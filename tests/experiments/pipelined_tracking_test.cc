@@ -101,7 +101,9 @@ void ExpectSameRuns(const Config& config, const std::string& name, int* reinitia
   // The reader kept at most max_frames_in_flight frames read and not yet textured.
   const int in_flight = LoadPipelineOptions(config).realtime.max_frames_in_flight;
   EXPECT_GE(pip.realtime.frames_in_flight_max, 1);
-  if (in_flight > 0) EXPECT_LE(pip.realtime.frames_in_flight_max, in_flight);
+  if (in_flight > 0) {
+    EXPECT_LE(pip.realtime.frames_in_flight_max, in_flight);
+  }
   if (reinitialised) {
     *reinitialised = 0;
     for (const FrameRecord& f : pip.frames) *reinitialised += f.reinitialised;
