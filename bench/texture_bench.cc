@@ -18,6 +18,7 @@
 // BM_CandidateLimit/<max_candidates>/<max_sweeps>: the same with at most max_candidates images
 //   per triangle (0: all); energies compare across the limits.
 // BM_LevelSeams: seam levelling of one labelling.
+// BM_ComposeAtlas: Texturer::Atlas, the texture as a 2D image (seams levelled already).
 // BM_LevelFactor/ldlt_factor:<0|1>: levelling's factorisation and solve, SimplicialLDLT's or
 //   the leveller's own (the same arithmetic).
 // Median figures: --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
@@ -297,6 +298,24 @@ void BM_LevelSeams(benchmark::State& state) {
   state.counters["rms_after"] = summary.seam_residual_after;
 }
 BENCHMARK(BM_LevelSeams)->Unit(benchmark::kMillisecond)->MinTime(1.0);
+
+// The texture as an image (Texturer::Atlas after kWarmupFrames frames, its seams levelled once
+// before the timing): the texels scattered into the atlas, the padding grown around the
+// charts, the conversion to 8 bits. What an atlas snapshot (texture quality, --export-atlases,
+// the stream) costs.
+void BM_ComposeAtlas(benchmark::State& state) {
+  const Sequence& seq = Walk();
+  Texturer texturer(seq.body, BenchOptions());
+  for (int f = 0; f < kWarmupFrames; ++f)
+    texturer.AddFrame(f, seq.color[f], seq.camera, seq.posed[f]);
+  cv::Mat atlas = texturer.Atlas();
+  for (auto _ : state) {
+    atlas = texturer.Atlas();
+    benchmark::DoNotOptimize(atlas.data);
+  }
+  state.counters["atlas_size"] = atlas.cols;
+}
+BENCHMARK(BM_ComposeAtlas)->Unit(benchmark::kMillisecond)->MinTime(1.0);
 
 // BM_LevelFactor/ldlt_factor:<0|1>: seam levelling's factorisation and three-channel solve on
 // the normal equations of one label over the whole body (its vertex graph with the default

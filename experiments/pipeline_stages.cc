@@ -355,7 +355,7 @@ bool TextureStage::Process(FrameWork* work, Eigen::MatrixX3d* colours) {
   work->evaluate_texture =
       evaluate_texture_ && every > 0 && ((i - begin_ + 1) % every == 0 || i == end_ - 1);
   if (work->evaluate_texture || work->write_atlas) {
-    work->atlas = texturer_->Atlas().clone();
+    work->atlas = texturer_->Atlas();  // a new image each call
     if (work->evaluate_texture) work->triangle_frames = texturer_->triangle_frames();
   }
   // Seams levelled by a read after AddFrame (texture.levelling_every_frame false: the colour

@@ -315,22 +315,42 @@ void PadAtlas(int padding, cv::Mat* out, cv::Mat* mask_image) {
   const int size = out->rows;
   uint8_t* mask = mask_image->data;
   auto* color = reinterpret_cast<cv::Vec3f*>(out->data);
-  std::vector<int> front;
-  for (int y = 0; y < size; ++y) {
-    for (int x = 0; x < size; ++x) {
-      if (mask[y * size + x]) continue;
-      bool next_to_filled = false;
-      for (int dy = -1; dy <= 1 && !next_to_filled; ++dy) {
-        for (int dx = -1; dx <= 1; ++dx) {
-          const int yy = y + dy, xx = x + dx;
-          if (yy < 0 || xx < 0 || yy >= size || xx >= size || mask[yy * size + xx] != 255) continue;
-          next_to_filled = true;
-          break;
-        }
-      }
-      if (next_to_filled) front.push_back(y * size + x);
+  // The first front: the empty texels next to a filled one, in raster order. Rows are scanned
+  // in parallel bands (each band's texels in order, the bands concatenated in order), and a row
+  // none of whose three rows around it holds a filled texel is skipped (most of the atlas).
+  std::vector<uint8_t> row_filled(size, 0);
+  tbb::parallel_for(tbb::blocked_range<int>(0, size, 64), [&](const tbb::blocked_range<int>& r) {
+    for (int y = r.begin(); y < r.end(); ++y) {
+      const uint8_t* row = mask + static_cast<std::size_t>(y) * size;
+      row_filled[y] = std::find(row, row + size, uint8_t{255}) != row + size;
     }
-  }
+  });
+  constexpr int kBandRows = 64;
+  const int bands = (size + kBandRows - 1) / kBandRows;
+  std::vector<std::vector<int>> band_front(bands);
+  tbb::parallel_for(0, bands, [&](int b) {
+    std::vector<int>& out = band_front[b];
+    for (int y = b * kBandRows; y < std::min(size, (b + 1) * kBandRows); ++y) {
+      if (!row_filled[y] && !(y > 0 && row_filled[y - 1]) && !(y + 1 < size && row_filled[y + 1]))
+        continue;
+      for (int x = 0; x < size; ++x) {
+        if (mask[y * size + x]) continue;
+        bool next_to_filled = false;
+        for (int dy = -1; dy <= 1 && !next_to_filled; ++dy) {
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int yy = y + dy, xx = x + dx;
+            if (yy < 0 || xx < 0 || yy >= size || xx >= size || mask[yy * size + xx] != 255)
+              continue;
+            next_to_filled = true;
+            break;
+          }
+        }
+        if (next_to_filled) out.push_back(y * size + x);
+      }
+    }
+  });
+  std::vector<int> front;
+  for (const std::vector<int>& band : band_front) front.insert(front.end(), band.begin(), band.end());
   std::vector<cv::Vec3f> values;
   std::vector<int> next;
   for (int pass = 0; pass < padding && !front.empty(); ++pass) {
