@@ -466,7 +466,8 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
                "gap_refit_radii", "gap_refit_iterations_per_stage", "gap_refit_leg_stride_deg",
                "gap_refit_stride_frames",
                "texture_quality_every", "texture_quality_yaws_deg", "texture_quality_height",
-               "export_atlases", "stream", "stream_estimate", "concurrency", "queue_depth", "max_frames_in_flight", "live",
+               "export_atlases", "stream", "stream_estimate", "concurrency", "queue_depth",
+               "max_frames_in_flight", "live",
                "live_queue_depth", "live_init_queue_depth", "live_rate_hz", "colour_delay_frames", "live_texture_skip",
                "threads", "heap_retain_mb", "huge_pages", "template_cache", "template_cache_dir",
                "template_cache_keep"});

@@ -24,9 +24,9 @@ struct RealtimeOptions {
   // frame ~1.2 MB of images at 640x480) and the added latency.
   int queue_depth = 2;
   // pipeline.max_frames_in_flight (>= 0): not live, pipelined, the reader reads a frame only
-  // while fewer than this many are read and not yet textured. A batch run's
-  // reader otherwise runs ahead by every queue's depth, and each frame waiting adds a frame
-  // period to its latency (read to textured); 0: bounded by the queues alone.
+  // while fewer than this many are read and not yet textured. A batch run's reader otherwise
+  // runs ahead by every queue's depth, and each frame waiting adds a frame period to its
+  // latency (read to textured); 0: bounded by the queues alone.
   int max_frames_in_flight = 2;
   // pipeline.live: frames arrive on a clock at live_rate_hz as from a sensor; a frame is read
   // only once the track stage's queue has room, the frames that arrived meanwhile are dropped
@@ -66,7 +66,7 @@ struct RealtimeOptions {
   // glibc >= 2.35 and the kernel's mode is `madvise`; the library's RunPipeline does not);
   // false: the ordinary 4 KB pages. Off by default: on a virtual machine that hands freed
   // memory back to its host, a 2 MB page's first touch costs 10-20 times a 4 KB page's per
-  // byte (docs/realtime.md, "Huge pages: off by default").
+  // byte (docs/realtime.md, "Frames in flight and the heap's pages").
   bool huge_pages = false;
 
   bool IsValid(std::string* error) const;

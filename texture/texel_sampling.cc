@@ -350,7 +350,8 @@ void PadAtlas(int padding, cv::Mat* out, cv::Mat* mask_image) {
     }
   });
   std::vector<int> front;
-  for (const std::vector<int>& band : band_front) front.insert(front.end(), band.begin(), band.end());
+  for (const std::vector<int>& band : band_front)
+    front.insert(front.end(), band.begin(), band.end());
   std::vector<cv::Vec3f> values;
   std::vector<int> next;
   for (int pass = 0; pass < padding && !front.empty(); ++pass) {
