@@ -16,8 +16,8 @@ int main(int argc, char** argv) {
   CLI::App app{"artex: articulated 3D model tracking with on-the-fly texturing"};
   app.require_subcommand(1);
   // "artex 0.1.0 (<git revision of the source tree>)"; --version works without a subcommand.
-  // Asked of git only when --version is given (every other start would run it twice, and
-  // `artex track` starts twice: pipeline.huge_pages).
+  // Asked of git only when --version is given (every other start would run it, twice when
+  // `artex track` restarts itself for pipeline.huge_pages).
   app.set_version_flag(
       "--version",
       std::function<std::string()>([] {
