@@ -18,6 +18,7 @@
 #include <tbb/global_control.h>
 #include <tbb/task_group.h>
 
+#include "experiments/blas_threads.h"
 #include "experiments/heap_retention.h"
 #include "experiments/pipeline_output.h"
 #include "experiments/pipeline_stages.h"
@@ -398,6 +399,8 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
                            const std::function<void(const PipelineProgress&)>& progress) {
   // pipeline.heap_retain_mb: process-wide, kept after the run (heap_retention.h).
   RetainFreedHeap(options.realtime.heap_retain_mb);
+  // pipeline.blas_threads: process-wide, kept after the run (blas_threads.h).
+  LimitBlasThreads(options.realtime.blas_threads);
   // pipeline.threads: the parallel loops' threads for this run (restored after it).
   std::unique_ptr<tbb::global_control> limit;
   const int opencv_threads = cv::getNumThreads();

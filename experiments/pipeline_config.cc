@@ -469,7 +469,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
                "export_atlases", "stream", "stream_estimate", "concurrency", "queue_depth",
                "max_frames_in_flight", "live",
                "live_queue_depth", "live_init_queue_depth", "live_rate_hz", "colour_delay_frames", "live_texture_skip",
-               "threads", "heap_retain_mb", "huge_pages", "template_cache", "template_cache_dir",
+               "threads", "blas_threads", "heap_retain_mb", "huge_pages", "template_cache", "template_cache_dir",
                "template_cache_keep"});
   c.Get("texture", &o->texture);
   c.Get("colour_term", &o->colour_term);
@@ -513,6 +513,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("threads", &o->realtime.threads);
   c.Get("heap_retain_mb", &o->realtime.heap_retain_mb);
   c.Get("huge_pages", &o->realtime.huge_pages);
+  c.Get("blas_threads", &o->realtime.blas_threads);
   c.Get("template_cache", &o->template_cache.enabled);
   c.Get("template_cache_dir", &o->template_cache.directory);
   c.Get("template_cache_keep", &o->template_cache.keep_files);

@@ -77,6 +77,9 @@ bool RealtimeOptions::IsValid(std::string* error) const {
   } else if (colour_delay_frames < 0) {
     msg = "pipeline.colour_delay_frames: expected >= 0, found " +
           std::to_string(colour_delay_frames);
+  } else if (blas_threads < 0) {
+    msg = "pipeline.blas_threads: expected >= 0 (0: the BLAS library's own setting), found " +
+          std::to_string(blas_threads);
   } else if (threads < 0) {
     msg = "pipeline.threads: expected >= 0 (0: every core), found " + std::to_string(threads);
   } else if (heap_retain_mb < 0 || heap_retain_mb > 65536) {

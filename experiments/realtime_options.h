@@ -68,6 +68,10 @@ struct RealtimeOptions {
   // memory back to its host, a 2 MB page's first touch costs 10-20 times a 4 KB page's per
   // byte (docs/realtime.md, "Frames in flight and the heap's pages").
   bool huge_pages = false;
+  // pipeline.blas_threads (>= 0): OpenBLAS's threads (experiments/blas_threads.h), set when a
+  // run starts and kept after it; 1 also ends the pool it starts when loaded, whose threads
+  // spin for ~0.1-0.25 s after every start. 0: the BLAS library's own setting.
+  int blas_threads = 1;
 
   bool IsValid(std::string* error) const;
 };

@@ -13,11 +13,13 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <iterator>
 #include <memory>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "experiments/blas_threads.h"
 #include "experiments/bounded_queue.h"
 #include "experiments/config.h"
 #include "experiments/pipeline.h"
@@ -389,6 +391,7 @@ TEST(PipelinedTrackingTest, RejectsInvalidOptions) {
                                                         {"pipeline.gap_refit_frames", "-1"},
                                                         {"pipeline.texture_every", "0"},
                                                         {"pipeline.threads", "-1"},
+                                                        {"pipeline.blas_threads", "-1"},
                                                         {"pipeline.gap_refit_radii", "[0.05, 0]"},
                                                         {"pipeline.gap_refit_iterations_per_stage", "0"}}) {
     Config config = BaseConfig();
@@ -526,6 +529,25 @@ TEST(ConcurrentQueueTest, InFlightLimitBoundsTheItemsOut) {
   InFlightLimit none(0);  // no limit
   for (int i = 0; i < 10; ++i) EXPECT_TRUE(none.Acquire());
   EXPECT_EQ(none.peak(), 10u);
+}
+
+// pipeline.blas_threads (experiments/blas_threads.h): where the process has OpenBLAS (the
+// system BLAS that OpenCV's LAPACK links on Debian), one thread ends the pool it started when
+// loaded: its threads leave the process. 0 changes nothing. (RunPipeline applies the option;
+// a test run before this one in the same process leaves one thread and no pool.)
+TEST(BlasThreadsTest, OneThreadEndsOpenBlasPool) {
+  const int before = BlasThreads();
+  if (before == 0) GTEST_SKIP() << "no OpenBLAS in this process";
+  const auto threads = [] {
+    return std::distance(fs::directory_iterator("/proc/self/task"), fs::directory_iterator());
+  };
+  EXPECT_FALSE(LimitBlasThreads(0));
+  EXPECT_EQ(BlasThreads(), before);
+  const long tasks = threads();
+  ASSERT_TRUE(LimitBlasThreads(1));
+  EXPECT_EQ(BlasThreads(), 1);
+  // The pool had one thread per core beyond the caller's.
+  EXPECT_LE(threads(), tasks - (before - 1)) << before << " OpenBLAS threads before";
 }
 
 TEST(ConcurrentColourMailboxTest, TakesTheNewestColoursUpToTheAskedFrame) {
