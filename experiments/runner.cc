@@ -25,6 +25,7 @@
 #include "experiments/file_util.h"
 #include "experiments/runner_internal.h"
 #include "models/error.h"
+#include "models/fnv1a.h"
 #include "models/template_cache.h"
 #include "models/template_generator.h"
 #include "models/template_io.h"
@@ -35,7 +36,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-using runner_internal::Fnv1a;
 using runner_internal::Hex;
 using runner_internal::Job;
 using runner_internal::Schedule;

@@ -14,13 +14,10 @@
 
 #include "experiments/config.h"
 #include "experiments/runner.h"
-#include "models/fnv1a.h"
 #include "sensors/virtual_kinect.h"
 
 namespace artex {
 namespace runner_internal {
-
-using ::artex::Fnv1a;  // models/fnv1a.h
 
 // The last `digits` (<= 16) hexadecimal digits of v.
 inline std::string Hex(uint64_t v, int digits) {

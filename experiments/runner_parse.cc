@@ -15,6 +15,7 @@
 #include "experiments/runner.h"
 #include "experiments/runner_internal.h"
 #include "models/error.h"
+#include "models/fnv1a.h"
 #include "sensors/frame_source.h"
 #include "sensors/yaml_checks.h"
 
@@ -24,7 +25,6 @@ namespace fs = std::filesystem;
 namespace {
 
 using runner_internal::CombinationLabel;
-using runner_internal::Fnv1a;
 using runner_internal::Hex;
 using runner_internal::SynthSpecFromConfig;
 
