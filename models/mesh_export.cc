@@ -82,6 +82,18 @@ void WriteFileAtomically(const std::string& path, const std::string& contents) {
   });
 }
 
+namespace {
+// A temporary file's name: "." + the target's + this + "<pid>-<thread>".
+constexpr char kTemporaryMarker[] = ".tmp-";
+}  // namespace
+
+std::string AtomicWriteTarget(const std::string& file_name) {
+  if (file_name.size() < 2 || file_name[0] != '.') return "";
+  const std::size_t marker = file_name.rfind(kTemporaryMarker);
+  if (marker == std::string::npos || marker < 2) return "";
+  return file_name.substr(1, marker - 1);
+}
+
 void WriteFileAtomically(const std::string& path,
                          const std::function<void(std::ostream&)>& write) {
   namespace fs = std::filesystem;
@@ -92,8 +104,8 @@ void WriteFileAtomically(const std::string& path,
     throw Error(path + ": cannot write (folder " + dir.string() + " does not exist)");
   }
   const fs::path tmp =
-      dir / ("." + target.filename().string() + ".tmp-" + std::to_string(::getpid()) + "-" +
-             std::to_string(std::hash<std::thread::id>()(std::this_thread::get_id())));
+      dir / ("." + target.filename().string() + kTemporaryMarker + std::to_string(::getpid()) +
+             "-" + std::to_string(std::hash<std::thread::id>()(std::this_thread::get_id())));
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     if (!out) throw Error(path + ": cannot write (cannot create a temporary file in " +

@@ -36,6 +36,10 @@ void WriteFileAtomically(const std::string& path, const std::string& contents);
 // and propagates).
 void WriteFileAtomically(const std::string& path,
                          const std::function<void(std::ostream&)>& write);
+// The file name a temporary of WriteFileAtomically (".<name>.tmp-<pid>-<thread>", in the
+// target's folder) is written for: <name>; empty for any other file name. For cleaning up
+// after a writer that crashed.
+std::string AtomicWriteTarget(const std::string& file_name);
 
 // Lower-case extension of `path` including the dot ("" when none).
 std::string LowerCaseExtension(const std::string& path);

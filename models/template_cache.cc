@@ -167,6 +167,11 @@ int FindBuildId(dl_phdr_info* info, std::size_t, void* data) {
   return 1;  // the object, without a build ID
 }
 
+// "template-<build>.bin"
+bool IsCacheFileName(const std::string& name) {
+  return name.rfind("template-", 0) == 0 && fs::path(name).extension() == ".bin";
+}
+
 // Cached templates of other builds beyond `keep` (this build's included), oldest written first,
 // are removed, and temporary files a crashed writer left (older than an hour). Best effort:
 // errors are ignored (another process may be doing the same).
@@ -176,11 +181,9 @@ void PruneCache(const fs::path& dir, int keep) {
     const auto stale = fs::file_time_type::clock::now() - std::chrono::hours(1);
     std::vector<std::pair<fs::file_time_type, fs::path>> files;
     for (const auto& entry : fs::directory_iterator(dir, ec)) {
-      // Temporary files are WriteFileAtomically's: ".<name>.tmp-<pid>-<thread>".
       const std::string name = entry.path().filename().string();
-      const bool temporary =
-          name.rfind(".template-", 0) == 0 && name.find(".bin.tmp-") != std::string::npos;
-      const bool cached = name.rfind("template-", 0) == 0 && entry.path().extension() == ".bin";
+      const bool cached = IsCacheFileName(name);
+      const bool temporary = IsCacheFileName(AtomicWriteTarget(name));  // a writer's
       if (!temporary && !cached) continue;
       std::error_code time_ec;
       const auto time = fs::last_write_time(entry.path(), time_ec);

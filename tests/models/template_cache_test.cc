@@ -13,6 +13,7 @@
 
 #include "models/error.h"
 #include "models/fnv1a.h"
+#include "models/mesh_export.h"
 #include "models/template_generator.h"
 #include "tests/error_of.h"
 #include "tests/testing_util.h"
@@ -171,6 +172,22 @@ TEST(TemplateCacheTest, TheDefaultTemplateIsWrittenOnceAndReadBack) {
 
 // No cache: disabled, or a folder that cannot be made (a path through a file; root may write
 // anywhere else). The template is generated all the same.
+// The cache prunes a crashed writer's temporaries by the name WriteFileAtomically gives them:
+// AtomicWriteTarget reads the target back from the temporary that exists while it writes.
+TEST(TemplateCacheTest, AtomicWriteTargetNamesTheFileATemporaryIsFor) {
+  const fs::path dir = FreshTempDir("template_cache_tmp_name");
+  std::vector<std::string> seen;  // the folder while the contents are written
+  WriteFileAtomically((dir / "template-abc.bin").string(), [&](std::ostream& out) {
+    for (const auto& e : fs::directory_iterator(dir)) seen.push_back(e.path().filename().string());
+    out << "x";
+  });
+  ASSERT_EQ(seen.size(), 1u);
+  EXPECT_EQ(AtomicWriteTarget(seen[0]), "template-abc.bin") << seen[0];
+  EXPECT_EQ(AtomicWriteTarget(".a.tmp-x.bin.tmp-12-3"), "a.tmp-x.bin");
+  for (const std::string name : {"template-abc.bin", ".tmp-1-2", "a.tmp-1-2", "", "."})
+    EXPECT_EQ(AtomicWriteTarget(name), "") << name;
+}
+
 TEST(TemplateCacheTest, WithoutAUsableFolderTheTemplateIsGenerated) {
   const fs::path dir = FreshTempDir("template_cache_none");
   WriteBytes(dir / "file", "a file, not a folder");
