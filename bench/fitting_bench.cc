@@ -10,6 +10,8 @@
 //                 noise, the subject facing away); counters: chosen yaw, ICP / EM / quality
 //                 ms, the ICP iterations per hypothesis and how many converged before the cap.
 //   BM_FitQuality: EvaluateFitQuality of the fitted (posed) template on that frame.
+//   BM_FitterSetup: EMFitter's constructor (once per run); BM_VoxelVertexSubset/<count>: the
+//                 fitted subset it chooses (twice: max_fit_vertices, tracking_max_fit_vertices).
 // Variants side by side: truncated-radius E-step + Gauss-Newton (default options), the same
 // with other E-step candidate margins (BM_TrackCandidateMargin/<mm>) and work budgets
 // (BM_TrackBudget/<fitted vertices>/<voxel %>), a cloud and gather per tracking radius or one
@@ -43,6 +45,7 @@
 #include "models/template_generator.h"
 #include "solvers/em_fitter.h"
 #include "solvers/fit_quality.h"
+#include "solvers/fit_vertex_subset.h"
 #include "solvers/initializer.h"
 #include "tests/solvers/fitting_test_util.h"
 #include "tests/solvers/virtual_kinect_scans.h"
@@ -396,6 +399,30 @@ KinectFixture& GetKinectFixture() {
   }();
   return *fixture;
 }
+
+// The fitter's set-up on the generated template (paid once per run, before the first frame):
+// the whole constructor, and the voxel vertex subset it chooses twice (max_fit_vertices and
+// tracking_max_fit_vertices, range(0) vertices here).
+void BM_FitterSetup(benchmark::State& state) {
+  const Fixture& f = GetFixture();
+  for (auto _ : state) {
+    EMFitter fitter(f.model, EMFitterOptions());
+    benchmark::DoNotOptimize(fitter);
+  }
+  state.counters["template_vertices"] = static_cast<double>(f.model.vertices.rows());
+}
+BENCHMARK(BM_FitterSetup)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+void BM_VoxelVertexSubset(benchmark::State& state) {
+  const Fixture& f = GetFixture();
+  std::vector<int> subset;
+  for (auto _ : state) {
+    subset = VoxelVertexSubset(f.model.vertices, static_cast<int>(state.range(0)));
+    benchmark::DoNotOptimize(subset);
+  }
+  state.counters["subset"] = static_cast<double>(subset.size());
+}
+BENCHMARK(BM_VoxelVertexSubset)->Unit(benchmark::kMillisecond)->UseRealTime()->Arg(3000)->Arg(2000);
 
 void BM_InitializeFit(benchmark::State& state) {
   KinectFixture& f = GetKinectFixture();

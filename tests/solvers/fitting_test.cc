@@ -11,6 +11,7 @@
 #include <limits>
 #include <memory>
 #include <random>
+#include <set>
 
 #include "energies/one_to_many_correspondence.h"
 #include "energies/tikhonov_term.h"
@@ -20,6 +21,7 @@
 #include "solvers/em_fitter.h"
 #include "solvers/estep.h"
 #include "solvers/fit_solver.h"
+#include "solvers/fit_vertex_subset.h"
 #include "solvers/icp_init.h"
 #include "tests/solvers/fitting_test_util.h"
 
@@ -206,6 +208,31 @@ TEST_F(FittingTest, FitVertexSubsets) {
   }
   EXPECT_LE(coverage[1], coverage[0] + 1e-12);
   EXPECT_EQ(FitVertexSelectionNames().at("voxel"), FitVertexSelection::kVoxel);
+}
+
+TEST(VoxelVertexSubsetTest, OneVertexPerCellOfTheSmallestGridWithinTheCount) {
+  // A 10 x 10 x 10 lattice of unit spacing (extent 9): cells up to 1.8 wide hold at most 6
+  // lattice planes per axis (216 cells), wider ones up to 2.25 hold 5 (125 cells), so a count
+  // of 125..215 gives 125 vertices, one per 2 x 2 x 2 block of the lattice.
+  Eigen::MatrixX3d lattice(1000, 3);
+  for (int i = 0; i < 1000; ++i) lattice.row(i) << i % 10, i / 10 % 10, i / 100;
+  for (int count : {125, 200}) {
+    std::vector<int> subset = VoxelVertexSubset(lattice, count);
+    ASSERT_EQ(subset.size(), 125u) << count;
+    std::set<int> blocks;
+    for (int v : subset) {
+      const Eigen::RowVector3d p = lattice.row(v);
+      blocks.insert(static_cast<int>(p.x()) / 2 + 5 * (static_cast<int>(p.y()) / 2) +
+                    25 * (static_cast<int>(p.z()) / 2));
+    }
+    EXPECT_EQ(blocks.size(), 125u) << count;
+  }
+  // Fewer cells allowed than 5 per axis: the next coarser grid (4 planes: 64 cells).
+  EXPECT_EQ(VoxelVertexSubset(lattice, 124).size(), 64u);
+  // Repeated points share a cell: 1000 copies of 3 distinct points give 3 vertices.
+  Eigen::MatrixX3d repeated(3000, 3);
+  for (int i = 0; i < 3000; ++i) repeated.row(i) << i % 3, 0.0, 0.0;
+  EXPECT_EQ(VoxelVertexSubset(repeated, 10).size(), 3u);
 }
 
 TEST_F(FittingTest, NormalsRefreshedEveryIterationOrPerStage) {
