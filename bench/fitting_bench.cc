@@ -8,7 +8,8 @@
 //   BM_InitializeFit: the multi-hypothesis first frame (solvers/initializer.h, default options:
 //                 12 hypotheses, 4 EM fits) on a virtual Kinect frame (640 x 480, default
 //                 noise, the subject facing away); counters: chosen yaw, ICP / EM / quality
-//                 ms, the ICP iterations per hypothesis and how many converged before the cap.
+//                 ms, the ICP iterations per hypothesis and how many converged before the cap;
+//                 cpu_ms (the process's CPU per initialisation) and cores (CPU / wall).
 //   BM_FitQuality: EvaluateFitQuality of the fitted (posed) template on that frame.
 //   BM_FitterSetup: EMFitter's constructor (once per run); BM_VoxelVertexSubset/<count>: the
 //                 fitted subset it chooses (twice: max_fit_vertices, tracking_max_fit_vertices).
@@ -430,6 +431,8 @@ void BM_InitializeFit(benchmark::State& state) {
   InitResult r;
   double icp = 0.0, em = 0.0, quality = 0.0;
   int runs = 0;
+  const double cpu0 = ProcessCpuSeconds();
+  const auto wall0 = std::chrono::steady_clock::now();
   for (auto _ : state) {
     fitter.Reset();
     r = InitializeFit(&fitter, f.data.scans[0], f.data.depth_camera, InitializerOptions());
@@ -439,6 +442,10 @@ void BM_InitializeFit(benchmark::State& state) {
     ++runs;
   }
   runs = std::max(runs, 1);
+  state.counters["cpu_ms"] = 1e3 * (ProcessCpuSeconds() - cpu0) / runs;
+  state.counters["cores"] =
+      (ProcessCpuSeconds() - cpu0) /
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
   state.counters["icp_ms"] = 1e3 * icp / runs;
   state.counters["em_ms"] = 1e3 * em / runs;
   state.counters["quality_ms"] = 1e3 * quality / runs;
