@@ -32,7 +32,7 @@ std::vector<int> VoxelVertexSubset(const Eigen::MatrixX3d& vertices, int count) 
   constexpr uint64_t kEmpty = ~uint64_t{0};  // no packed key has all 64 bits set
   const auto occupied = [&](double cell) {
     std::fill(table.begin(), table.end(), kEmpty);
-    int count = 0;
+    int cells = 0;
     for (int i = 0; i < v; ++i) {
       uint64_t key = 0;
       for (int d = 0; d < 3; ++d) {
@@ -43,10 +43,10 @@ std::vector<int> VoxelVertexSubset(const Eigen::MatrixX3d& vertices, int count) 
       while (table[slot] != kEmpty && table[slot] != key) slot = (slot + 1) & mask;
       if (table[slot] == kEmpty) {
         table[slot] = key;
-        ++count;
+        ++cells;
       }
     }
-    return count;
+    return cells;
   };
   double lo = extent * 1e-4, hi = extent;  // occupied(hi) = 1 <= count
   for (int it = 0; it < 30; ++it) {        // cell size to ~1e-9 of the extent
