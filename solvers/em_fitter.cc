@@ -574,11 +574,22 @@ FitSummary EMFitter::FinishFrame(bool* ok_out) {
   }
   bool ok = !summary.too_few_points && !summary.non_finite;
   if (ok && st.initial_posed.rows() > 0) {
+    // Over the fitted vertices: only they are posed (the fit's subset, evenly spread over the
+    // surface; the whole template without one).
     Eigen::MatrixX3d posed;
     const auto start = Clock::now();
-    skinning_->Apply(pose_, &posed);
+    fit_skinning_->Apply(pose_, &posed);
     summary.skinning_seconds += SecondsSince(start);
-    summary.mean_motion = (posed - st.initial_posed).rowwise().norm().mean();
+    if (fit_skinning_ != skinning_.get()) {
+      const std::vector<int>& fit_vertices = *fit_vertices_;
+      double sum = 0.0;
+      for (size_t i = 0; i < fit_vertices.size(); ++i) {
+        sum += (posed.row(i) - st.initial_posed.row(fit_vertices[i])).norm();
+      }
+      summary.mean_motion = sum / std::max<size_t>(fit_vertices.size(), 1);
+    } else {
+      summary.mean_motion = (posed - st.initial_posed).rowwise().norm().mean();
+    }
     const double scale_change = std::abs(pose_.scale / st.initial_guess.scale - 1.0);
     if (!std::isfinite(summary.mean_motion) || summary.mean_motion > options_.max_mean_motion ||
         !(scale_change <= options_.max_scale_change)) {

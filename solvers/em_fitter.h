@@ -176,8 +176,8 @@ struct EMFitterOptions {
   int min_scan_points = 100;      // fewer: frame flagged too_few_points, pose kept
                                   // (also when no correspondence is found)
                                   // non-finite scan values flag non_finite
-  double max_mean_motion = 0.5;   // mean vertex displacement (m) from the frame's initial
-                                  // guess beyond which the frame is flagged diverged
+  double max_mean_motion = 0.5;   // mean displacement (m) of the fitted vertices from the
+                                  // frame's initial guess beyond which it is flagged diverged
   double max_scale_change = 0.5;  // relative scale change within a frame: diverged
 
   bool IsValid(std::string* error) const;
@@ -214,7 +214,7 @@ struct FitSummary {
   int num_scan_points = 0;
   int out_of_view_joints = 0;  // joints held at the initial guess (solvers/out_of_view.h)
   double scale = 1.0;
-  double mean_motion = 0.0;  // mean vertex displacement from the initial guess (m)
+  double mean_motion = 0.0;  // mean fitted-vertex displacement from the initial guess (m)
   // E-step work: neighbour queries and candidate scan points visited (solvers/estep.h).
   long long neighbor_queries = 0;
   long long candidates_visited = 0;

@@ -210,6 +210,35 @@ TEST_F(FittingTest, FitVertexSubsets) {
   EXPECT_EQ(FitVertexSelectionNames().at("voxel"), FitVertexSelection::kVoxel);
 }
 
+TEST_F(FittingTest, MeanMotionIsOverTheFittedVertices) {
+  // The divergence check's mean motion: the fitted vertices' mean displacement from the
+  // frame's initial guess (the subset's when the fit uses one, else every vertex's).
+  for (const int count : {250, 0}) {
+    EMFitterOptions options = DefaultOptions();
+    options.max_fit_vertices = count;
+    EMFitter fitter(model_, options);
+    fitter.SetInitialPose(start_);
+    const FitSummary summary = fitter.FitFrame(scan_);
+    ASSERT_TRUE(summary.ok());
+    Eigen::MatrixX3d before, after;
+    skinning_.Apply(start_, &before);
+    skinning_.Apply(fitter.pose(), &after);
+    std::vector<int> vertices = fitter.fit_vertices();
+    if (vertices.empty()) {
+      for (int v = 0; v < model_.num_vertices(); ++v) vertices.push_back(v);
+    }
+    if (count > 0) {
+      EXPECT_LE(static_cast<int>(vertices.size()), count);
+    } else {
+      EXPECT_EQ(static_cast<int>(vertices.size()), model_.num_vertices());
+    }
+    double sum = 0.0;
+    for (int v : vertices) sum += (after.row(v) - before.row(v)).norm();
+    EXPECT_NEAR(summary.mean_motion, sum / vertices.size(), 1e-12) << count;
+    EXPECT_GT(summary.mean_motion, 0.01);  // start_ is ~50 mm from the truth
+  }
+}
+
 TEST(VoxelVertexSubsetTest, OneVertexPerCellOfTheSmallestGridWithinTheCount) {
   // A 10 x 10 x 10 lattice of unit spacing (extent 9): cells up to 1.8 wide hold at most 6
   // lattice planes per axis (216 cells), wider ones up to 2.25 hold 5 (125 cells), so a count
