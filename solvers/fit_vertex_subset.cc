@@ -10,8 +10,10 @@ namespace artex {
 
 std::vector<int> VoxelVertexSubset(const Eigen::MatrixX3d& vertices, int count) {
   const int v = static_cast<int>(vertices.rows());
+  if (v == 0 || count <= 0) return {};
   const Eigen::RowVector3d low = vertices.colwise().minCoeff();
   const double extent = (vertices.colwise().maxCoeff() - low).maxCoeff();
+  if (!(extent > 0.0)) return {0};  // every vertex at one point: one cell (or no finite extent)
   const auto cell_key = [&](int i, double cell, int64_t* coords) {
     for (int d = 0; d < 3; ++d) {
       coords[d] = static_cast<int64_t>(std::floor((vertices(i, d) - low[d]) / cell));

@@ -262,6 +262,10 @@ TEST(VoxelVertexSubsetTest, OneVertexPerCellOfTheSmallestGridWithinTheCount) {
   Eigen::MatrixX3d repeated(3000, 3);
   for (int i = 0; i < 3000; ++i) repeated.row(i) << i % 3, 0.0, 0.0;
   EXPECT_EQ(VoxelVertexSubset(repeated, 10).size(), 3u);
+  // Degenerate input: every vertex at one point, no vertices, no count.
+  EXPECT_EQ(VoxelVertexSubset(Eigen::MatrixX3d::Ones(5, 3), 3), std::vector<int>{0});
+  EXPECT_TRUE(VoxelVertexSubset(Eigen::MatrixX3d(0, 3), 3).empty());
+  EXPECT_TRUE(VoxelVertexSubset(lattice, 0).empty());
 }
 
 TEST_F(FittingTest, NormalsRefreshedEveryIterationOrPerStage) {
