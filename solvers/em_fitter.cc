@@ -580,16 +580,12 @@ FitSummary EMFitter::FinishFrame(bool* ok_out) {
     const auto start = Clock::now();
     fit_skinning_->Apply(pose_, &posed);
     summary.skinning_seconds += SecondsSince(start);
-    if (fit_skinning_ != skinning_.get()) {
-      const std::vector<int>& fit_vertices = *fit_vertices_;
-      double sum = 0.0;
-      for (size_t i = 0; i < fit_vertices.size(); ++i) {
-        sum += (posed.row(i) - st.initial_posed.row(fit_vertices[i])).norm();
-      }
-      summary.mean_motion = sum / std::max<size_t>(fit_vertices.size(), 1);
-    } else {
-      summary.mean_motion = (posed - st.initial_posed).rowwise().norm().mean();
+    const bool subset = fit_skinning_ != skinning_.get();  // row i is vertex (*fit_vertices_)[i]
+    double sum = 0.0;
+    for (int i = 0; i < static_cast<int>(posed.rows()); ++i) {
+      sum += (posed.row(i) - st.initial_posed.row(subset ? (*fit_vertices_)[i] : i)).norm();
     }
+    summary.mean_motion = sum / std::max<Eigen::Index>(posed.rows(), 1);
     const double scale_change = std::abs(pose_.scale / st.initial_guess.scale - 1.0);
     if (!std::isfinite(summary.mean_motion) || summary.mean_motion > options_.max_mean_motion ||
         !(scale_change <= options_.max_scale_change)) {

@@ -14,10 +14,15 @@ std::vector<int> VoxelVertexSubset(const Eigen::MatrixX3d& vertices, int count) 
   const Eigen::RowVector3d low = vertices.colwise().minCoeff();
   const double extent = (vertices.colwise().maxCoeff() - low).maxCoeff();
   if (!(extent > 0.0)) return {0};  // every vertex at one point: one cell (or no finite extent)
-  const auto cell_key = [&](int i, double cell, int64_t* coords) {
+  // Vertex i's cell coordinates for a cell size (>= 0: low is the minimum); the counts below
+  // and the chosen grid's cells use these same ones.
+  const auto cell_coords = [&](int i, double cell, int64_t* coords) {
     for (int d = 0; d < 3; ++d) {
       coords[d] = static_cast<int64_t>(std::floor((vertices(i, d) - low[d]) / cell));
     }
+  };
+  const auto cell_key = [&](int i, double cell, int64_t* coords) {  // Z-curve order
+    cell_coords(i, cell, coords);
     uint64_t key = 0;
     for (int bit = 20; bit >= 0; --bit) {
       for (int d = 0; d < 3; ++d) key = key << 1 | ((static_cast<uint64_t>(coords[d]) >> bit) & 1);
@@ -35,12 +40,11 @@ std::vector<int> VoxelVertexSubset(const Eigen::MatrixX3d& vertices, int count) 
   const auto occupied = [&](double cell) {
     std::fill(table.begin(), table.end(), kEmpty);
     int cells = 0;
+    int64_t coords[3];
     for (int i = 0; i < v; ++i) {
+      cell_coords(i, cell, coords);
       uint64_t key = 0;
-      for (int d = 0; d < 3; ++d) {
-        const auto c = static_cast<uint64_t>(std::floor((vertices(i, d) - low[d]) / cell));
-        key |= (c & 0x1fffff) << (21 * d);
-      }
+      for (int d = 0; d < 3; ++d) key |= (static_cast<uint64_t>(coords[d]) & 0x1fffff) << (21 * d);
       uint64_t slot = (key * 0x9e3779b97f4a7c15ULL) >> (64 - table_bits);
       while (table[slot] != kEmpty && table[slot] != key) slot = (slot + 1) & mask;
       if (table[slot] == kEmpty) {
