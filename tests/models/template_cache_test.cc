@@ -170,8 +170,6 @@ TEST(TemplateCacheTest, TheDefaultTemplateIsWrittenOnceAndReadBack) {
   ExpectIdentical(ReadTemplateBinary(file.string()), generated);
 }
 
-// No cache: disabled, or a folder that cannot be made (a path through a file; root may write
-// anywhere else). The template is generated all the same.
 // The cache prunes a crashed writer's temporaries by the name WriteFileAtomically gives them:
 // AtomicWriteTarget reads the target back from the temporary that exists while it writes.
 TEST(TemplateCacheTest, AtomicWriteTargetNamesTheFileATemporaryIsFor) {
@@ -188,6 +186,8 @@ TEST(TemplateCacheTest, AtomicWriteTargetNamesTheFileATemporaryIsFor) {
     EXPECT_EQ(AtomicWriteTarget(name), "") << name;
 }
 
+// No cache: disabled, or a folder that cannot be made (a path through a file; root may write
+// anywhere else). The template is generated all the same.
 TEST(TemplateCacheTest, WithoutAUsableFolderTheTemplateIsGenerated) {
   const fs::path dir = FreshTempDir("template_cache_none");
   WriteBytes(dir / "file", "a file, not a folder");
