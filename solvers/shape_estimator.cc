@@ -44,6 +44,9 @@ bool ShapeOptions::IsValid(std::string* error) const {
         << scan_to_model_max_distance;
   } else if (!(std::isfinite(chain_prior_weight) && chain_prior_weight >= 0.0)) {
     msg << "shape.chain_prior_weight: expected a finite value >= 0, found " << chain_prior_weight;
+  } else if (!(std::isfinite(limb_girth_prior_weight) && limb_girth_prior_weight >= 0.0)) {
+    msg << "shape.limb_girth_prior_weight: expected a finite value >= 0, found "
+        << limb_girth_prior_weight;
   } else if (!(std::isfinite(depth_prior_weight) && depth_prior_weight >= 0.0)) {
     msg << "shape.depth_prior_weight: expected a finite value >= 0, found " << depth_prior_weight;
   } else if (!(std::isfinite(prior_weight) && prior_weight >= 0.0)) {
@@ -160,6 +163,22 @@ ShapeEstimator::ShapeEstimator(const Template& base, const ShapeOptions& options
   chain_ = Eigen::MatrixXd::Zero(static_cast<int>(pairs.size()), model_.num_parameters());
   for (size_t k = 0; k < pairs.size(); ++k) {
     chain_.row(k) = model_.expansion().row(pairs[k].first) - model_.expansion().row(pairs[k].second);
+  }
+  // Limb girth pairs: a collinear pair (j, c) whose bone j leaves a fork (the bone ending at
+  // j's parent is not collinear with it: hip, shoulder) joins segment parent(j), which spans
+  // bone j, and segment j, which spans bone c (thigh and shank, upper arm and forearm).
+  std::vector<std::pair<int, int>> limbs;
+  for (const auto& [j, c] : pairs) {
+    const int p = base.joints[j].parent;
+    if (p <= 0 || base.joints[p].parent < 0) continue;
+    bool fork = true;
+    for (const auto& [a, b] : pairs) fork = fork && !(a == p && b == j);
+    if (fork) limbs.emplace_back(p, j);
+  }
+  limb_girth_ = Eigen::MatrixXd::Zero(static_cast<int>(limbs.size()), model_.num_parameters());
+  for (size_t k = 0; k < limbs.size(); ++k) {
+    limb_girth_.row(k) = model_.expansion().row(nj + limbs[k].first) -
+                         model_.expansion().row(nj + limbs[k].second);
   }
 }
 
@@ -364,6 +383,14 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
         cost += options_.chain_prior_weight * d.squaredNorm();
         h.topLeftCorner(nq, nq) += options_.chain_prior_weight * chain_.transpose() * chain_;
         g.head(nq) += options_.chain_prior_weight * chain_.transpose() * d;
+      }
+      if (options_.limb_girth_prior_weight > 0.0 && limb_girth_.rows() > 0) {
+        // w |G q|^2, G q the differences of a limb's two segments' girth factors.
+        const double w = options_.limb_girth_prior_weight;
+        const Eigen::VectorXd d = limb_girth_ * q_;
+        cost += w * d.squaredNorm();
+        h.topLeftCorner(nq, nq) += w * limb_girth_.transpose() * limb_girth_;
+        g.head(nq) += w * limb_girth_.transpose() * d;
       }
       for (int f = 0; f < nf; ++f) {
         const int offset = nq + f * np;

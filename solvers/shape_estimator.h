@@ -100,6 +100,10 @@ struct ShapeOptions {
   // without it the split drifts (the generator and real bodies keep it within a few per cent).
   // Cost m^2 per unit^2 of a factor difference, as prior_weight. 0: off.
   double chain_prior_weight = 1e-3;
+  // Limb girth chain prior: limb_girth_prior_weight |g_a - g_b|^2 for the two segments of a
+  // limb between its fork and its leaf (thigh/shank, upper arm/forearm; not the feet, hands or
+  // trunk). Cost m^2 per unit^2 of a factor difference, as prior_weight. 0: off.
+  double limb_girth_prior_weight = 0.0;
   double prior_weight = 1e-5;             // towards the template (cost m^2 per unit^2 of a factor)
   double pose_damping = 1e-5;             // per frame on the pose update (per unit^2 / rad^2 / m^2)
   double bone_min = 0.7, bone_max = 1.4;  // bone length factor bounds
@@ -177,6 +181,7 @@ class ShapeEstimator {
   bool has_camera_ = false;
   std::vector<int> fit_vertices_;
   Eigen::MatrixXd chain_;  // collinear bone pairs x Q: difference of their length factors
+  Eigen::MatrixXd limb_girth_;  // limb segment pairs x Q: difference of their girth factors
   Eigen::VectorXd q_;
   std::vector<Scan> scans_;
   std::vector<Pose> poses_;

@@ -224,6 +224,51 @@ TEST(ShapeEstimatorTest, DepthPriorHoldsTheProportions) {
   EXPECT_NE(why.find("depth_prior_weight"), std::string::npos) << why;
 }
 
+// The limb girth prior ties the thigh's girth to the shank's (and the upper arm's to the
+// forearm's) and no other pair: with it a subject whose thigh is thicker and shank thinner
+// than the template's gets one girth for both, between the two, while the feet's and the
+// chest's girths are recovered as without it.
+TEST(ShapeEstimatorTest, LimbGirthPriorTiesThighAndShankOnly) {
+  const Template& t = CoarseTemplate();
+  for (double weight : {0.0, 1.0}) {
+    ShapeOptions o = Options(ShapeMode::kBonesGirth);
+    o.limb_girth_prior_weight = weight;
+    ShapeEstimator estimator(t, o);
+    const ShapeModel& model = estimator.model();
+    const int thigh = ParameterIndex(model, "girth:l_hip");
+    const int shank = ParameterIndex(model, "girth:l_knee");
+    const int foot = ParameterIndex(model, "girth:l_ankle");
+    const int chest = ParameterIndex(model, "girth:chest");
+    ASSERT_LT(std::max({thigh, shank, foot, chest}), model.num_parameters());
+    Eigen::VectorXd truth = Eigen::VectorXd::Zero(model.num_parameters());
+    truth[thigh] = 0.2;
+    truth[shank] = -0.1;
+    truth[foot] = 0.15;
+    truth[chest] = 0.1;
+    const Template subject = model.Apply(truth);
+    std::vector<Scan> scans;
+    std::vector<Pose> poses;
+    PosesAndScans(subject, 2, 0.2, 17, &poses, &scans);
+    estimator.Solve({&scans[0], &scans[1]}, &poses, Eigen::VectorXd::Zero(truth.size()), 1e-8);
+    const Eigen::VectorXd& q = estimator.parameters();
+    EXPECT_NEAR(q[foot], 0.15, 0.03) << "weight " << weight;
+    EXPECT_NEAR(q[chest], 0.1, 0.03) << "weight " << weight;
+    if (weight == 0.0) {
+      EXPECT_NEAR(q[thigh], 0.2, 0.03);
+      EXPECT_NEAR(q[shank], -0.1, 0.03);
+    } else {
+      EXPECT_NEAR(q[thigh], q[shank], 0.01);
+      EXPECT_GT(q[shank], -0.1 + 0.05);
+      EXPECT_LT(q[thigh], 0.2 - 0.05);
+    }
+  }
+  ShapeOptions bad;
+  bad.limb_girth_prior_weight = -1.0;
+  std::string why;
+  EXPECT_FALSE(bad.IsValid(&why));
+  EXPECT_NE(why.find("limb_girth_prior_weight"), std::string::npos) << why;
+}
+
 TEST(ShapeEstimatorTest, BoundsHoldAndOptionsAreChecked) {
   const Template& t = CoarseTemplate();
   ShapeOptions o = Options(ShapeMode::kScale);
