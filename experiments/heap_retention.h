@@ -1,5 +1,5 @@
-// Keeping freed memory in the process for reuse (pipeline.heap_retain_mb, docs/realtime.md,
-// "Freed memory kept for reuse").
+// Keeping freed memory in the process for reuse (pipeline.heap_retain_mb,
+// docs/realtime-measurements.md, "Freed memory kept for reuse").
 //
 // A tracking run allocates and frees the same large buffers every frame: decoded images
 // (2.4 MB of colour), the PNG's inflated rows, raster and visibility buffers, atlases. With
@@ -19,8 +19,8 @@ namespace artex {
 // allocator that ignores mallopt (the sanitizers'), or a value glibc refused.
 bool RetainFreedHeap(int megabytes);
 
-// Transparent huge pages for glibc's heap (pipeline.huge_pages, docs/realtime.md, "Huge pages
-// for the heap"). The heap's first touch of the pool's images, colours and raster buffers
+// Transparent huge pages for glibc's heap (pipeline.huge_pages, docs/realtime-measurements.md,
+// "Huge pages for the heap"). The heap's first touch of the pool's images, colours and raster buffers
 // costs ~95,000 page faults over the first 60 frames of the default walk with 4 KB pages;
 // glibc's tunable glibc.malloc.hugetlb=1 (glibc >= 2.35) makes the allocator advise the kernel
 // to back its heaps with 2 MB pages where the kernel's transparent_hugepage mode is `madvise`.

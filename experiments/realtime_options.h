@@ -66,7 +66,7 @@ struct RealtimeOptions {
   // glibc >= 2.35 and the kernel's mode is `madvise`; the library's RunPipeline does not);
   // false: the ordinary 4 KB pages. Off by default: on a virtual machine that hands freed
   // memory back to its host, a 2 MB page's first touch costs 10-20 times a 4 KB page's per
-  // byte (docs/realtime.md, "Frames in flight and the heap's pages").
+  // byte (docs/realtime-measurements.md, "Frames in flight and the heap's pages").
   bool huge_pages = false;
   // pipeline.blas_threads (>= 0): OpenBLAS's threads (experiments/blas_threads.h), set when a
   // run starts and kept after it; 1 also ends the pool it starts when loaded, whose threads
