@@ -1,6 +1,7 @@
-// Fit quality without ground truth (docs/fitting.md "Fit quality"): how well a posed template
-// explains one scan, from three measures that a wrong fit cannot all pass (an EM cost cannot
-// tell: it is a weighted mean over the correspondences that exist, whatever their number):
+// Fit quality without ground truth (docs/fitting.md "Initialisation and fit quality"): how well a
+// posed template explains one scan, from three measures that a wrong fit cannot all pass (an EM
+// cost cannot tell: it is a weighted mean over the correspondences that exist, whatever their
+// number):
 //   inlier_fraction:  scan points within inlier_distance of the posed template (distance to
 //                     the nearest posed vertex; the template's vertex spacing of ~1 cm is well
 //                     below the default distance), i.e. how much of the scan the fit explains;

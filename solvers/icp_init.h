@@ -1,5 +1,5 @@
-// First-frame initialisation (docs/design.md "First frame"): the template in a predefined pose
-// (rest pose by default), pre-aligned to the scan by a similarity transform:
+// First-frame initialisation (docs/fitting.md "Initialisation and fit quality"): the template in
+// a predefined pose (rest pose by default), pre-aligned to the scan by a similarity transform:
 //   1. coarse: yaw from the mean scan normal (the subject faces the camera; the template faces
 //      +Z), the initial pose's (nominal) scale or, on request, the ratio of the vertical
 //      extents, translation from the centroids of the scan and of the template vertices facing
