@@ -20,8 +20,8 @@ namespace artex {
 bool RetainFreedHeap(int megabytes);
 
 // Transparent huge pages for glibc's heap (pipeline.huge_pages, docs/realtime-measurements.md,
-// "Huge pages for the heap"). The heap's first touch of the pool's images, colours and raster buffers
-// costs ~95,000 page faults over the first 60 frames of the default walk with 4 KB pages;
+// "Huge pages for the heap"). The heap's first touch of the pool's images, colours and raster
+// buffers costs ~95,000 page faults over the first 60 frames of the default walk with 4 KB pages;
 // glibc's tunable glibc.malloc.hugetlb=1 (glibc >= 2.35) makes the allocator advise the kernel
 // to back its heaps with 2 MB pages where the kernel's transparent_hugepage mode is `madvise`.
 // Tunables are read when the process starts, so this re-executes the running program (its

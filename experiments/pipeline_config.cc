@@ -630,9 +630,9 @@ void BindShape(const Config& c, ShapeOptions* o) {
                "iterations_per_stage", "over_relaxation", "bias_correction",
                "visibility_min_cos", "bias_density", "girth_max_radius", "scan_to_model_weight",
                "scan_to_model_voxel", "scan_to_model_max_distance", "scan_to_model_girth",
-               "chain_prior_weight", "limb_girth_prior_weight", "prior_weight", "pose_damping", "bone_min", "bone_max",
-               "girth_min", "girth_max", "refine_every", "refine_prior_weight",
-               "max_fit_vertices", "joint_limits"});
+               "chain_prior_weight", "limb_girth_prior_weight", "prior_weight", "pose_damping",
+               "bone_min", "bone_max", "girth_min", "girth_max", "refine_every",
+               "refine_prior_weight", "max_fit_vertices", "joint_limits"});
   c.GetEnum("mode", ShapeModeNames(), &o->mode);
   c.Get("retrack", &o->retrack);
   c.Get("symmetric", &o->symmetric);

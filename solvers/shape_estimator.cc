@@ -170,7 +170,7 @@ ShapeEstimator::ShapeEstimator(const Template& base, const ShapeOptions& options
   std::vector<std::pair<int, int>> limbs;
   for (const auto& [j, c] : pairs) {
     const int p = base.joints[j].parent;
-    if (p <= 0 || base.joints[p].parent < 0) continue;
+    if (p <= 0) continue;  // bone j leaves the root: the trunk
     bool fork = true;
     for (const auto& [a, b] : pairs) fork = fork && !(a == p && b == j);
     if (fork) limbs.emplace_back(p, j);
