@@ -442,10 +442,11 @@ void BM_InitializeFit(benchmark::State& state) {
     ++runs;
   }
   runs = std::max(runs, 1);
-  state.counters["cpu_ms"] = 1e3 * (ProcessCpuSeconds() - cpu0) / runs;
-  state.counters["cores"] =
-      (ProcessCpuSeconds() - cpu0) /
+  const double cpu = ProcessCpuSeconds() - cpu0;
+  const double wall =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
+  state.counters["cpu_ms"] = 1e3 * cpu / runs;
+  state.counters["cores"] = cpu / wall;
   state.counters["icp_ms"] = 1e3 * icp / runs;
   state.counters["em_ms"] = 1e3 * em / runs;
   state.counters["quality_ms"] = 1e3 * quality / runs;

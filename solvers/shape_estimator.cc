@@ -377,21 +377,17 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
           g[p] += options_.depth_prior_weight * q_[p];
         }
       }
-      if (options_.chain_prior_weight > 0.0 && chain_.rows() > 0) {
-        // w |C q|^2, C q the differences of collinear bones' length factors.
-        const Eigen::VectorXd d = chain_ * q_;
-        cost += options_.chain_prior_weight * d.squaredNorm();
-        h.topLeftCorner(nq, nq) += options_.chain_prior_weight * chain_.transpose() * chain_;
-        g.head(nq) += options_.chain_prior_weight * chain_.transpose() * d;
-      }
-      if (options_.limb_girth_prior_weight > 0.0 && limb_girth_.rows() > 0) {
-        // w |G q|^2, G q the differences of a limb's two segments' girth factors.
-        const double w = options_.limb_girth_prior_weight;
-        const Eigen::VectorXd d = limb_girth_ * q_;
+      // w |M q|^2 over the shape parameters.
+      const auto difference_prior = [&](double w, const Eigen::MatrixXd& m) {
+        if (!(w > 0.0) || m.rows() == 0) return;
+        const Eigen::VectorXd d = m * q_;
         cost += w * d.squaredNorm();
-        h.topLeftCorner(nq, nq) += w * limb_girth_.transpose() * limb_girth_;
-        g.head(nq) += w * limb_girth_.transpose() * d;
-      }
+        h.topLeftCorner(nq, nq) += w * m.transpose() * m;
+        g.head(nq) += w * m.transpose() * d;
+      };
+      // Differences of collinear bones' length factors; of a limb's two segments' girths.
+      difference_prior(options_.chain_prior_weight, chain_);
+      difference_prior(options_.limb_girth_prior_weight, limb_girth_);
       for (int f = 0; f < nf; ++f) {
         const int offset = nq + f * np;
         if (!pose_priors_.empty()) {
