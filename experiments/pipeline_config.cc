@@ -629,7 +629,8 @@ void BindShape(const Config& c, ShapeOptions* o) {
                "calibration_frames", "calibration_stride", "calibration_rounds", "radii",
                "iterations_per_stage", "over_relaxation", "bias_correction",
                "visibility_min_cos", "bias_density", "girth_max_radius", "scan_to_model_weight",
-               "scan_to_model_voxel", "scan_to_model_max_distance", "scan_to_model_girth",
+               "scan_to_model_voxel", "scan_to_model_max_distance",
+               "scan_to_model_normal_distance", "scan_to_model_girth",
                "chain_prior_weight", "limb_girth_prior_weight", "prior_weight", "pose_damping",
                "bone_min", "bone_max", "girth_min", "girth_max", "refine_every",
                "refine_prior_weight", "max_fit_vertices", "joint_limits"});
@@ -654,6 +655,7 @@ void BindShape(const Config& c, ShapeOptions* o) {
   c.Get("scan_to_model_weight", &o->scan_to_model_weight);
   c.Get("scan_to_model_voxel", &o->scan_to_model_voxel);
   c.Get("scan_to_model_max_distance", &o->scan_to_model_max_distance);
+  c.Get("scan_to_model_normal_distance", &o->scan_to_model_normal_distance);
   c.Get("scan_to_model_girth", &o->scan_to_model_girth);
   c.Get("chain_prior_weight", &o->chain_prior_weight);
   c.Get("limb_girth_prior_weight", &o->limb_girth_prior_weight);

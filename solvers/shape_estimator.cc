@@ -2,9 +2,11 @@
 
 #include <Eigen/Cholesky>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <sstream>
 #include <unordered_map>
 
@@ -39,6 +41,10 @@ bool ShapeOptions::IsValid(std::string* error) const {
   } else if (!(std::isfinite(scan_to_model_voxel) && scan_to_model_voxel >= 0.0)) {
     msg << "shape.scan_to_model_voxel: expected a finite value >= 0 (m; 0: every point), found "
         << scan_to_model_voxel;
+  } else if (!(std::isfinite(scan_to_model_normal_distance) &&
+               scan_to_model_normal_distance >= 0.0)) {
+    msg << "shape.scan_to_model_normal_distance: expected a finite value >= 0 (m; 0: off), "
+        << "found " << scan_to_model_normal_distance;
   } else if (!positive(scan_to_model_max_distance)) {
     msg << "shape.scan_to_model_max_distance: expected a finite value > 0 (m), found "
         << scan_to_model_max_distance;
@@ -77,11 +83,20 @@ bool ShapeOptions::IsValid(std::string* error) const {
 }
 
 namespace {
-// Mean point per occupied cubic cell of side `cell` (all points when cell <= 0).
-Eigen::MatrixX3d VoxelMeans(const Eigen::MatrixX3d& points, double cell) {
-  if (!(cell > 0.0)) return points;
+// Mean point per occupied cubic cell of side `cell` (all points when cell <= 0); with
+// `normals` (one per point) and `mean_normals`, also each cell's mean normal, normalised.
+Eigen::MatrixX3d VoxelMeans(const Eigen::MatrixX3d& points, double cell,
+                            const Eigen::MatrixX3d* normals = nullptr,
+                            Eigen::MatrixX3d* mean_normals = nullptr) {
+  const bool with_normals =
+      normals != nullptr && mean_normals != nullptr && normals->rows() == points.rows();
+  if (mean_normals != nullptr) mean_normals->resize(0, 3);
+  if (!(cell > 0.0)) {
+    if (with_normals) *mean_normals = *normals;
+    return points;
+  }
   std::unordered_map<std::int64_t, int> slot;
-  std::vector<Eigen::Vector3d> sum;
+  std::vector<Eigen::Vector3d> sum, normal_sum;
   std::vector<int> count;
   for (int k = 0; k < points.rows(); ++k) {
     const Eigen::Vector3d p = points.row(k).transpose();
@@ -92,13 +107,23 @@ Eigen::MatrixX3d VoxelMeans(const Eigen::MatrixX3d& points, double cell) {
     const auto [it, inserted] = slot.emplace(id, static_cast<int>(sum.size()));
     if (inserted) {
       sum.push_back(Eigen::Vector3d::Zero());
+      normal_sum.push_back(Eigen::Vector3d::Zero());
       count.push_back(0);
     }
     sum[it->second] += p;
+    if (with_normals) normal_sum[it->second] += normals->row(k).transpose();
     ++count[it->second];
   }
   Eigen::MatrixX3d out(sum.size(), 3);
   for (size_t c = 0; c < sum.size(); ++c) out.row(c) = sum[c].transpose() / count[c];
+  if (with_normals) {
+    mean_normals->resize(sum.size(), 3);
+    for (size_t c = 0; c < sum.size(); ++c) {
+      const double norm = normal_sum[c].norm();
+      mean_normals->row(c).setZero();
+      if (norm > 0.0) mean_normals->row(c) = normal_sum[c].transpose() / norm;
+    }
+  }
   return out;
 }
 
@@ -112,15 +137,41 @@ double Uniform01(std::uint64_t i) {
 }
 
 // Per point of `index` (the fit vertices): how many of `samples` have it as their nearest
-// (within sqrt(max_d2)) and their sum.
+// (within sqrt(max_d2)) and their sum. With `normal_distance` s > 0, a sample p's nearest is
+// the one of its kNormalCandidates nearest vertices x minimising |p - x|^2 + s^2 |n_p - n_x|^2
+// (normals `sample_normals`, `vertex_normals`), the distance of x being the one compared
+// with max_d2.
+constexpr int kNormalCandidates = 8;
 void NearestSums(const PointCloudIndex& index, const Eigen::MatrixX3d& samples, double max_d2,
-                 std::vector<double>* count, Eigen::MatrixX3d* sum) {
+                 std::vector<double>* count, Eigen::MatrixX3d* sum,
+                 const Eigen::MatrixX3d* sample_normals = nullptr,
+                 const Eigen::MatrixX3d* vertex_normals = nullptr, double normal_distance = 0.0) {
   count->assign(index.size(), 0.0);
   sum->setZero(index.size(), 3);
+  const bool by_normal = normal_distance > 0.0 && sample_normals != nullptr &&
+                         sample_normals->rows() == samples.rows() && vertex_normals != nullptr;
+  const double s2 = normal_distance * normal_distance;
+  std::array<int, kNormalCandidates> ids;
+  std::array<double, kNormalCandidates> d2s;
   double d2 = 0.0;
   for (int k = 0; k < samples.rows(); ++k) {
     const Eigen::Vector3d p = samples.row(k).transpose();
-    const int i = index.Nearest(p, &d2);
+    int i = -1;
+    if (!by_normal) {
+      i = index.Nearest(p, &d2);
+    } else {
+      const int found = index.KNearest(p, kNormalCandidates, ids.data(), d2s.data());
+      const Eigen::RowVector3d n = sample_normals->row(k);
+      double best = std::numeric_limits<double>::infinity();
+      for (int c = 0; c < found; ++c) {
+        const double e = d2s[c] + s2 * (vertex_normals->row(ids[c]) - n).squaredNorm();
+        if (e < best) {
+          best = e;
+          i = ids[c];
+          d2 = d2s[c];
+        }
+      }
+    }
     if (i < 0 || d2 > max_d2) continue;
     (*count)[i] += 1.0;
     sum->row(i) += p.transpose();
@@ -133,6 +184,15 @@ ShapeOptions Checked(const ShapeOptions& options) {
   return options;
 }
 }  // namespace
+
+void ScanToModelSums(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3d& vertex_normals,
+                     const Eigen::MatrixX3d& samples, const Eigen::MatrixX3d& sample_normals,
+                     double max_distance, double normal_distance, std::vector<double>* count,
+                     Eigen::MatrixX3d* sum) {
+  const PointCloudIndex index(vertices);
+  NearestSums(index, samples, max_distance * max_distance, count, sum, &sample_normals,
+              &vertex_normals, normal_distance);
+}
 
 ShapeEstimator::ShapeEstimator(const Template& base, const ShapeOptions& options)
     : options_(Checked(options)),
@@ -220,10 +280,11 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
   estep_options.mode = EStepMode::kRadius;
   for (const Scan* s : scans) esteps.push_back(std::make_unique<EStep>(*s, estep_options));
   const bool scan_to_model = options_.scan_to_model_weight > 0.0;
-  std::vector<Eigen::MatrixX3d> scan_samples(nf);
+  std::vector<Eigen::MatrixX3d> scan_samples(nf), scan_sample_normals(nf);
   if (scan_to_model) {
     for (int f = 0; f < nf; ++f) {
-      scan_samples[f] = VoxelMeans(scans[f]->points, options_.scan_to_model_voxel);
+      scan_samples[f] = VoxelMeans(scans[f]->points, options_.scan_to_model_voxel,
+                                   &scans[f]->normals, &scan_sample_normals[f]);
     }
   }
   const double max_d2 = options_.scan_to_model_max_distance * options_.scan_to_model_max_distance;
@@ -302,13 +363,17 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
         double c_reverse = 0.0;
         if (scan_to_model && scan_samples[f].rows() > 0) {
           const PointCloudIndex index(sub_posed);
-          NearestSums(index, scan_samples[f], max_d2, &reverse_count, &reverse_sum);
+          NearestSums(index, scan_samples[f], max_d2, &reverse_count, &reverse_sum,
+                      &scan_sample_normals[f], &sub_normals, options_.scan_to_model_normal_distance);
           if (options_.bias_correction) {
             // The same bias as the E-step's: a one-sided scan's samples pull a limb's side
             // vertices towards the camera and inwards. Measured on the template's own
             // camera-facing vertices (sampled alike) and subtracted: the truth is a fixed point.
-            NearestSums(index, VoxelMeans(self.points, options_.scan_to_model_voxel), max_d2,
-                        &self_count, &self_sum);
+            Eigen::MatrixX3d self_normals;
+            const Eigen::MatrixX3d self_samples = VoxelMeans(
+                self.points, options_.scan_to_model_voxel, &self.normals, &self_normals);
+            NearestSums(index, self_samples, max_d2, &self_count, &self_sum, &self_normals,
+                        &sub_normals, options_.scan_to_model_normal_distance);
             for (int i = 0; i < n; ++i) {
               if (reverse_count[i] > 0.0 && self_count[i] > 0.0) {
                 reverse_sum.row(i) -= reverse_count[i] * (self_sum.row(i) / self_count[i] -

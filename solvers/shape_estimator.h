@@ -92,6 +92,11 @@ struct ShapeOptions {
   double scan_to_model_weight = 0.3;
   double scan_to_model_voxel = 0.01;
   double scan_to_model_max_distance = 0.3;
+  // A scan point's "nearest" vertex also weighs the normals: of its 8 nearest vertices the one
+  // minimising |p - x|^2 + d^2 |n_p - n_x|^2, d this distance (m; 0: the nearest alone). A
+  // hand hanging beside a thigh then pulls the hand's vertices, not the thigh's side, which
+  // faces another way (docs/shape.md, "B's remaining error").
+  double scan_to_model_normal_distance = 0.0;
   // The term also moves the girths (false: bone lengths and poses only).
   bool scan_to_model_girth = true;
   // Chain prior: chain_prior_weight |b_j - b_c|^2 per pair of collinear bones (a bone and the
@@ -116,6 +121,14 @@ struct ShapeOptions {
 
   bool IsValid(std::string* error) const;
 };
+
+// The scan-to-model term's correspondences: per vertex of `vertices`, how many of `samples`
+// (within `max_distance` m) take it as their nearest, and their sum. `normal_distance` as
+// ShapeOptions::scan_to_model_normal_distance (normals unit, one per row; 0: distance alone).
+void ScanToModelSums(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3d& vertex_normals,
+                     const Eigen::MatrixX3d& samples, const Eigen::MatrixX3d& sample_normals,
+                     double max_distance, double normal_distance, std::vector<double>* count,
+                     Eigen::MatrixX3d* sum);
 
 struct ShapeSolveSummary {
   int frames = 0;

@@ -145,6 +145,32 @@ TEST(ShapeEstimatorTest, ScanToModelTermRecoversLongShanks) {
   EXPECT_LT(error[1], 0.03);
 }
 
+TEST(ShapeEstimatorTest, ScanToModelNormalDistancePicksTheVertexFacingAlike) {
+  // A hand's scan point (facing the camera, -z) 1 cm from a thigh's side vertex (facing +x)
+  // and 2.5 cm from the hand's vertex (facing -z); a second point on the thigh's side.
+  Eigen::MatrixX3d vertices(2, 3), vertex_normals(2, 3), samples(2, 3), sample_normals(2, 3);
+  vertices << 0.01, 0.0, 0.0,  //
+      0.0, 0.0, 0.025;
+  vertex_normals << 1.0, 0.0, 0.0,  //
+      0.0, 0.0, -1.0;
+  samples << 0.0, 0.0, 0.0,  //
+      0.02, 0.0, 0.0;
+  sample_normals << 0.0, 0.0, -1.0,  //
+      1.0, 0.0, 0.0;
+  std::vector<double> count;
+  Eigen::MatrixX3d sum;
+  ScanToModelSums(vertices, vertex_normals, samples, sample_normals, 0.3, 0.0, &count, &sum);
+  EXPECT_EQ(count, (std::vector<double>{2.0, 0.0})) << "by distance alone: both on the thigh";
+  // |p - x|^2 + d^2 |n_p - n_x|^2 with d = 2 cm: thigh 1 + 4 * 2 = 9 cm^2, hand 6.25 cm^2.
+  ScanToModelSums(vertices, vertex_normals, samples, sample_normals, 0.3, 0.02, &count, &sum);
+  EXPECT_EQ(count, (std::vector<double>{1.0, 1.0}));
+  EXPECT_TRUE(sum.row(1).isZero()) << sum;
+  EXPECT_DOUBLE_EQ(sum(0, 0), 0.02);
+  // The distance compared with max_distance is the chosen vertex's (2.5 cm).
+  ScanToModelSums(vertices, vertex_normals, samples, sample_normals, 0.02, 0.02, &count, &sum);
+  EXPECT_EQ(count, (std::vector<double>{1.0, 0.0}));
+}
+
 TEST(ShapeEstimatorTest, CalibratesAfterTheConfiguredFramesThenFreezes) {
   const Template& t = CoarseTemplate();
   ShapeOptions o = Options(ShapeMode::kScale);
@@ -290,6 +316,10 @@ TEST(ShapeEstimatorTest, BoundsHoldAndOptionsAreChecked) {
   std::string why;
   EXPECT_FALSE(bad.IsValid(&why));
   EXPECT_NE(why.find("bone_min"), std::string::npos) << why;
+  bad = ShapeOptions();
+  bad.scan_to_model_normal_distance = -0.01;
+  EXPECT_FALSE(bad.IsValid(&why));
+  EXPECT_NE(why.find("scan_to_model_normal_distance"), std::string::npos) << why;
 }
 
 }  // namespace
