@@ -363,8 +363,9 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
         double c_reverse = 0.0;
         if (scan_to_model && scan_samples[f].rows() > 0) {
           const PointCloudIndex index(sub_posed);
+          const double normal_distance = options_.scan_to_model_normal_distance;
           NearestSums(index, scan_samples[f], max_d2, &reverse_count, &reverse_sum,
-                      &scan_sample_normals[f], &sub_normals, options_.scan_to_model_normal_distance);
+                      &scan_sample_normals[f], &sub_normals, normal_distance);
           if (options_.bias_correction) {
             // The same bias as the E-step's: a one-sided scan's samples pull a limb's side
             // vertices towards the camera and inwards. Measured on the template's own
@@ -373,7 +374,7 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
             const Eigen::MatrixX3d self_samples = VoxelMeans(
                 self.points, options_.scan_to_model_voxel, &self.normals, &self_normals);
             NearestSums(index, self_samples, max_d2, &self_count, &self_sum, &self_normals,
-                        &sub_normals, options_.scan_to_model_normal_distance);
+                        &sub_normals, normal_distance);
             for (int i = 0; i < n; ++i) {
               if (reverse_count[i] > 0.0 && self_count[i] > 0.0) {
                 reverse_sum.row(i) -= reverse_count[i] * (self_sum.row(i) / self_count[i] -
