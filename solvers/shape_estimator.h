@@ -95,7 +95,7 @@ struct ShapeOptions {
   // A scan point's "nearest" vertex also weighs the normals: of its 8 nearest vertices the one
   // minimising |p - x|^2 + d^2 |n_p - n_x|^2, d this distance (m; 0: the nearest alone). A
   // hand hanging beside a thigh then pulls the hand's vertices, not the thigh's side, which
-  // faces another way (docs/shape.md, "B's remaining error").
+  // faces another way (docs/shape-measurements.md, "B's remaining error").
   double scan_to_model_normal_distance = 0.0;
   // The term also moves the girths (false: bone lengths and poses only).
   bool scan_to_model_girth = true;
