@@ -239,7 +239,7 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
     result.warnings.push_back("fitting.joint_coupling: the template has no joint " + uncoupled +
                               "; those pairs are not coupled");
   }
-  shape.SetCameraCenter(calibration.depth.world_to_camera.inverse().translation());
+  shape.SetDepthCamera(calibration.depth, options.fitting.out_of_view);
   TrackStage track(options, calibration, &preprocessor, &fitter);
   track.SetShape(&shape, &tmpl);
   PoolStage pooling(options, calibration, texturer.get());
@@ -255,6 +255,7 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
   const int shape_calibrated_frame = track.shape_calibrated_frame;
   result.shape_calibrated_frame = shape_calibrated_frame;
   result.shape_final_frame = track.shape_final_frame;
+  if (shape.enabled() && shape_calibrated_frame >= 0) AddShapeWarnings(shape, &result.warnings);
   const std::vector<Pose>& poses = output.poses;
   const std::vector<std::string>& failures = output.failures;
   const double fit_seconds = track.fit_seconds, init_seconds = track.init_seconds;
@@ -441,6 +442,12 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
                  resolved_config, out_dir, progress);
   result.shape_calibrated_frame = calibration.shape_calibrated_frame;
   result.shape_final_frame = calibration.shape_final_frame;
+  // The first pass's doubts about the shape the second pass used.
+  for (auto it = calibration.warnings.rbegin(); it != calibration.warnings.rend(); ++it) {
+    if (it->rfind(kShapeWarningPrefix, 0) == 0) {
+      result.warnings.insert(result.warnings.begin(), *it);
+    }
+  }
   result.warnings.insert(
       result.warnings.begin(),
       calibrated ? "shape.retrack: tracked twice; the second pass used the subject's template "

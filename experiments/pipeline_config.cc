@@ -630,7 +630,7 @@ void BindShape(const Config& c, ShapeOptions* o) {
                "iterations_per_stage", "over_relaxation", "bias_correction",
                "visibility_min_cos", "bias_density", "girth_max_radius", "scan_to_model_weight",
                "scan_to_model_voxel", "scan_to_model_max_distance",
-               "scan_to_model_normal_distance", "scan_to_model_girth",
+               "scan_to_model_normal_distance", "scan_to_model_girth", "hold_unseen",
                "chain_prior_weight", "limb_girth_prior_weight", "prior_weight", "pose_damping",
                "bone_min", "bone_max", "girth_min", "girth_max", "refine_every",
                "refine_prior_weight", "max_fit_vertices", "joint_limits"});
@@ -656,6 +656,7 @@ void BindShape(const Config& c, ShapeOptions* o) {
   c.Get("scan_to_model_voxel", &o->scan_to_model_voxel);
   c.Get("scan_to_model_max_distance", &o->scan_to_model_max_distance);
   c.Get("scan_to_model_normal_distance", &o->scan_to_model_normal_distance);
+  c.Get("hold_unseen", &o->hold_unseen);
   c.Get("scan_to_model_girth", &o->scan_to_model_girth);
   c.Get("chain_prior_weight", &o->chain_prior_weight);
   c.Get("limb_girth_prior_weight", &o->limb_girth_prior_weight);

@@ -13,7 +13,31 @@ namespace artex {
 
 namespace {
 double Finite(double x) { return std::isfinite(x) ? x : std::numeric_limits<double>::quiet_NaN(); }
+
+std::string JoinNames(const std::vector<std::string>& names) {
+  std::string out;
+  for (const std::string& n : names) out += (out.empty() ? "" : ", ") + n;
+  return out;
+}
 }  // namespace
+
+void AddShapeWarnings(const ShapeEstimator& shape, std::vector<std::string>* warnings) {
+  const std::vector<std::string>& unseen = shape.unseen_parameters();
+  if (!unseen.empty()) {
+    warnings->push_back(std::string(kShapeWarningPrefix) + std::to_string(unseen.size()) +
+                        " parameters held (their parts were out of the depth image in every "
+                        "calibration frame; shape.hold_unseen): " + JoinNames(unseen) +
+                        "; the subject template keeps the template's proportions there");
+  }
+  const std::vector<std::string> bounded = shape.ParametersAtBounds();
+  if (!bounded.empty()) {
+    warnings->push_back(std::string(kShapeWarningPrefix) + std::to_string(bounded.size()) +
+                        " parameters at their bounds (shape.bone_min/bone_max, "
+                        "girth_min/girth_max): " + JoinNames(bounded) +
+                        "; the solve would have moved them further: check that the recording "
+                        "shows those parts");
+  }
+}
 
 void AddShapeToSummary(const std::string& summary_path, const PipelineResult& result,
                        const ShapeRunInfo& info) {
@@ -39,6 +63,8 @@ void AddShapeToSummary(const std::string& summary_path, const PipelineResult& re
     params[est.model().parameter_names()[p]] = 1.0 + est.parameters()[p];
   }
   shape["parameters"] = params;
+  shape["parameters_held_unseen"] = est.unseen_parameters();
+  shape["parameters_at_bounds"] = est.ParametersAtBounds();
   const BodyShape body = est.shape();
   nlohmann::json joints = nlohmann::json::array();
   double bone_sum = 0.0, bone_max = 0.0;

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 #include "experiments/pipeline.h"
 #include "models/template.h"
@@ -30,5 +31,12 @@ struct ShapeRunInfo {
 // last round's (*_after_final_calibration: the calibration phase complete). Throws artex::Error naming the file on I/O failure.
 void AddShapeToSummary(const std::string& summary_path, const PipelineResult& result,
                        const ShapeRunInfo& info);
+
+// The start of every warning AddShapeWarnings adds.
+inline constexpr char kShapeWarningPrefix[] = "shape: ";
+// Appends the doubts about a calibrated shape to `warnings`: parameters held because their
+// parts were out of view in every calibration frame (ShapeOptions::hold_unseen), parameters at
+// a bound (the solve would have moved them further).
+void AddShapeWarnings(const ShapeEstimator& shape, std::vector<std::string>* warnings);
 
 }  // namespace artex

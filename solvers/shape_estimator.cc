@@ -244,20 +244,81 @@ ShapeEstimator::ShapeEstimator(const Template& base, const ShapeOptions& options
 
 ShapeEstimator::~ShapeEstimator() = default;
 
-void ShapeEstimator::ClampToBounds(Eigen::VectorXd* q) const {
+void ShapeEstimator::Bounds(int p, double* lo, double* hi) const {
   const int nj = model_.base().num_joints();
   const Eigen::MatrixXd& e = model_.expansion();
+  // A parameter moves girth rows only (bones_girth's girths) or length rows: bones (also
+  // kScale) or leaf segments.
+  bool bone = false;
+  for (int r = 0; r < nj; ++r) {
+    bone = bone || e(r, p) != 0.0 || e(2 * nj + r, p) != 0.0 || e(3 * nj + r, p) != 0.0;
+  }
+  *lo = (bone ? options_.bone_min : options_.girth_min) - 1.0;
+  *hi = (bone ? options_.bone_max : options_.girth_max) - 1.0;
+}
+
+void ShapeEstimator::ClampToBounds(Eigen::VectorXd* q) const {
   for (int p = 0; p < q->size(); ++p) {
-    // A parameter moves girth rows only (bones_girth's girths) or length rows: bones (also
-    // kScale) or leaf segments.
-    bool bone = false;
-    for (int r = 0; r < nj; ++r) {
-      bone = bone || e(r, p) != 0.0 || e(2 * nj + r, p) != 0.0 || e(3 * nj + r, p) != 0.0;
-    }
-    const double lo = (bone ? options_.bone_min : options_.girth_min) - 1.0;
-    const double hi = (bone ? options_.bone_max : options_.girth_max) - 1.0;
+    double lo = 0.0, hi = 0.0;
+    Bounds(p, &lo, &hi);
     (*q)[p] = std::clamp((*q)[p], lo, hi);
   }
+}
+
+std::vector<std::string> ShapeEstimator::ParametersAtBounds() const {
+  std::vector<std::string> names;
+  for (int p = 0; p < q_.size(); ++p) {
+    double lo = 0.0, hi = 0.0;
+    Bounds(p, &lo, &hi);
+    if (q_[p] <= lo + 1e-9 || q_[p] >= hi - 1e-9) names.push_back(model_.parameter_names()[p]);
+  }
+  return names;
+}
+
+void ShapeEstimator::SetDepthCamera(const PinholeCamera& camera,
+                                    const OutOfViewOptions& out_of_view) {
+  depth_camera_ = camera;
+  out_of_view_ = out_of_view;
+  has_depth_camera_ = true;
+  SetCameraCenter(camera.world_to_camera.inverse().translation());
+}
+
+std::vector<int> ShapeEstimator::UnseenParameters(const std::vector<Pose>& poses) const {
+  std::vector<int> unseen;
+  const int nq = model_.num_parameters();
+  if (!options_.hold_unseen || !has_depth_camera_ || !out_of_view_.enabled() || poses.empty() ||
+      nq == 0) {
+    return unseen;
+  }
+  const Template shaped = model_.Apply(q_);
+  const Skinning skinning(shaped, SkinningOptions());
+  const int nj = shaped.num_joints();
+  std::vector<int> parents(nj);
+  for (int j = 0; j < nj; ++j) parents[j] = shaped.joints[j].parent;
+  const Eigen::MatrixXd& e = model_.expansion();
+  std::vector<bool> seen(nq, false);
+  Eigen::MatrixX3d posed, centers;
+  for (const Pose& pose : poses) {
+    skinning.Apply(pose, &posed);
+    skinning.PosedJointCenters(pose, &centers);
+    std::vector<bool> held(nj, false);
+    for (int j : OutOfViewJoints(posed, shaped.vertex_joint, centers, parents, depth_camera_,
+                                 out_of_view_)) {
+      held[j] = true;
+    }
+    for (int row = 0; row < e.rows(); ++row) {
+      // Rows: bone lengths, girths, leaf lengths, fork widths, depth factors (models/shape.h).
+      const int kind = row / nj, j = row % nj;
+      const bool bone = kind == 0 || kind == 3;
+      const bool row_seen = !held[j] && !(bone && parents[j] >= 0 && held[parents[j]]);
+      if (!row_seen) continue;
+      for (int p = 0; p < nq; ++p) seen[p] = seen[p] || e(row, p) != 0.0;
+    }
+  }
+  for (int p = 0; p < nq; ++p) {
+    if (!seen[p]) unseen.push_back(p);
+  }
+  return unseen;
 }
 
 ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
@@ -302,6 +363,9 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
   for (int p = 0; p < nq; ++p) {
     if (model_.IsGirthParameter(p)) girth_columns.push_back(p);
   }
+  // Columns of q the frames do not show (hold_unseen), held throughout.
+  const std::vector<int> unseen = UnseenParameters(*poses);
+  last_unseen_ = unseen;
   bool first = true;
   for (double radius : options_.radii) {
     for (int it = 0; it < options_.iterations_per_stage; ++it) {
@@ -475,14 +539,16 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
         h(offset + kScaleIndex, offset + kScaleIndex) = 1.0;  // held: no data, no update
         g[offset + kScaleIndex] = 0.0;
       }
+      const auto hold = [&](int p) {
+        h.row(p).setZero();
+        h.col(p).setZero();
+        h(p, p) = 1.0;
+        g[p] = 0.0;
+      };
       if (radius > options_.girth_max_radius) {
-        for (int p : girth_columns) {
-          h.row(p).setZero();
-          h.col(p).setZero();
-          h(p, p) = 1.0;
-          g[p] = 0.0;
-        }
+        for (int p : girth_columns) hold(p);
       }
+      for (int p : unseen) hold(p);
       for (int d = 0; d < dim; ++d) h(d, d) += 1e-4 * h(d, d) + 1e-12;  // Marquardt
       if (!std::isfinite(cost) || !g.allFinite()) break;
       const Eigen::VectorXd step = -options_.over_relaxation * h.ldlt().solve(g);
@@ -514,6 +580,8 @@ bool ShapeEstimator::AddFrame(const Scan& scan, const Pose& pose, bool scale_set
     for (const Scan& s : scans_) pointers.push_back(&s);
     const ShapeSolveSummary round =
         Solve(pointers, &poses_, Eigen::VectorXd::Zero(q_.size()), options_.prior_weight);
+    unseen_names_.clear();
+    for (int p : last_unseen_) unseen_names_.push_back(model_.parameter_names()[p]);
     if (rounds_done_ == 0) calibration_.initial_cost = round.initial_cost;
     calibration_.final_cost = round.final_cost;
     calibration_.frames += round.frames;

@@ -21,7 +21,9 @@
 #include "models/shape.h"
 #include "models/template.h"
 #include "sensors/scan.h"
+#include "render/camera.h"
 #include "solvers/estep.h"
+#include "solvers/out_of_view.h"
 
 namespace artex {
 
@@ -97,6 +99,12 @@ struct ShapeOptions {
   // hand hanging beside a thigh then pulls the hand's vertices, not the thigh's side, which
   // faces another way (docs/shape-measurements.md, "B's remaining error").
   double scan_to_model_normal_distance = 0.0;
+  // Parameters the solve's frames do not show are held at their current value: a bone whose
+  // parent or own joint the tracker's out-of-view test (fitting.out_of_view, needs
+  // SetDepthCamera) holds in every frame, a girth, leaf length or depth factor whose joint it
+  // holds in every frame. Without it a person framed from the waist up got legs at the bound
+  // (0.7): the thighs' stubs at the image border pull the template's legs up into view.
+  bool hold_unseen = true;
   // The term also moves the girths (false: bone lengths and poses only).
   bool scan_to_model_girth = true;
   // Chain prior: chain_prior_weight |b_j - b_c|^2 per pair of collinear bones (a bone and the
@@ -159,6 +167,18 @@ class ShapeEstimator {
     camera_center_ = center;
     has_camera_ = true;
   }
+  // The depth camera (intrinsics, world_to_camera) and the tracker's out-of-view test, for
+  // hold_unseen; also sets the camera centre.
+  void SetDepthCamera(const PinholeCamera& camera, const OutOfViewOptions& out_of_view);
+  // Names of the parameters the last calibration round held as unseen (hold_unseen), sorted as
+  // the parameters.
+  const std::vector<std::string>& unseen_parameters() const { return unseen_names_; }
+  // Names of the parameters at a bound (bone_min/bone_max, girth_min/girth_max): the solve
+  // would have moved them further.
+  std::vector<std::string> ParametersAtBounds() const;
+  // The parameters hold_unseen holds for frames posed as `poses` on their depth images (the
+  // camera of SetDepthCamera; empty without one or with hold_unseen off). Public for tests.
+  std::vector<int> UnseenParameters(const std::vector<Pose>& poses) const;
 
   // Pose priors of the tracker (terms that need no skinning: joint limits, coupled joints)
   // added to every calibration frame's pose in the joint solve, so that it minimises the
@@ -186,12 +206,18 @@ class ShapeEstimator {
 
  private:
   void ClampToBounds(Eigen::VectorXd* q) const;
+  void Bounds(int p, double* lo, double* hi) const;  // of q_p (factor - 1)
 
   ShapeOptions options_;
   ShapeModel model_;
   std::vector<std::shared_ptr<const FittingTerm>> pose_priors_;
   Eigen::Vector3d camera_center_ = Eigen::Vector3d::Zero();
   bool has_camera_ = false;
+  PinholeCamera depth_camera_;
+  OutOfViewOptions out_of_view_;
+  bool has_depth_camera_ = false;
+  std::vector<std::string> unseen_names_;
+  std::vector<int> last_unseen_;  // of the last Solve
   std::vector<int> fit_vertices_;
   Eigen::MatrixXd chain_;  // collinear bone pairs x Q: difference of their length factors
   Eigen::MatrixXd limb_girth_;  // limb segment pairs x Q: difference of their girth factors

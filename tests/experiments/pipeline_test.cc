@@ -587,11 +587,36 @@ TEST(PipelineTest, ShapeCalibrationWritesTheSubjectTemplate) {
   EXPECT_EQ(subject.num_joints(), base.num_joints());
   EXPECT_EQ(subject.uvs.rows(), base.uvs.rows());
   EXPECT_GT((subject.vertices - base.vertices).cwiseAbs().maxCoeff(), 1e-6);
+  EXPECT_TRUE(shape.at("parameters_held_unseen").is_array());
+  EXPECT_TRUE(shape.at("parameters_at_bounds").is_array());
 
   Config bad = SmallConfig();
   bad.Set("shape.mode", "sculpted");
   const std::string msg = ErrorOf([&] { LoadPipelineOptions(bad); });
   EXPECT_NE(msg.find("shape.mode"), std::string::npos) << msg;
+}
+
+// A parameter the solve pushes against its bound is named in a warning and in summary.json
+// (girth bounds of 1: every girth sits at them).
+TEST(PipelineTest, ShapeWarnsOfParametersAtTheirBounds) {
+  Config config = SmallShapeConfig();
+  config.Set("shape.girth_min", "1");
+  config.Set("shape.girth_max", "1");
+  const fs::path out = OutDir("run_shape_bounds");
+  const PipelineResult r = Track(TestData().sequence, out.string(), config);
+  std::string warning;
+  for (const std::string& w : r.warnings) {
+    if (w.find("parameters at their bounds") != std::string::npos) warning = w;
+  }
+  EXPECT_EQ(warning.rfind("shape: ", 0), 0u) << warning;
+  EXPECT_NE(warning.find("girth:chest"), std::string::npos) << warning;
+  EXPECT_EQ(warning.find("bone:"), std::string::npos) << warning;
+  std::ifstream in(out / "summary.json");
+  const nlohmann::json summary = nlohmann::json::parse(in);
+  const auto bounded =
+      summary.at("shape").at("parameters_at_bounds").get<std::vector<std::string>>();
+  EXPECT_NE(std::find(bounded.begin(), bounded.end(), "girth:chest"), bounded.end());
+  EXPECT_EQ(summary.at("warnings").size(), r.warnings.size());
 }
 
 // shape.joint_limits: limits added to the shape solve's pose priors only. The frames tracked

@@ -171,6 +171,79 @@ TEST(ShapeEstimatorTest, ScanToModelNormalDistancePicksTheVertexFacingAlike) {
   EXPECT_EQ(count, (std::vector<double>{1.0, 0.0}));
 }
 
+// A depth camera seeing the subject (posed as RandomPose: 2.5 m in front of it along +z) from
+// above its knees: the knee joints 30 px outside the image's top row.
+PinholeCamera UpperBodyCamera(const Template& subject) {
+  PinholeCamera camera;
+  camera.fx = camera.fy = 500.0;
+  const int knee = subject.FindJoint("l_knee");
+  // v = fy y / 2.5 + cy for a point at depth 2.5 m (identity world_to_camera).
+  camera.cy = -30.0 - camera.fy * subject.joints[knee].center.y() / 2.5;
+  return camera;
+}
+
+// Parameters of parts out of view in every frame are held (hold_unseen); those in view are
+// estimated: a subject with longer thighs and forearms, seen from above the knees (the scan
+// keeps only the points the camera sees), gets its forearms and keeps the template's thighs.
+TEST(ShapeEstimatorTest, HoldsTheParametersOfPartsOutOfView) {
+  const Template& t = CoarseTemplate();
+  ShapeOptions o = Options(ShapeMode::kBonesGirth);
+  ShapeEstimator estimator(t, o);
+  const ShapeModel& model = estimator.model();
+  const int thigh = ParameterIndex(model, "bone:l_knee");
+  const int forearm = ParameterIndex(model, "bone:l_wrist");
+  ASSERT_LT(thigh, model.num_parameters());
+  ASSERT_LT(forearm, model.num_parameters());
+  Eigen::VectorXd truth = Eigen::VectorXd::Zero(model.num_parameters());
+  truth[thigh] = 0.2;
+  truth[forearm] = 0.1;
+  const Template subject = model.Apply(truth);
+  const PinholeCamera camera = UpperBodyCamera(t);
+  std::vector<Scan> scans;
+  std::vector<Pose> poses;
+  PosesAndScans(subject, 4, 0.35, 5, &poses, &scans);
+  for (Scan& scan : scans) {  // keep what the camera sees
+    std::vector<int> keep;
+    for (int i = 0; i < scan.size(); ++i) {
+      const Eigen::Vector2d uv = camera.Project(scan.points.row(i).transpose());
+      if (uv.x() >= 0.0 && uv.x() < camera.width && uv.y() >= 0.0 && uv.y() < camera.height) {
+        keep.push_back(i);
+      }
+    }
+    ASSERT_GT(keep.size(), 100u);
+    ASSERT_LT(keep.size(), static_cast<size_t>(scan.size()));
+    Scan cut;
+    cut.points = scan.points(keep, Eigen::all);
+    cut.normals = scan.normals(keep, Eigen::all);
+    cut.colors = Eigen::MatrixX3d::Zero(cut.points.rows(), 3);
+    cut.color_valid.assign(keep.size(), 0);
+    scan = cut;
+  }
+  estimator.SetDepthCamera(camera, OutOfViewOptions());
+  const std::vector<int> unseen = estimator.UnseenParameters(poses);
+  const auto held = [&](const std::string& name) {
+    return std::find(unseen.begin(), unseen.end(), ParameterIndex(model, name)) != unseen.end();
+  };
+  for (const char* name : {"bone:l_knee", "bone:l_ankle", "girth:l_knee", "length:l_ankle"}) {
+    EXPECT_TRUE(held(name)) << name;
+  }
+  for (const char* name : {"bone:l_elbow", "bone:l_wrist", "bone:chest", "girth:chest"}) {
+    EXPECT_FALSE(held(name)) << name;
+  }
+  std::vector<const Scan*> pointers;
+  for (const Scan& s : scans) pointers.push_back(&s);
+  estimator.Solve(pointers, &poses, Eigen::VectorXd::Zero(truth.size()), 1e-8);
+  EXPECT_EQ(estimator.parameters()[thigh], 0.0) << "held at the template's";
+  EXPECT_NEAR(estimator.parameters()[forearm], truth[forearm], 0.03);
+  // Without a depth camera nothing is held.
+  ShapeEstimator blind(t, o);
+  EXPECT_TRUE(blind.UnseenParameters(poses).empty());
+  o.hold_unseen = false;
+  ShapeEstimator off(t, o);
+  off.SetDepthCamera(camera, OutOfViewOptions());
+  EXPECT_TRUE(off.UnseenParameters(poses).empty());
+}
+
 TEST(ShapeEstimatorTest, CalibratesAfterTheConfiguredFramesThenFreezes) {
   const Template& t = CoarseTemplate();
   ShapeOptions o = Options(ShapeMode::kScale);
