@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <iterator>
 #include <limits>
 #include <memory>
 #include <nanoflann.hpp>
@@ -443,11 +444,11 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
   result.shape_calibrated_frame = calibration.shape_calibrated_frame;
   result.shape_final_frame = calibration.shape_final_frame;
   // The first pass's doubts about the shape the second pass used.
-  for (auto it = calibration.warnings.rbegin(); it != calibration.warnings.rend(); ++it) {
-    if (it->rfind(kShapeWarningPrefix, 0) == 0) {
-      result.warnings.insert(result.warnings.begin(), *it);
-    }
-  }
+  std::vector<std::string> doubts;
+  std::copy_if(calibration.warnings.begin(), calibration.warnings.end(),
+               std::back_inserter(doubts),
+               [](const std::string& w) { return w.rfind(kShapeWarningPrefix, 0) == 0; });
+  result.warnings.insert(result.warnings.begin(), doubts.begin(), doubts.end());
   result.warnings.insert(
       result.warnings.begin(),
       calibrated ? "shape.retrack: tracked twice; the second pass used the subject's template "

@@ -280,7 +280,6 @@ void ShapeEstimator::SetDepthCamera(const PinholeCamera& camera,
   depth_camera_ = camera;
   out_of_view_ = out_of_view;
   has_depth_camera_ = true;
-  SetCameraCenter(camera.world_to_camera.inverse().translation());
 }
 
 std::vector<int> ShapeEstimator::UnseenParameters(const std::vector<Pose>& poses) const {
@@ -364,8 +363,8 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
     if (model_.IsGirthParameter(p)) girth_columns.push_back(p);
   }
   // Columns of q the frames do not show (hold_unseen), held throughout.
-  const std::vector<int> unseen = UnseenParameters(*poses);
-  last_unseen_ = unseen;
+  summary.held_unseen = UnseenParameters(*poses);
+  const Eigen::Vector3d camera_center = depth_camera_.Center();
   bool first = true;
   for (double radius : options_.radii) {
     for (int it = 0; it < options_.iterations_per_stage; ++it) {
@@ -394,12 +393,12 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
           for (int v = 0; v < posed.rows(); ++v) {
             const Eigen::Vector3d x = posed.row(v).transpose();
             const double facing =
-                has_camera_ ? normals.row(v).dot((camera_center_ - x).normalized()) : 1.0;
+                has_depth_camera_ ? normals.row(v).dot((camera_center - x).normalized()) : 1.0;
             if (facing <= options_.visibility_min_cos) continue;
             // A depth camera samples a surface with a density ~ cos(angle to the view ray);
             // the template's vertices are uniform: keep each with that probability (a fixed
             // pseudo-random number per vertex) so the self E-step sees the scan's sampling.
-            if (options_.bias_density && has_camera_ && Uniform01(v) > facing) continue;
+            if (options_.bias_density && has_depth_camera_ && Uniform01(v) > facing) continue;
             {
               visible.push_back(v);
             }
@@ -548,7 +547,7 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
       if (radius > options_.girth_max_radius) {
         for (int p : girth_columns) hold(p);
       }
-      for (int p : unseen) hold(p);
+      for (int p : summary.held_unseen) hold(p);
       for (int d = 0; d < dim; ++d) h(d, d) += 1e-4 * h(d, d) + 1e-12;  // Marquardt
       if (!std::isfinite(cost) || !g.allFinite()) break;
       const Eigen::VectorXd step = -options_.over_relaxation * h.ldlt().solve(g);
@@ -581,7 +580,7 @@ bool ShapeEstimator::AddFrame(const Scan& scan, const Pose& pose, bool scale_set
     const ShapeSolveSummary round =
         Solve(pointers, &poses_, Eigen::VectorXd::Zero(q_.size()), options_.prior_weight);
     unseen_names_.clear();
-    for (int p : last_unseen_) unseen_names_.push_back(model_.parameter_names()[p]);
+    for (int p : round.held_unseen) unseen_names_.push_back(model_.parameter_names()[p]);
     if (rounds_done_ == 0) calibration_.initial_cost = round.initial_cost;
     calibration_.final_cost = round.final_cost;
     calibration_.frames += round.frames;

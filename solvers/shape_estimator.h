@@ -20,8 +20,8 @@
 #include "models/pose.h"
 #include "models/shape.h"
 #include "models/template.h"
-#include "sensors/scan.h"
 #include "render/camera.h"
+#include "sensors/scan.h"
 #include "solvers/estep.h"
 #include "solvers/out_of_view.h"
 
@@ -77,7 +77,7 @@ struct ShapeOptions {
   bool bias_correction = true;
   // The camera sees one side of the body and loses points at grazing angles: the self E-step
   // uses only the template vertices facing the camera (cosine of the normal with the direction
-  // to the camera above this) when the camera centre is known (SetCameraCenter), else all.
+  // to the camera above this) when the depth camera is known (SetDepthCamera), else all.
   double visibility_min_cos = 0.3;
   // ... and keeps each of them with probability cos(angle to the view ray), the depth camera's
   // sampling density (the template's vertices are uniform over the surface; a scan thins out
@@ -144,6 +144,7 @@ struct ShapeSolveSummary {
   double initial_cost = 0.0;  // data + priors at the start (per frame mean of m^2)
   double final_cost = 0.0;
   double seconds = 0.0;
+  std::vector<int> held_unseen;  // columns of q held as unseen (hold_unseen), ascending
 };
 
 class ShapeEstimator {
@@ -162,13 +163,8 @@ class ShapeEstimator {
   BodyShape shape() const { return model_.Expand(q_); }
   Template SubjectTemplate() const { return model_.Apply(q_); }
 
-  // Depth camera centre in the tracking world frame (for the bias correction's visibility).
-  void SetCameraCenter(const Eigen::Vector3d& center) {
-    camera_center_ = center;
-    has_camera_ = true;
-  }
-  // The depth camera (intrinsics, world_to_camera) and the tracker's out-of-view test, for
-  // hold_unseen; also sets the camera centre.
+  // The depth camera (intrinsics, world_to_camera; its centre for the bias correction's
+  // visibility) and the tracker's out-of-view test, for hold_unseen.
   void SetDepthCamera(const PinholeCamera& camera, const OutOfViewOptions& out_of_view);
   // Names of the parameters the last calibration round held as unseen (hold_unseen), sorted as
   // the parameters.
@@ -211,13 +207,10 @@ class ShapeEstimator {
   ShapeOptions options_;
   ShapeModel model_;
   std::vector<std::shared_ptr<const FittingTerm>> pose_priors_;
-  Eigen::Vector3d camera_center_ = Eigen::Vector3d::Zero();
-  bool has_camera_ = false;
   PinholeCamera depth_camera_;
   OutOfViewOptions out_of_view_;
   bool has_depth_camera_ = false;
   std::vector<std::string> unseen_names_;
-  std::vector<int> last_unseen_;  // of the last Solve
   std::vector<int> fit_vertices_;
   Eigen::MatrixXd chain_;  // collinear bone pairs x Q: difference of their length factors
   Eigen::MatrixXd limb_girth_;  // limb segment pairs x Q: difference of their girth factors
