@@ -12,11 +12,13 @@
 //   BM_MStepJacobian:    posing the fitted vertices with their skinning Jacobian (one
 //                        Gauss-Newton evaluation, PrepareFitEvaluation)
 //   BM_MStepNormalEquations: the data term's J^T J and J^T r on that evaluation
-//   BM_IndexNearestBuild: PointCloudIndex (its kd-tree) over the whole posed template (the
-//                        ICP's and the scale sample's target), and one nearest-point query
-//   BM_IndexNearestWithin: the ICP's queries into that index, 1500 scan points (a fixed stride),
-//                        each bounded by the distance to its nearest vertex at the pose 1 cm
-//                        off (as an ICP iteration bounds its search by the previous one's)
+//   BM_IndexNearestBuild/<cell mm>: PointCloudIndex (its kd-tree; cell 0) or NearestGrid over
+//                        the whole posed template (the ICP's and the scale sample's target),
+//                        and one nearest-point query
+//   BM_IndexNearestWithin/<cell mm>/<bound>: the ICP's queries into that index, 1500 scan
+//                        points (a fixed stride), each bounded by the distance to its nearest
+//                        vertex at the pose 1 cm off (bound 1, as an ICP iteration bounds its
+//                        search by the previous one's) or by 5 cm (bound 0, a first iteration)
 // Counters: cpu_ms (process CPU per iteration, all threads), candidates (visited per E-step)
 // and pairs (with p_st > 0). For one core run under `taskset -c 0` (oneTBB follows the
 // affinity mask).
@@ -33,6 +35,7 @@
 #include "models/template_generator.h"
 #include "solvers/em_fitter.h"
 #include "solvers/estep.h"
+#include "solvers/nearest_grid.h"
 #include "tests/solvers/fitting_test_util.h"
 
 namespace artex {
@@ -227,22 +230,50 @@ void BM_MStepNormalEquations(benchmark::State& state) {
 BENCHMARK(BM_MStepNormalEquations)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // The ICP's target: the posed template; its queries: a fixed-stride subsample of the scan.
+// The template's nearest-vertex index of an ICP: range(0) = 0 the kd-tree (leaf 24), else
+// a NearestGrid of that cell in mm.
+struct NearestIndex {
+  NearestIndex(const Eigen::MatrixX3d& points, int64_t cell_mm) {
+    if (cell_mm > 0) {
+      grid = std::make_unique<NearestGrid>(points, 1e-3 * static_cast<double>(cell_mm));
+    } else {
+      tree = std::make_unique<PointCloudIndex>(points, 24);
+    }
+  }
+  int NearestWithin(const Eigen::Vector3d& q, double bound2, double* d2) const {
+    return grid ? grid->NearestWithin(q, bound2, d2) : tree->NearestWithin(q, bound2, d2);
+  }
+  std::unique_ptr<PointCloudIndex> tree;
+  std::unique_ptr<NearestGrid> grid;
+};
+
 void BM_IndexNearestBuild(benchmark::State& state) {
   const Fixture& f = GetFixture();
   const double cpu_start = ProcessCpuSeconds();
   for (auto _ : state) {
-    const PointCloudIndex index(f.full_guess, 24);
+    const NearestIndex index(f.full_guess, state.range(0));
     double d2 = 0.0;
-    benchmark::DoNotOptimize(index.Nearest(f.scan.points.row(0).transpose(), &d2));
+    benchmark::DoNotOptimize(index.NearestWithin(f.scan.points.row(0).transpose(), 1.0, &d2));
   }
   ReportCpu(state, cpu_start);
   state.counters["points"] = static_cast<double>(f.full_guess.rows());
 }
-BENCHMARK(BM_IndexNearestBuild)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_IndexNearestBuild)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Arg(0)
+    ->Arg(10)
+    ->Arg(20)
+    ->Arg(30)
+    ->Arg(40);
 
+// range(1) = 1: each query bounded by the distance to its nearest vertex at the pose 1 cm off
+// (as an ICP iteration bounds its search by the previous one's); 0: by 5 cm (the scale
+// sample's first iteration, fitting.scale_sample_max_distance).
 void BM_IndexNearestWithin(benchmark::State& state) {
   const Fixture& f = GetFixture();
-  const PointCloudIndex index(f.full_guess, 24);
+  const NearestIndex index(f.full_guess, state.range(0));
+  const bool from_previous = state.range(1) != 0;
   const int stride = std::max(1, f.scan.size() / 1500);
   std::vector<int> sample, previous;
   for (int s = 0; s < f.scan.size(); s += stride) sample.push_back(s);
@@ -261,7 +292,10 @@ void BM_IndexNearestWithin(benchmark::State& state) {
     for (size_t k = 0; k < sample.size(); ++k) {
       const Eigen::Vector3d q = f.scan.points.row(sample[k]).transpose();
       const double bound2 =
-          (f.full_guess.row(previous[k]).transpose() - q).squaredNorm() * (1.0 + 1e-9) + 1e-300;
+          from_previous
+              ? (f.full_guess.row(previous[k]).transpose() - q).squaredNorm() * (1.0 + 1e-9) +
+                    1e-300
+              : 0.05 * 0.05;
       found += index.NearestWithin(q, bound2, &d2) >= 0;
     }
   }
@@ -269,7 +303,10 @@ void BM_IndexNearestWithin(benchmark::State& state) {
   state.counters["queries"] = static_cast<double>(sample.size());
   benchmark::DoNotOptimize(found);
 }
-BENCHMARK(BM_IndexNearestWithin)->Unit(benchmark::kMicrosecond)->UseRealTime();
+BENCHMARK(BM_IndexNearestWithin)
+    ->Unit(benchmark::kMicrosecond)
+    ->UseRealTime()
+    ->ArgsProduct({{0, 10, 20, 30, 40}, {1, 0}});
 
 }  // namespace
 }  // namespace artex

@@ -172,7 +172,7 @@ void BindPreprocess(const Config& c, PreprocessOptions* o) {
 void BindIcpInit(const Config& c, IcpInitOptions* o) {
   c.CheckKeys({"coarse_alignment", "facing_camera", "estimate_scale", "scale_from_extent",
                "max_iterations", "max_distance", "min_normal_dot", "max_scan_points", "tolerance",
-               "extent_quantile", "kd_leaf_size"});
+               "extent_quantile", "kd_leaf_size", "grid_cell"});
   c.Get("coarse_alignment", &o->coarse_alignment);
   c.Get("facing_camera", &o->facing_camera);
   c.Get("estimate_scale", &o->estimate_scale);
@@ -184,6 +184,7 @@ void BindIcpInit(const Config& c, IcpInitOptions* o) {
   c.Get("tolerance", &o->tolerance);
   c.Get("extent_quantile", &o->extent_quantile);
   c.Get("kd_leaf_size", &o->kd_leaf_size);
+  c.Get("grid_cell", &o->grid_cell);
 }
 
 void BindQuality(const Config& c, FitQualityOptions* o) {
@@ -288,7 +289,7 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
                "tracking_tikhonov",
                "fit_vertex_selection", "scale_estimator", "scale_sample_max_distance",
                "scale_sample_min_pair_fraction", "scale_sample_max_scan_points",
-               "scale_sample_tolerance", "icp_init",
+               "scale_sample_tolerance", "scale_sample_grid_cell", "icp_init",
                "init", "quality", "prediction", "kalman", "particle",
                "temporal_prior_on_prediction", "silhouette", "unobserved_joints", "upright",
                "out_of_view"});
@@ -370,6 +371,7 @@ void BindFitting(const Config& c, EMFitterOptions* o) {
   c.Get("scale_sample_min_pair_fraction", &o->scale_sample_min_pair_fraction);
   c.Get("scale_sample_max_scan_points", &o->scale_sample_max_scan_points);
   c.Get("scale_sample_tolerance", &o->scale_sample_tolerance);
+  c.Get("scale_sample_grid_cell", &o->scale_sample_grid_cell);
   BindIcpInit(c.Section("icp_init"), &o->icp);
 }
 

@@ -619,6 +619,7 @@ void EMFitter::Commit(const Scan& scan, const Pose& pose, bool scale_was_free,
           icp.max_scan_points = options_.scale_sample_max_scan_points;
         }
         if (options_.scale_sample_tolerance > 0.0) icp.tolerance = options_.scale_sample_tolerance;
+        if (options_.scale_sample_grid_cell > 0.0) icp.grid_cell = options_.scale_sample_grid_cell;
         const IcpInitResult aligned = AlignByIcp(*skinning_, pose, scan, icp);
         sample = aligned.pose.AllFinite() &&
                  aligned.num_pairs >= std::min(options_.min_scan_points, aligned.num_samples) &&

@@ -120,6 +120,10 @@ bool EMFitterOptions::IsValid(std::string* error) const {
   } else if (!(std::isfinite(scale_sample_tolerance) && scale_sample_tolerance >= 0.0)) {
     msg << "scale_sample_tolerance: expected a finite value >= 0 (0: icp_init.tolerance), found "
         << scale_sample_tolerance;
+  } else if (!(std::isfinite(scale_sample_grid_cell) && scale_sample_grid_cell >= 0.0)) {
+    msg << "scale_sample_grid_cell: expected a finite value >= 0 (m; 0: icp_init.grid_cell), "
+           "found "
+        << scale_sample_grid_cell;
   } else if (tracking_max_fit_vertices < 0) {
     msg << "tracking_max_fit_vertices: expected >= 0 (0: max_fit_vertices), found "
         << tracking_max_fit_vertices;

@@ -9,6 +9,7 @@
 #include "models/error.h"
 #include "models/normals.h"
 #include "solvers/estep.h"
+#include "solvers/nearest_grid.h"
 
 namespace artex {
 
@@ -28,6 +29,8 @@ bool IcpInitOptions::IsValid(std::string* error) const {
     msg << "extent_quantile: expected a value in [0, 0.5), found " << extent_quantile;
   } else if (kd_leaf_size < 1) {
     msg << "kd_leaf_size: expected >= 1, found " << kd_leaf_size;
+  } else if (!(std::isfinite(grid_cell) && grid_cell >= 0.0)) {
+    msg << "grid_cell: expected a finite value >= 0 (m; 0: the kd-tree), found " << grid_cell;
   } else {
     return true;
   }
@@ -73,7 +76,8 @@ void CheckInputs(const Pose& initial, int num_joints, const Scan& scan,
 
 }  // namespace
 
-IcpTemplate::IcpTemplate(const Skinning& skinning, const Pose& articulation, int kd_leaf_size) {
+IcpTemplate::IcpTemplate(const Skinning& skinning, const Pose& articulation, int kd_leaf_size,
+                         double grid_cell) {
   const Template& model = skinning.model();
   num_joints_ = model.num_joints();
   if (articulation.num_joints() != num_joints_) {
@@ -88,15 +92,26 @@ IcpTemplate::IcpTemplate(const Skinning& skinning, const Pose& articulation, int
   local.rotation.setIdentity();
   skinning.Apply(local, &vertices_);
   ComputeVertexNormals(vertices_, model.triangles, &normals_);
-  index_ = std::make_unique<PointCloudIndex>(vertices_, kd_leaf_size);
+  if (grid_cell > 0.0) {
+    grid_ = std::make_unique<NearestGrid>(vertices_, grid_cell);
+  } else {
+    index_ = std::make_unique<PointCloudIndex>(vertices_, kd_leaf_size);
+  }
 }
 
 IcpTemplate::~IcpTemplate() = default;
 
+int IcpTemplate::NearestWithin(const Eigen::Vector3d& query, double bound2,
+                               double* distance2) const {
+  return grid_ ? grid_->NearestWithin(query, bound2, distance2)
+               : index_->NearestWithin(query, bound2, distance2);
+}
+
 IcpInitResult AlignByIcp(const Skinning& skinning, const Pose& initial, const Scan& scan,
                          const IcpInitOptions& options) {
   CheckInputs(initial, skinning.model().num_joints(), scan, options);
-  return AlignByIcp(IcpTemplate(skinning, initial, options.kd_leaf_size), initial, scan, options);
+  return AlignByIcp(IcpTemplate(skinning, initial, options.kd_leaf_size, options.grid_cell),
+                   initial, scan, options);
 }
 
 IcpInitResult AlignByIcp(const IcpTemplate& target, const Pose& initial, const Scan& scan,
@@ -105,7 +120,6 @@ IcpInitResult AlignByIcp(const IcpTemplate& target, const Pose& initial, const S
   // Articulated template without its global similarity: x_t, n_t.
   const Eigen::MatrixX3d& x = target.vertices();
   const Eigen::MatrixX3d& xn = target.normals();
-  const PointCloudIndex& index = target.index();
 
   // Subsampled scan.
   const int stride =
@@ -170,7 +184,7 @@ IcpInitResult AlignByIcp(const IcpTemplate& target, const Pose& initial, const S
             bound2, (x.row(previous[k]).transpose() - q).squaredNorm() * (1.0 + 1e-9) + 1e-300);
       }
       double d2 = 0.0;
-      const int t = index.NearestWithin(q, bound2, &d2);
+      const int t = target.NearestWithin(q, bound2, &d2);
       previous[k] = t;
       const double world_d2 = d2 * scale * scale;
       if (t < 0 || world_d2 > max_d2) continue;

@@ -37,6 +37,11 @@ struct IcpInitOptions {
   // the same. 24 rather than nanoflann's usual 10: the first frame's ICP 11-13 % faster
   // (docs/fitting-speed.md, "The first frame: candidate fits side by side").
   int kd_leaf_size = 24;
+  // > 0: the template's nearest-vertex search on a uniform grid of cubic cells of this side
+  // (m, template frame; NearestGrid) instead of the kd-tree: the same nearest vertex, a tenth
+  // of the build, but each query's cost grows with (max_distance / grid_cell)^3, so for
+  // alignments that start close (the tracker's scale sample, `fitting.scale_sample_grid_cell`).
+  double grid_cell = 0.0;
 
   bool IsValid(std::string* error) const;
 };
@@ -50,6 +55,7 @@ struct IcpInitResult {
   bool converged = false;
 };
 
+class NearestGrid;
 class PointCloudIndex;
 
 // The articulated template of a pose without its global similarity (scale 1, no rotation or
@@ -58,18 +64,22 @@ class PointCloudIndex;
 // several facings of each arm pose).
 class IcpTemplate {
  public:
-  // Throws artex::Error for a pose with the wrong joint count or kd_leaf_size < 1
-  // (IcpInitOptions::kd_leaf_size).
-  IcpTemplate(const Skinning& skinning, const Pose& articulation, int kd_leaf_size = 24);
+  // The vertices' index: a kd-tree of kd_leaf_size points per leaf, or with grid_cell > 0 a
+  // NearestGrid of that cell (IcpInitOptions). Throws artex::Error for a pose with the wrong
+  // joint count, kd_leaf_size < 1 or an invalid grid_cell.
+  IcpTemplate(const Skinning& skinning, const Pose& articulation, int kd_leaf_size = 24,
+              double grid_cell = 0.0);
   ~IcpTemplate();
   const Eigen::MatrixX3d& vertices() const { return vertices_; }
   const Eigen::MatrixX3d& normals() const { return normals_; }
-  const PointCloudIndex& index() const { return *index_; }
+  // PointCloudIndex::NearestWithin over the vertices, by whichever index was built.
+  int NearestWithin(const Eigen::Vector3d& query, double bound2, double* distance2) const;
   int num_joints() const { return num_joints_; }
 
  private:
   Eigen::MatrixX3d vertices_, normals_;
   std::unique_ptr<PointCloudIndex> index_;
+  std::unique_ptr<NearestGrid> grid_;
   int num_joints_ = 0;
 };
 

@@ -257,7 +257,8 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
     // Posed once per arm pose, shared by its facings' coarse placements and ICP alignments.
     std::vector<std::unique_ptr<IcpTemplate>> targets(num_arms);
     ForEachConcurrently(num_arms, [&](int a) {
-      targets[a] = std::make_unique<IcpTemplate>(skinning, arm_poses[a].second, icp.kd_leaf_size);
+      targets[a] = std::make_unique<IcpTemplate>(skinning, arm_poses[a].second, icp.kd_leaf_size,
+                                                 icp.grid_cell);
     });
     result.hypotheses.resize(num_arms * num_yaws);
     ForEachConcurrently(num_arms * num_yaws, [&](int i) {

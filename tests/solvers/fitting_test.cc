@@ -720,6 +720,12 @@ TEST(FitOptionsTest, InvalidOptionsThrow) {
   EXPECT_THROW(EMFitter(model, options), Error);
   options.scale_sample_tolerance = 1e-4;
   EXPECT_NO_THROW(EMFitter(model, options));
+  options.scale_sample_grid_cell = -0.03;  // 0 (icp_init's) or > 0
+  EXPECT_THROW(EMFitter(model, options), Error);
+  options.scale_sample_grid_cell = std::numeric_limits<double>::infinity();
+  EXPECT_THROW(EMFitter(model, options), Error);
+  options.scale_sample_grid_cell = 0.0;
+  EXPECT_NO_THROW(EMFitter(model, options));
   FitSolverOptions solver;
   solver.num_threads = 0;
   EXPECT_THROW(FitSolver::Create(solver), Error);
