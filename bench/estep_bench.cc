@@ -12,6 +12,8 @@
 //   BM_MStepJacobian:    posing the fitted vertices with their skinning Jacobian (one
 //                        Gauss-Newton evaluation, PrepareFitEvaluation)
 //   BM_MStepNormalEquations: the data term's J^T J and J^T r on that evaluation
+//   BM_FittedNormals/<0|1>: a normal refresh of the fitted vertices: the whole template's
+//                        normals (0) or only the fitted vertices' (1, ComputeVertexNormalsOf)
 //   BM_IndexNearestBuild/<cell mm>: PointCloudIndex (its kd-tree; cell 0) or NearestGrid over
 //                        the whole posed template (the ICP's and the scale sample's target),
 //                        and one nearest-point query
@@ -230,6 +232,32 @@ void BM_MStepNormalEquations(benchmark::State& state) {
 BENCHMARK(BM_MStepNormalEquations)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // The ICP's target: the posed template; its queries: a fixed-stride subsample of the scan.
+// A normal refresh of a tracking frame's fitted vertices from the posed template: range(0) = 0
+// the whole template's normals, then the fitted rows (before); 1 only the fitted vertices',
+// from their incident triangles (EMFitter now).
+void BM_FittedNormals(benchmark::State& state) {
+  const Fixture& f = GetFixture();
+  const EMFitter fitter(f.model, EMFitterOptions());
+  const std::vector<int>& fit = fitter.fit_vertices(true);
+  const IncidentTriangles incident =
+      FindIncidentTriangles(f.model.triangles, fit, f.model.num_vertices());
+  Eigen::MatrixX3d whole, normals(fit.size(), 3);
+  const double cpu_start = ProcessCpuSeconds();
+  for (auto _ : state) {
+    if (state.range(0) == 0) {
+      ComputeVertexNormals(f.full_guess, f.model.triangles, &whole);
+      for (size_t i = 0; i < fit.size(); ++i) normals.row(i) = whole.row(fit[i]);
+    } else {
+      ComputeVertexNormalsOf(f.full_guess, f.model.triangles, incident, &normals);
+    }
+    benchmark::DoNotOptimize(normals.data());
+  }
+  ReportCpu(state, cpu_start);
+  state.counters["triangles"] = static_cast<double>(
+      state.range(0) == 0 ? f.model.num_triangles() : static_cast<int>(incident.triangles.size()));
+}
+BENCHMARK(BM_FittedNormals)->Unit(benchmark::kMicrosecond)->UseRealTime()->Arg(0)->Arg(1);
+
 // The template's nearest-vertex index of an ICP: range(0) = 0 the kd-tree (leaf 24), else
 // a NearestGrid of that cell in mm.
 struct NearestIndex {

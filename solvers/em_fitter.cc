@@ -99,7 +99,7 @@ EMFitter::EMFitter(const Template& tmpl, const EMFitterOptions& options) : optio
     subsets_[1] = MakeFitSubset(tmpl, tracking);
   }
   fit_skinning_ = subsets_[0].skinning ? subsets_[0].skinning.get() : skinning_.get();
-  fit_vertices_ = &subsets_[0].vertices;
+  fit_subset_ = &subsets_[0];
   solver_ = FitSolver::Create(options.solver);
   predictor_ = PosePredictor::Create(options.prediction);
   initial_pose_ = Pose::Identity(tmpl.num_joints());
@@ -129,12 +129,13 @@ EMFitter::EMFitter(const EMFitter& other)
       frame_information_(other.frame_information_) {
   for (int i = 0; i < 2; ++i) {
     subsets_[i].vertices = other.subsets_[i].vertices;
+    subsets_[i].incident = other.subsets_[i].incident;
     if (other.subsets_[i].skinning) {
       subsets_[i].skinning = std::make_unique<Skinning>(*other.subsets_[i].skinning);
     }
   }
   fit_skinning_ = subsets_[0].skinning ? subsets_[0].skinning.get() : skinning_.get();
-  fit_vertices_ = &subsets_[0].vertices;
+  fit_subset_ = &subsets_[0];
 }
 
 std::unique_ptr<EMFitter> EMFitter::Clone() const {
@@ -172,6 +173,7 @@ EMFitter::FitSubset EMFitter::MakeFitSubset(const Template& tmpl, int max_vertic
   subset.triangles << 0, std::min(1, n - 1), std::min(2, n - 1);  // unused placeholder
   subset.joints = tmpl.joints;
   result.skinning = std::make_unique<Skinning>(subset);
+  result.incident = FindIncidentTriangles(tmpl.triangles, result.vertices, v);
   return result;
 }
 
@@ -340,7 +342,7 @@ void EMFitter::BeginFrame(const Scan& scan, const Pose& initial_guess) {
   st.estep = std::make_unique<EStep>(scan, estep_options);
   st.summary.estep_seconds += SecondsSince(estep_start);
   fit_skinning_ = fit.skinning ? fit.skinning.get() : skinning_.get();
-  fit_vertices_ = &fit.vertices;
+  fit_subset_ = &fit;
   next_radii_.clear();
   st.max_iterations = st.first_frame ? 2 * options_.max_iterations : options_.max_iterations;
   if (!radius_mode) st.iterations_per_stage = st.max_iterations;
@@ -376,7 +378,7 @@ EMIterationInfo EMFitter::Iterate() {
   const bool refresh_normals = st.normals_pose_stage != st.stage ||
                                (options_.normal_refresh_iterations > 0 &&
                                 st.normals_age + 1 >= options_.normal_refresh_iterations);
-  const std::vector<int>& fit_vertices = *fit_vertices_;
+  const std::vector<int>& fit_vertices = fit_subset_->vertices;
   const int n_fit = static_cast<int>(fit_vertices.size());
   if (refresh_normals) {
     if (st.summary.iterations == 0 && st.initial_posed.rows() == model.num_vertices()) {
@@ -384,14 +386,14 @@ EMIterationInfo EMFitter::Iterate() {
     } else {
       skinning_->Apply(pose_, &st.full_posed);
     }
-    ComputeVertexNormals(st.full_posed, model.triangles, &st.full_normals);
     if (subset) {
+      // The fitted vertices' normals from their incident triangles: the whole template's
+      // normals at those vertices, bit for bit, for about half the triangles.
+      ComputeVertexNormalsOf(st.full_posed, model.triangles, fit_subset_->incident, &st.normals);
       st.posed.resize(n_fit, 3);
-      st.normals.resize(n_fit, 3);
-      for (int i = 0; i < n_fit; ++i) {
-        st.posed.row(i) = st.full_posed.row(fit_vertices[i]);
-        st.normals.row(i) = st.full_normals.row(fit_vertices[i]);
-      }
+      for (int i = 0; i < n_fit; ++i) st.posed.row(i) = st.full_posed.row(fit_vertices[i]);
+    } else {
+      ComputeVertexNormals(st.full_posed, model.triangles, &st.full_normals);
     }
     st.normals_pose_stage = st.stage;
     st.normals_age = 0;
@@ -580,10 +582,10 @@ FitSummary EMFitter::FinishFrame(bool* ok_out) {
     const auto start = Clock::now();
     fit_skinning_->Apply(pose_, &posed);
     summary.skinning_seconds += SecondsSince(start);
-    const bool subset = fit_skinning_ != skinning_.get();  // row i is vertex (*fit_vertices_)[i]
+    const bool subset = fit_skinning_ != skinning_.get();  // row i is fit_subset_->vertices[i]
     double sum = 0.0;
     for (int i = 0; i < static_cast<int>(posed.rows()); ++i) {
-      sum += (posed.row(i) - st.initial_posed.row(subset ? (*fit_vertices_)[i] : i)).norm();
+      sum += (posed.row(i) - st.initial_posed.row(subset ? fit_subset_->vertices[i] : i)).norm();
     }
     summary.mean_motion = sum / std::max<Eigen::Index>(posed.rows(), 1);
     const double scale_change = std::abs(pose_.scale / st.initial_guess.scale - 1.0);

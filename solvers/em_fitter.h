@@ -29,6 +29,7 @@
 #include "energies/silhouette_term.h"
 #include "energies/unobserved_joint_term.h"
 #include "energies/tikhonov_term.h"
+#include "models/normals.h"
 #include "models/pose.h"
 #include "models/skinning.h"
 #include "models/template.h"
@@ -348,10 +349,12 @@ class EMFitter {
               const Eigen::MatrixXd& information);
 
   // The template vertices a frame fits: their indices and, when a proper subset, their own
-  // skinning (skinning constants are per vertex, so the subset skins exactly like the template).
+  // skinning (skinning constants are per vertex, so the subset skins exactly like the template)
+  // and incident triangles (their normals without the rest of the template's).
   struct FitSubset {
     std::vector<int> vertices;
     std::unique_ptr<Skinning> skinning;  // null: the whole template (skinning_)
+    IncidentTriangles incident;          // of a proper subset
   };
   FitSubset MakeFitSubset(const Template& tmpl, int max_vertices) const;
 
@@ -359,9 +362,9 @@ class EMFitter {
   std::unique_ptr<Skinning> skinning_;
   std::vector<std::shared_ptr<const FittingTerm>> pose_priors_;
   FitSubset subsets_[2];  // [0]: max_fit_vertices; [1]: tracking frames (null skinning: use [0])
-  // The frame's subset (BeginFrame): skinning_ or a subset's, and its template indices.
+  // The frame's subset (BeginFrame) and its skinning: skinning_ or the subset's.
   const Skinning* fit_skinning_ = nullptr;
-  const std::vector<int>* fit_vertices_ = nullptr;
+  const FitSubset* fit_subset_ = nullptr;
   std::unique_ptr<FitSolver> solver_;
   Eigen::MatrixX3d template_colors_;
   Pose initial_pose_;

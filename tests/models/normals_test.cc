@@ -2,8 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <map>
+#include <random>
 #include <utility>
 #include <vector>
 
@@ -142,6 +144,68 @@ TEST(NormalsTest, RejectsOutOfRangeIndices) {
   EXPECT_THROW(ComputeVertexNormals(mesh.vertices, bad, &normals), Error);
   bad(3, 1) = -1;
   EXPECT_THROW(ComputeTriangleNormals(mesh.vertices, bad, &normals), Error);
+}
+
+// A subset's normals from its incident triangles alone are the whole mesh's at those vertices,
+// bit for bit: on a noisy icosphere (random triangle shapes, some degenerate) and with the
+// degenerate and isolated vertices of the test above.
+TEST(NormalsTest, SubsetNormalsEqualTheWholeMeshsBitForBit) {
+  Mesh mesh = Icosphere(3, 0.7, Eigen::Vector3d(0.1, 1.0, 2.0));
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> g(0.0, 0.01);
+  for (Eigen::Index v = 0; v < mesh.vertices.rows(); ++v) {
+    for (int d = 0; d < 3; ++d) mesh.vertices(v, d) += g(rng);
+  }
+  mesh.vertices.row(17) = mesh.vertices.row(5);  // degenerate triangles at vertex 5
+  Eigen::MatrixX3d whole, some;
+  ComputeVertexNormals(mesh.vertices, mesh.triangles, &whole);
+  std::vector<int> which;
+  for (int v = static_cast<int>(mesh.vertices.rows()) - 1; v >= 0; v -= 3) which.push_back(v);
+  ASSERT_NE(std::find(which.begin(), which.end(), 5), which.end());  // the degenerate ones'
+  const IncidentTriangles incident =
+      FindIncidentTriangles(mesh.triangles, which, static_cast<int>(mesh.vertices.rows()));
+  // Each vertex's triangles, ascending, as a brute-force search lists them.
+  for (size_t i = 0; i < which.size(); ++i) {
+    std::vector<int> expected;
+    for (int f = 0; f < mesh.triangles.rows(); ++f) {
+      if ((mesh.triangles.row(f).array() == which[i]).any()) expected.push_back(f);
+    }
+    const std::vector<int> found(incident.triangles.begin() + incident.offset[i],
+                                 incident.triangles.begin() + incident.offset[i + 1]);
+    ASSERT_EQ(found, expected) << "vertex " << which[i];
+  }
+  ComputeVertexNormalsOf(mesh.vertices, mesh.triangles, incident, &some);
+  ASSERT_EQ(some.rows(), static_cast<Eigen::Index>(which.size()));
+  for (size_t i = 0; i < which.size(); ++i) {
+    for (int d = 0; d < 3; ++d) ASSERT_EQ(some(i, d), whole(which[i], d)) << "vertex " << which[i];
+  }
+
+  Eigen::MatrixX3d vertices(6, 3);
+  vertices << 0, 0, 0, 1, 0, 0, 2, 0, 0, 0, 1, 0, 5, 5, 5, 1, 1, 0;
+  Eigen::MatrixX3i triangles(2, 3);
+  triangles << 0, 1, 2, 1, 5, 3;
+  ComputeVertexNormals(vertices, triangles, &whole);
+  const std::vector<int> all = {4, 0, 1, 2, 3, 5};
+  ComputeVertexNormalsOf(vertices, triangles, FindIncidentTriangles(triangles, all, 6), &some);
+  for (size_t i = 0; i < all.size(); ++i) {
+    for (int d = 0; d < 3; ++d) EXPECT_EQ(some(i, d), whole(all[i], d)) << "vertex " << all[i];
+  }
+}
+
+TEST(NormalsTest, SubsetNormalsRejectBadInput) {
+  const Mesh mesh = Icosphere(1, 1.0, Eigen::Vector3d::Zero());
+  const int n = static_cast<int>(mesh.vertices.rows());
+  EXPECT_THROW(FindIncidentTriangles(mesh.triangles, {0, n}, n), Error);
+  EXPECT_THROW(FindIncidentTriangles(mesh.triangles, {-1}, n), Error);
+  EXPECT_THROW(FindIncidentTriangles(mesh.triangles, {3, 4, 3}, n), Error);  // listed twice
+  EXPECT_THROW(FindIncidentTriangles(mesh.triangles, {0}, n - 1), Error);     // triangles
+  const IncidentTriangles incident = FindIncidentTriangles(mesh.triangles, {0, 1}, n);
+  Eigen::MatrixX3d normals;
+  EXPECT_THROW(ComputeVertexNormalsOf(mesh.vertices.topRows(n - 1), mesh.triangles, incident,
+                                      &normals),
+               Error);
+  EXPECT_THROW(ComputeVertexNormalsOf(mesh.vertices, mesh.triangles.topRows(3), incident, &normals),
+               Error);
 }
 
 }  // namespace
