@@ -390,22 +390,23 @@ EStep::EStep(const Scan& scan, const EStepOptions& options) : scan_(scan), optio
   std::string error;
   if (!options.IsValid(&error)) throw Error("E-step options: " + error);
   CheckScan(scan, "E-step");
-  const int n = scan.size();
   full_ = std::make_unique<Cloud>();
-  full_->points = scan.points;
-  full_->normals = scan.normals;
-  if (scan.colors.rows() == n) {
-    full_->colors = scan.colors;
-    full_->color_valid = Eigen::VectorXd::Ones(n);
-    for (int s = 0; s < n && !scan.color_valid.empty(); ++s) {
-      full_->color_valid[s] = scan.color_valid[s] ? 1.0 : 0.0;
-    }
-  }
-  full_->count = Eigen::VectorXd::Ones(n);
 }
 
 const EStep::Cloud& EStep::FullCloud() const {
+  // Built on first use: the radius E-step's voxel clouds read the scan itself.
   std::call_once(full_index_once_, [this] {
+    const int n = scan_.size();
+    full_->points = scan_.points;
+    full_->normals = scan_.normals;
+    if (scan_.colors.rows() == n) {
+      full_->colors = scan_.colors;
+      full_->color_valid = Eigen::VectorXd::Ones(n);
+      for (int s = 0; s < n && !scan_.color_valid.empty(); ++s) {
+        full_->color_valid[s] = scan_.color_valid[s] ? 1.0 : 0.0;
+      }
+    }
+    full_->count = Eigen::VectorXd::Ones(n);
     full_->index = std::make_unique<PointCloudIndex>(full_->points, options_.kdtree_leaf_size);
     full_->Pack();
   });
@@ -434,7 +435,7 @@ const EStep::Cloud& EStep::CloudForRadius(double radius, double gather_radius,
   // are numbered in Morton (Z-curve) order of their grid coordinates, so that cells close in
   // space are close in memory (the pair loops gather them per template vertex).
   const int n = scan_.size();
-  const bool has_color = full_->colors.rows() == n;
+  const bool has_color = scan_.colors.rows() == n;
   std::vector<std::pair<uint64_t, int>> keyed(n);
   const double inv = 1.0 / cell;
   for (int s = 0; s < n; ++s) {
@@ -463,8 +464,8 @@ const EStep::Cloud& EStep::CloudForRadius(double radius, double gather_radius,
       cloud->normals(c, d) += scan_.normals(s, d);
     }
     cloud->count[c] += 1.0;
-    if (has_color && full_->color_valid[s] > 0.0) {
-      for (int d = 0; d < 3; ++d) cloud->colors(c, d) += full_->colors(s, d);
+    if (has_color && (scan_.color_valid.empty() || scan_.color_valid[s])) {
+      for (int d = 0; d < 3; ++d) cloud->colors(c, d) += scan_.colors(s, d);
       color_count[c] += 1.0;
     }
   }

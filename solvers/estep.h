@@ -126,11 +126,11 @@ class EStep {
   const Cloud& CloudForRadius(double radius, double gather_radius,
                               std::pair<double, double>* key = nullptr);
   double GatherRadius(double radius) const;  // list_radius when it covers radius, else radius
-  const Cloud& FullCloud() const;  // the whole scan; its kd-tree is built on first use
+  const Cloud& FullCloud() const;  // the whole scan, with its kd-tree, built on first use
 
   Scan scan_;
   EStepOptions options_;
-  std::unique_ptr<Cloud> full_;
+  std::unique_ptr<Cloud> full_;  // the whole scan as a cloud, filled by FullCloud()
   mutable std::once_flag full_index_once_;
   // Keyed by voxel size and gather radius.
   std::map<std::pair<double, double>, std::unique_ptr<Cloud>> subsampled_;
