@@ -22,8 +22,8 @@
 // `taskset -c 0` (oneTBB follows the affinity mask).
 // Counters: cpu_ms (process CPU per frame, all threads, of the fitter's calls alone: BM_Track*
 // leave out the error against the truth they evaluate after each frame; wall times are
-// unreliable on a shared machine), wall_ratio / cpu_ratio to the default of the same kind, EM iterations, E-/M-step
-// ms, kd-tree queries and scan candidates visited per frame, error_mm (mean per-vertex error
+// unreliable on a shared machine), wall_ratio / cpu_ratio to the default of the same kind, EM
+// iterations, E-/M-step ms, kd-tree queries and scan candidates visited per frame, error_mm (mean per-vertex error
 // against the true pose, i.e. including tangential sliding), and for the dense variant the mean
 // per-vertex difference to the default fit (mm). BM_Track* split cpu_ms: scale_cpu_ms per
 // tracking frame that still samples the scale (the first scale_estimation_frames accepted

@@ -38,8 +38,8 @@ struct IcpInitOptions {
   // (docs/fitting-speed.md, "The first frame: candidate fits side by side").
   int kd_leaf_size = 24;
   // > 0: the template's nearest-vertex search on a uniform grid of cubic cells of this side
-  // (m, template frame; NearestGrid) instead of the kd-tree: the same nearest vertex, a tenth
-  // of the build, but each query's cost grows with (max_distance / grid_cell)^3, so for
+  // (m, template frame; NearestGrid) instead of the kd-tree: the same nearest vertex, under a
+  // tenth of the build, but each query's cost grows with (max_distance / grid_cell)^3, so for
   // alignments that start close (the tracker's scale sample, `fitting.scale_sample_grid_cell`).
   double grid_cell = 0.0;
 

@@ -23,6 +23,14 @@ int64_t Floor(double value) {
 }
 }  // namespace
 
+double NearestGrid::AutoCell(const Eigen::MatrixX3d& points) {
+  const Eigen::Index n = points.rows();
+  if (n == 0) return 1.0;
+  const Eigen::Vector3d extent =
+      (points.colwise().maxCoeff() - points.colwise().minCoeff()).transpose().cwiseMax(1e-9);
+  return std::max(std::cbrt(extent.prod() / static_cast<double>(n)), extent.maxCoeff() / 128.0);
+}
+
 NearestGrid::NearestGrid(const Eigen::MatrixX3d& points, double cell)
     : cell_(cell), inv_cell_(1.0 / cell) {
   if (!(std::isfinite(cell) && cell > 0.0)) {
@@ -97,19 +105,24 @@ int NearestGrid::NearestWithin(const Eigen::Vector3d& query, double bound2,
                                  offset[d] - static_cast<double>(last + 1)});
       return g * g;
     };
-    const auto visit = [&](int64_t x, int64_t y, int64_t z) {
-      if ((gap2(0, x, x) + gap2(1, y, y) + gap2(2, z, z)) * cell2 * kSlack >= best) return;
-      const int cell = static_cast<int>((x * dims_[1] + y) * dims_[2] + z);
-      for (int s = begin_[cell]; s < begin_[cell + 1]; ++s) {
+    // The points of cell (x, y, z), whose squared distance along x and y is gap_xy (cells^2).
+    const auto visit = [&](int64_t row, double gap_xy, int64_t z) {
+      const int cell = static_cast<int>(row + z);
+      const int first = begin_[cell], last = begin_[cell + 1];
+      if (first == last) return;
+      if ((gap_xy + gap2(2, z, z)) * cell2 * kSlack >= best) return;
+      for (int s = first; s < last; ++s) {
         const double* p = xyz_.data() + 3 * s;
         double dist = 0.0;
         for (int d = 0; d < 3; ++d) {
           const double diff = query[d] - p[d];
           dist += diff * diff;
         }
-        if (dist < best) {
-          best = dist;
-          best_slot = s;
+        if (dist <= best) {  // rarely: a nearer point, or a tie (the lower index wins)
+          if (dist < best || (best_slot >= 0 && index_[s] < index_[best_slot])) {
+            best = dist;
+            best_slot = s;
+          }
         }
       }
     };
@@ -142,12 +155,16 @@ int NearestGrid::NearestWithin(const Eigen::Vector3d& query, double bound2,
       const int64_t z0 = std::max(lo[2], home[2] - k), z1 = std::min(hi[2], home[2] + k);
       for (int64_t x = x0; x <= x1; ++x) {
         const bool x_edge = x == home[0] - k || x == home[0] + k;
+        const double gap_x = gap2(0, x, x);
         for (int64_t y = y0; y <= y1; ++y) {
+          const int64_t row = (x * dims_[1] + y) * dims_[2];
+          const double gap_xy = gap_x + gap2(1, y, y);
+          if (gap_xy * cell2 * kSlack >= best) continue;
           if (x_edge || y == home[1] - k || y == home[1] + k) {
-            for (int64_t z = z0; z <= z1; ++z) visit(x, y, z);
+            for (int64_t z = z0; z <= z1; ++z) visit(row, gap_xy, z);
           } else {
-            if (home[2] - k >= z0) visit(x, y, home[2] - k);
-            if (home[2] + k <= z1) visit(x, y, home[2] + k);
+            if (home[2] - k >= z0) visit(row, gap_xy, home[2] - k);
+            if (home[2] + k <= z1) visit(row, gap_xy, home[2] + k);
           }
         }
       }

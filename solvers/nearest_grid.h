@@ -1,13 +1,16 @@
-// NearestGrid: the nearest of a point set to a query within a bound, on a uniform grid of cubic
-// cells. Built in one counting sort (a tenth of a kd-tree's build over a template's 12k
-// vertices), exact like PointCloudIndex::NearestWithin, and fast while the bound spans few
-// cells: a query visits the cells within its bound, shell by shell from its own, so its cost
-// grows with (bound / cell)^3. For searches that start close, such as the scale sample's ICP
-// from the fitted pose (docs/fitting-speed.md); the kd-tree serves far ones.
+// NearestGrid: the nearest of a point set to a query (within a bound, or anywhere), on a uniform
+// grid of cubic cells. Built in one counting sort (under a tenth of a kd-tree's build over a
+// template's 12k vertices) and exact: the nearest point and its squared distance computed as
+// PointCloudIndex computes it, the lowest index among equidistant points. A query visits the
+// cells shell by shell from its own and stops at the first shell that cannot hold a nearer
+// point, so it is fast while the answer lies within a few cells. Used where the points move
+// every frame: the scale sample's ICP from the fitted pose (docs/fitting-speed.md) and the
+// output stage's vertex error against the truth (experiments/surface_error.h).
 #pragma once
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 namespace artex {
@@ -19,12 +22,19 @@ class NearestGrid {
   NearestGrid(const Eigen::MatrixX3d& points, double cell);
 
   static constexpr int64_t kMaxCells = int64_t{1} << 24;
+  // About one cell per point over the points' bounding box (surfaces leave most cells empty,
+  // so an occupied cell holds a few points), at most 128 cells along each axis; 1 when empty.
+  static double AutoCell(const Eigen::MatrixX3d& points);
 
   int size() const { return static_cast<int>(index_.size()); }
   // The index of the nearest point whose squared distance is below `bound2` (-1 when none:
-  // distance2 +inf) and that squared distance, computed as PointCloudIndex computes it (so
-  // the same point and the same bits; of equal distances either may be returned).
+  // distance2 +inf) and that squared distance, computed as PointCloudIndex computes it (the
+  // same bits); of equidistant points the lowest index.
   int NearestWithin(const Eigen::Vector3d& query, double bound2, double* distance2) const;
+  // Without a bound: -1 only when there are no points or the query is not finite.
+  int Nearest(const Eigen::Vector3d& query, double* distance2) const {
+    return NearestWithin(query, std::numeric_limits<double>::infinity(), distance2);
+  }
 
  private:
   double cell_ = 0.0, inv_cell_ = 0.0;

@@ -1,8 +1,10 @@
-// The output stage's vertex error (experiments/surface_error.h): the grid's nearest point is
-// the brute-force nearest (the same index and squared distance, bit for bit), also for query
-// points far outside the points' bounding box, degenerate (flat, single-point) sets and
-// duplicates; SurfaceErrors equals the same computation by brute force.
+// The output stage's vertex error (experiments/surface_error.h): the nearest point of its grid
+// (NearestGrid with its automatic cell) is the brute-force nearest (the same index and squared
+// distance, bit for bit), also for query points far outside the points' bounding box,
+// degenerate (flat, single-point) sets and duplicates; SurfaceErrors equals the same
+// computation by brute force.
 #include "experiments/surface_error.h"
+#include "solvers/nearest_grid.h"
 
 #include <gtest/gtest.h>
 
@@ -46,7 +48,7 @@ TEST(SurfaceErrorTest, GridNearestIsBruteForceNearest) {
     for (const int n : {1, 2, 50, 3000}) {
       Eigen::MatrixX3d points = SurfacePoints(n, &rng, flatten);
       if (n >= 50) points.row(7) = points.row(3);  // a duplicate: the lower index wins
-      const NearestPointGrid grid(points);
+      const NearestGrid grid(points, NearestGrid::AutoCell(points));
       for (int q = 0; q < 2000; ++q) {
         // Near the surface, and anywhere in a box three times its size.
         Eigen::Vector3d p = q % 2 ? Eigen::Vector3d(u(rng), u(rng), u(rng))
@@ -62,7 +64,8 @@ TEST(SurfaceErrorTest, GridNearestIsBruteForceNearest) {
   }
   const Eigen::MatrixX3d none(0, 3);
   double d2 = 0.0;
-  EXPECT_EQ(NearestPointGrid(none).Nearest(Eigen::Vector3d::Zero(), &d2), -1);
+  EXPECT_EQ(NearestGrid(none, NearestGrid::AutoCell(none)).Nearest(Eigen::Vector3d::Zero(), &d2),
+            -1);
 }
 
 TEST(SurfaceErrorTest, SurfaceErrorsEqualBruteForce) {
