@@ -21,15 +21,15 @@
 // exact E-step (single frame only: it takes seconds per EM iteration). For one core run under
 // `taskset -c 0` (oneTBB follows the affinity mask).
 // Counters: cpu_ms (process CPU per frame, all threads, of the fitter's calls alone: BM_Track*
-// leave out the error against the truth they evaluate after each frame; wall times are
-// unreliable on a shared machine), wall_ratio / cpu_ratio to the default of the same kind, EM
-// iterations, E-/M-step ms, kd-tree queries and scan candidates visited per frame, error_mm (mean per-vertex error
-// against the true pose, i.e. including tangential sliding), and for the dense variant the mean
-// per-vertex difference to the default fit (mm). BM_Track* split cpu_ms: scale_cpu_ms per
-// tracking frame that still samples the scale (the first scale_estimation_frames accepted
-// frames: a similarity ICP each; scale_frames of the 11), steady_cpu_ms per frame after (the
-// cost of a long sequence). With ARTEX_BENCH_DUMP_POSES set, BM_Track* print every tracked
-// pose parameter as hexadecimal floats to stderr.
+// leave out the error against the truth they evaluate after each frame; wall times are unreliable
+// on a shared machine), wall_ratio / cpu_ratio to the default of the same kind, EM iterations,
+// E-/M-step ms, kd-tree queries and scan candidates visited per frame, error_mm (mean per-vertex
+// error against the true pose, i.e. including tangential sliding), and for the dense variant the
+// mean per-vertex difference to the default fit (mm). BM_Track* split cpu_ms: scale_cpu_ms per
+// tracking frame that still samples the scale (the first scale_estimation_frames accepted frames: a
+// similarity ICP each; scale_frames of the 11), steady_cpu_ms per frame after (the cost of a long
+// sequence). With ARTEX_BENCH_DUMP_POSES set, BM_Track* print every tracked pose parameter as
+// hexadecimal floats to stderr.
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
 

@@ -42,8 +42,8 @@ TEST(NearestGridTest, FindsWhatTheKdTreeFindsBitForBit) {
     for (int q = 0; q < 2000; ++q) {
       // Near the sheet, off it, outside the grid's box and far away.
       const double spread = q % 4 == 0 ? 0.005 : q % 4 == 1 ? 0.05 : q % 4 == 2 ? 0.5 : 5.0;
-      const Eigen::Vector3d query =
-          points.row(q % points.rows()).transpose() + spread * Eigen::Vector3d(g(rng), g(rng), g(rng));
+      const Eigen::Vector3d offset(g(rng), g(rng), g(rng));
+      const Eigen::Vector3d query = points.row(q % points.rows()).transpose() + spread * offset;
       double nearest2 = 0.0;
       const int nearest = tree.Nearest(query, &nearest2);
       // Bounds around the nearest distance (below, at, just above, wider) and unbounded.
