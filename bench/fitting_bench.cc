@@ -444,9 +444,13 @@ void BM_VoxelVertexSubset(benchmark::State& state) {
 }
 BENCHMARK(BM_VoxelVertexSubset)->Unit(benchmark::kMillisecond)->UseRealTime()->Arg(3000)->Arg(2000);
 
+// range(0): the hypotheses' ICP template index, 0 the kd-tree (default), else a grid of that
+// cell in mm (fitting.init.icp.grid_cell).
 void BM_InitializeFit(benchmark::State& state) {
   KinectFixture& f = GetKinectFixture();
   EMFitter fitter(f.model, EMFitterOptions());
+  InitializerOptions init;
+  init.icp.grid_cell = 1e-3 * static_cast<double>(state.range(0));
   InitResult r;
   double icp = 0.0, em = 0.0, quality = 0.0;
   int runs = 0;
@@ -454,7 +458,7 @@ void BM_InitializeFit(benchmark::State& state) {
   const auto wall0 = std::chrono::steady_clock::now();
   for (auto _ : state) {
     fitter.Reset();
-    r = InitializeFit(&fitter, f.data.scans[0], f.data.depth_camera, InitializerOptions());
+    r = InitializeFit(&fitter, f.data.scans[0], f.data.depth_camera, init);
     icp += r.icp_seconds;
     em += r.em_seconds;
     quality += r.quality_seconds;
@@ -484,7 +488,7 @@ void BM_InitializeFit(benchmark::State& state) {
   state.counters["icp_iterations"] = aligned > 0 ? icp_iterations / aligned : 0.0;
   state.counters["icp_converged"] = converged;
 }
-BENCHMARK(BM_InitializeFit)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_InitializeFit)->Unit(benchmark::kMillisecond)->UseRealTime()->Arg(0)->Arg(30);
 
 void BM_FitQuality(benchmark::State& state) {
   KinectFixture& f = GetKinectFixture();
