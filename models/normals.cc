@@ -1,6 +1,7 @@
 #include "models/normals.h"
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -71,7 +72,6 @@ IncidentTriangles FindIncidentTriangles(const Eigen::MatrixX3i& triangles,
     slot[which[i]] = static_cast<int>(i);
   }
   IncidentTriangles result;
-  result.which = which;
   result.offset.assign(which.size() + 1, 0);
   for (int f = 0; f < triangles.rows(); ++f) {
     for (int c = 0; c < 3; ++c) {
@@ -101,7 +101,7 @@ void ComputeVertexNormalsOf(const Eigen::MatrixX3d& vertices, const Eigen::Matri
         << vertices.rows() << " vertices, " << triangles.rows() << " triangles";
     throw Error(msg.str());
   }
-  const int n = static_cast<int>(incident.which.size());
+  const int n = std::max(0, static_cast<int>(incident.offset.size()) - 1);
   // The same types and operations, in the same order, as ComputeVertexNormals per vertex.
   Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> sum(1, 3);
   normals->resize(n, 3);

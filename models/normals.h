@@ -11,19 +11,19 @@ namespace artex {
 // vertices: V x 3; triangles: F x 3 (counter-clockwise from outside); normals: V x 3.
 void ComputeVertexNormals(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& triangles,
                           Eigen::MatrixX3d* normals);
-// The triangles incident to some of a mesh's vertices, ascending per vertex: those of vertex
-// which[i] are triangles[offset[i] .. offset[i + 1]).
+// The triangles incident to a list of a mesh's vertices, ascending per vertex: those of the
+// list's i-th vertex are triangles[offset[i] .. offset[i + 1]).
 struct IncidentTriangles {
-  std::vector<int> which, offset, triangles;
+  std::vector<int> offset, triangles;
   int num_vertices = 0, num_triangles = 0;  // the mesh's
 };
 // Throws artex::Error for a vertex index outside [0, num_vertices) in `which` or `triangles`,
 // or a vertex listed twice in `which`.
 IncidentTriangles FindIncidentTriangles(const Eigen::MatrixX3i& triangles,
                                         const std::vector<int>& which, int num_vertices);
-// The normals ComputeVertexNormals gives the vertices incident.which, bit for bit, computed
-// from their incident triangles alone: normals is |which| x 3, row i vertex which[i]. Throws
-// artex::Error for a mesh of another vertex or triangle count than incident's.
+// The normals ComputeVertexNormals gives the listed vertices, bit for bit, computed from their
+// incident triangles alone: row i is the list's i-th vertex. Throws artex::Error for a mesh of
+// another vertex or triangle count than incident's.
 void ComputeVertexNormalsOf(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& triangles,
                             const IncidentTriangles& incident, Eigen::MatrixX3d* normals);
 // F x 3 unit triangle normals (zero for degenerate triangles).

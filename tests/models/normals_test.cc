@@ -206,6 +206,9 @@ TEST(NormalsTest, SubsetNormalsRejectBadInput) {
                Error);
   EXPECT_THROW(ComputeVertexNormalsOf(mesh.vertices, mesh.triangles.topRows(3), incident, &normals),
                Error);
+  ComputeVertexNormalsOf(Eigen::MatrixX3d(0, 3), Eigen::MatrixX3i(0, 3), IncidentTriangles(),
+                         &normals);  // nothing listed, an empty mesh
+  EXPECT_EQ(normals.rows(), 0);
 }
 
 }  // namespace
