@@ -162,9 +162,9 @@ int NearestGrid::NearestWithin(const Eigen::Vector3d& query, double bound2,
           if (gap_xy * cell2 * kSlack >= best) continue;
           if (x_edge || y == home[1] - k || y == home[1] + k) {
             for (int64_t z = z0; z <= z1; ++z) visit(row, gap_xy, z);
-          } else {
-            if (home[2] - k >= z0) visit(row, gap_xy, home[2] - k);
-            if (home[2] + k <= z1) visit(row, gap_xy, home[2] + k);
+          } else if (z0 <= z1) {  // the two ends of the column, where they lie in the grid
+            if (home[2] - k == z0) visit(row, gap_xy, z0);
+            if (home[2] + k == z1) visit(row, gap_xy, z1);
           }
         }
       }
