@@ -13,6 +13,7 @@
 #include <utility>
 
 #include "models/error.h"
+#include "models/numeric.h"
 #include "solvers/estep_pairs.h"
 
 namespace artex {
@@ -119,12 +120,9 @@ using IndexBuffer = std::vector<int, DefaultInitAllocator<int>>;
 inline int64_t GridCoordinate(double scaled) {
   constexpr int64_t kOffset = 1 << 20;
   constexpr double kRange = 1u << 22;  // beyond: clamped whatever the rounding
-  // floor() without the library call (no SSE4.1 rounding in the baseline ISA): truncate, then
-  // step down for negative non-integers; NaN lands on the lower clamp as before.
+  // NaN lands on the lower clamp.
   if (!(std::abs(scaled) < kRange)) return scaled > 0.0 ? (int64_t{1} << 21) - 1 : 0;
-  int64_t i = static_cast<int64_t>(scaled);
-  i -= static_cast<double>(i) > scaled;
-  return std::clamp<int64_t>(i + kOffset, 0, (int64_t{1} << 21) - 1);
+  return std::clamp<int64_t>(FloorToInt64(scaled) + kOffset, 0, (int64_t{1} << 21) - 1);
 }
 
 // Sorts (key, index) pairs whose indices ascend in input order exactly as std::sort would

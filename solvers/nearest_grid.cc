@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "models/error.h"
+#include "models/numeric.h"
 
 namespace artex {
 
@@ -13,14 +14,6 @@ namespace {
 // The cells' distance bounds are shrunk by far more than their rounding, so that no cell is
 // skipped that holds a point nearer than the best found.
 constexpr double kSlack = 1.0 - 1e-9;
-
-// floor() of a value of moderate size without the library call (no SSE4.1 rounding in the
-// baseline ISA): truncate, then step down for negative non-integers.
-int64_t Floor(double value) {
-  int64_t i = static_cast<int64_t>(value);
-  i -= static_cast<double>(i) > value;
-  return i;
-}
 }  // namespace
 
 double NearestGrid::AutoCell(const Eigen::MatrixX3d& points) {
@@ -54,14 +47,14 @@ NearestGrid::NearestGrid(const Eigen::MatrixX3d& points, double cell)
         << " cells over the points' bounding box, expected at most " << kMaxCells;
     throw Error(msg.str());
   }
-  for (int d = 0; d < 3; ++d) dims_[d] = Floor((high[d] - low[d]) * inv_cell_) + 1;
+  for (int d = 0; d < 3; ++d) dims_[d] = FloorToInt64((high[d] - low[d]) * inv_cell_) + 1;
   // Counting sort of the points by cell.
   std::vector<int> cell_of(n);
   begin_.assign(static_cast<size_t>(cells) + 1, 0);
   for (Eigen::Index i = 0; i < n; ++i) {
     int64_t c[3];
     for (int d = 0; d < 3; ++d) {
-      c[d] = std::min(dims_[d] - 1, Floor((points(i, d) - low_[d]) * inv_cell_));
+      c[d] = std::min(dims_[d] - 1, FloorToInt64((points(i, d) - low_[d]) * inv_cell_));
     }
     cell_of[i] = static_cast<int>((c[0] * dims_[1] + c[1]) * dims_[2] + c[2]);
     ++begin_[cell_of[i] + 1];
@@ -93,9 +86,9 @@ int NearestGrid::NearestWithin(const Eigen::Vector3d& query, double bound2,
       const double limit = static_cast<double>(dims_[d]) + 2.0;
       const double clamped = std::clamp(offset[d], -2.0, limit);
       const double span = std::min(reach, limit + 2.0);
-      home[d] = Floor(clamped);
-      lo[d] = std::max<int64_t>(0, Floor(clamped - span));
-      hi[d] = std::min<int64_t>(dims_[d] - 1, Floor(clamped + span));
+      home[d] = FloorToInt64(clamped);
+      lo[d] = std::max<int64_t>(0, FloorToInt64(clamped - span));
+      hi[d] = std::min<int64_t>(dims_[d] - 1, FloorToInt64(clamped + span));
       reaches = reaches && lo[d] <= hi[d];
     }
     const double cell2 = cell_ * cell_;
