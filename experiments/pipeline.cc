@@ -256,6 +256,10 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
   const int shape_calibrated_frame = track.shape_calibrated_frame;
   result.shape_calibrated_frame = shape_calibrated_frame;
   result.shape_final_frame = track.shape_final_frame;
+  result.shape_detail_frame = track.shape_detail_frame;
+  // A sequence that ended before the surface detail's frames were all kept: estimated from
+  // those kept, for subject.glb (and shape.retrack's second pass); no frame was tracked with it.
+  if (shape.FinishDetail()) tmpl = shape.SubjectTemplate();
   if (shape.enabled() && shape_calibrated_frame >= 0) AddShapeWarnings(shape, &result.warnings);
   const std::vector<Pose>& poses = output.poses;
   const std::vector<std::string>& failures = output.failures;
@@ -384,6 +388,7 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
     shape_info.global_scale = poses.empty() ? 1.0 : poses.back().scale;
     shape_info.calibrated_frame = shape_calibrated_frame;
     shape_info.final_frame = track.shape_final_frame;
+    shape_info.detail_frame = track.shape_detail_frame;
     shape_info.truth = subject.get();
     AddShapeToSummary(out_dir + "/summary.json", result, shape_info);
     if (shape.enabled()) WriteTemplateGlb(out_dir + "/subject.glb", tmpl, texturer ? &texture : nullptr);

@@ -635,7 +635,7 @@ void BindShape(const Config& c, ShapeOptions* o) {
                "scan_to_model_normal_distance", "scan_to_model_girth", "hold_unseen",
                "chain_prior_weight", "limb_girth_prior_weight", "prior_weight", "pose_damping",
                "bone_min", "bone_max", "girth_min", "girth_max", "refine_every",
-               "refine_prior_weight", "max_fit_vertices", "joint_limits"});
+               "refine_prior_weight", "max_fit_vertices", "joint_limits", "detail"});
   c.GetEnum("mode", ShapeModeNames(), &o->mode);
   c.Get("retrack", &o->retrack);
   c.Get("symmetric", &o->symmetric);
@@ -671,6 +671,23 @@ void BindShape(const Config& c, ShapeOptions* o) {
   c.Get("refine_every", &o->refine_every);
   c.Get("refine_prior_weight", &o->refine_prior_weight);
   c.Get("max_fit_vertices", &o->max_fit_vertices);
+  const Config d = c.Section("detail");
+  d.CheckKeys({"enabled", "frames", "iterations", "max_distance", "max_tangential",
+               "normal_min_cos", "visibility_min_cos", "occlusion_tolerance", "smoothness",
+               "prior_weight", "max_offset", "bias_bins", "bias_per_segment"});
+  d.Get("enabled", &o->detail.enabled);
+  d.Get("frames", &o->detail.frames);
+  d.Get("iterations", &o->detail.iterations);
+  d.Get("max_distance", &o->detail.max_distance);
+  d.Get("max_tangential", &o->detail.max_tangential);
+  d.Get("normal_min_cos", &o->detail.normal_min_cos);
+  d.Get("visibility_min_cos", &o->detail.visibility_min_cos);
+  d.Get("occlusion_tolerance", &o->detail.occlusion_tolerance);
+  d.Get("smoothness", &o->detail.smoothness);
+  d.Get("prior_weight", &o->detail.prior_weight);
+  d.Get("max_offset", &o->detail.max_offset);
+  d.Get("bias_bins", &o->detail.bias_bins);
+  d.Get("bias_per_segment", &o->detail.bias_per_segment);
   std::string why;
   if (!o->IsValid(&why)) throw Error(c.Path("") + " " + why);
 }

@@ -90,6 +90,8 @@ class TrackStage {
   int shape_calibrated_frame = -1;  // record.frame of the first swap (-1: none)
   // record.frame of the last calibration round's swap (shape_->calibrated() from then on).
   int shape_final_frame = -1;
+  // record.frame of the surface detail's swap (-1: none; shape.detail).
+  int shape_detail_frame = -1;
 
   // Totals over the processed frames.
   double fit_seconds = 0.0, init_seconds = 0.0, quality_seconds = 0.0;

@@ -116,6 +116,42 @@ void AddShapeToSummary(const std::string& summary_path, const PipelineResult& re
                           {"initial_cost", c.initial_cost},
                           {"final_cost", c.final_cost},
                           {"seconds", c.seconds}};
+  if (est.options().detail.enabled) {
+    const ShapeDetailSummary& d = est.detail_summary();
+    shape["detail"] = {{"estimated", est.detail().size() > 0},
+                       {"after_frame", info.detail_frame},
+                       {"frames", d.frames},
+                       {"iterations", d.iterations},
+                       {"observed_vertices", d.observed_vertices},
+                       {"observations", d.observations},
+                       {"residual_before_mm", 1e3 * d.residual_before},
+                       {"residual_after_mm", 1e3 * d.residual_after},
+                       {"frame_mean_residual_mm", 1e3 * d.frame_mean_residual},
+                       {"mean_offset_mm", 1e3 * d.mean_offset},
+                       {"rms_offset_mm", 1e3 * d.rms_offset},
+                       {"max_offset_mm", 1e3 * d.max_offset},
+                       {"vertices_at_bound", d.at_bound},
+                       {"seconds", d.seconds}};
+    // Per segment (the vertices of each joint): mean and rms offset (mm, + outwards).
+    const Eigen::VectorXd& offsets = est.detail();
+    if (offsets.size() == subject.num_vertices()) {
+      nlohmann::json by_joint = nlohmann::json::object();
+      for (int j = 0; j < subject.num_joints(); ++j) {
+        double sum = 0.0, sum2 = 0.0;
+        int n = 0;
+        for (int v = 0; v < subject.num_vertices(); ++v) {
+          if (subject.vertex_joint[v] != j) continue;
+          sum += offsets[v];
+          sum2 += offsets[v] * offsets[v];
+          ++n;
+        }
+        if (n == 0) continue;
+        by_joint[subject.joints[j].name] = {{"mean_mm", 1e3 * sum / n},
+                                            {"rms_mm", 1e3 * std::sqrt(sum2 / n)}};
+      }
+      shape["detail"]["segments"] = by_joint;
+    }
+  }
   shape["refinements"] = est.refinements();
   shape["refine_seconds"] = est.refine_seconds();
   shape["rounds"] = est.rounds_done();
@@ -157,6 +193,10 @@ void AddShapeToSummary(const std::string& summary_path, const PipelineResult& re
     add_window(info.calibrated_frame, false, "calibration");
     // ... and from the last round's swap (the calibration phase complete; fixed: all frames).
     add_window(info.final_frame, est.enabled() && info.final_frame < 0, "final_calibration");
+    // ... and from the surface detail's swap.
+    if (est.options().detail.enabled) {
+      add_window(info.detail_frame, info.detail_frame < 0, "detail");
+    }
   }
   summary["shape"] = shape;
   WriteFileAtomically(summary_path, summary.dump(2) + "\n");

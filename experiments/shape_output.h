@@ -20,6 +20,7 @@ struct ShapeRunInfo {
   double global_scale = 1.0;          // s0 of the last tracked pose
   int calibrated_frame = -1;          // sequence frame after which the shape was swapped in
   int final_frame = -1;               // ... after the last calibration round (phase complete)
+  int detail_frame = -1;              // ... with the surface detail (shape.detail; -1: none)
   const Template* truth = nullptr;    // ground-truth subject (bone length errors), optional
 };
 

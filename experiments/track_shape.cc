@@ -23,6 +23,7 @@ void TrackStage::FeedShape(const Pose& pose, int frame) {
   if (shape_calibrated_frame < 0) shape_calibrated_frame = frame;
   // The last calibration round's swap (the shape is final, or refined from here on).
   if (shape_final_frame < 0 && shape_->calibrated()) shape_final_frame = frame;
+  if (shape_detail_frame < 0 && shape_->detail().size() > 0) shape_detail_frame = frame;
 }
 
 }  // namespace artex

@@ -76,6 +76,8 @@ bool ShapeOptions::IsValid(std::string* error) const {
   } else if (!estep.IsValid(error)) {
     if (error) *error = "shape.estep: " + *error;
     return false;
+  } else if (!detail.IsValid(error)) {
+    return false;
   }
   if (msg.str().empty()) return true;
   if (error) *error = msg.str();
@@ -566,6 +568,16 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
   return summary;
 }
 
+Template ShapeEstimator::SubjectTemplate() const {
+  Template shaped = model_.Apply(q_);
+  if (detail_.size() == 0) return shaped;
+  return ApplySurfaceDetail(shaped, detail_);
+}
+
+bool ShapeEstimator::DetailPending() const {
+  return calibrated_ && options_.detail.enabled && has_depth_camera_ && detail_.size() == 0;
+}
+
 bool ShapeEstimator::AddFrame(const Scan& scan, const Pose& pose, bool scale_settled,
                               Pose* refined) {
   if (!enabled()) return false;
@@ -589,9 +601,22 @@ bool ShapeEstimator::AddFrame(const Scan& scan, const Pose& pose, bool scale_set
     calibrated_ = ++rounds_done_ >= options_.calibration_rounds;
     accepted_ = 0;
     if (refined) *refined = poses_.back();
-    scans_.clear();
-    poses_.clear();
+    // The last round's frames, their poses refined with the final shape, are the surface
+    // detail's first frames.
+    if (DetailPending()) {
+      EstimateDetailWhenDue();
+    } else {
+      scans_.clear();
+      poses_.clear();
+    }
     return true;
+  }
+  if (DetailPending()) {
+    // Tracked with the final shape: every calibration_stride-th accepted frame is one more.
+    if (accepted_++ % options_.calibration_stride != 0) return false;
+    scans_.push_back(scan);
+    poses_.push_back(pose);
+    return EstimateDetailWhenDue();
   }
   if (options_.refine_every <= 0 || ++after_ % options_.refine_every != 0) return false;
   std::vector<Pose> one = {pose};
@@ -600,6 +625,25 @@ bool ShapeEstimator::AddFrame(const Scan& scan, const Pose& pose, bool scale_set
   ++refinements_;
   refine_seconds_ += s.seconds;
   if (refined) *refined = one[0];
+  return true;
+}
+
+bool ShapeEstimator::FinishDetail() {
+  if (!DetailPending() || scans_.empty()) return false;
+  return EstimateDetailWhenDue(/*now=*/true);
+}
+
+bool ShapeEstimator::EstimateDetailWhenDue(bool now) {
+  if (!now &&
+      static_cast<int>(scans_.size()) < options_.calibration_frames + options_.detail.frames) {
+    return false;
+  }
+  std::vector<const Scan*> pointers;
+  for (const Scan& s : scans_) pointers.push_back(&s);
+  detail_ = EstimateSurfaceDetail(model_.Apply(q_), pointers, poses_, depth_camera_,
+                                  options_.detail, &detail_summary_);
+  scans_.clear();
+  poses_.clear();
   return true;
 }
 

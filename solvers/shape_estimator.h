@@ -24,6 +24,7 @@
 #include "sensors/scan.h"
 #include "solvers/estep.h"
 #include "solvers/out_of_view.h"
+#include "solvers/shape_detail.h"
 
 namespace artex {
 
@@ -126,6 +127,9 @@ struct ShapeOptions {
   double refine_prior_weight = 1e-2;  // towards the current estimate
   int max_fit_vertices = 3000;        // template vertices in the solve (voxel subset; 0: all)
   EStepOptions estep;                 // the correspondence weights (colour term unused)
+  // Per-vertex offsets along the normals after the last calibration round (solvers/
+  // shape_detail.h; off by default). Needs the depth camera (SetDepthCamera).
+  ShapeDetailOptions detail;
 
   bool IsValid(std::string* error) const;
 };
@@ -158,10 +162,20 @@ class ShapeEstimator {
   bool enabled() const { return options_.mode != ShapeMode::kFixed; }
   // True once every calibration round has been solved.
   bool calibrated() const { return calibrated_; }
+  // The rounds are solved and the surface detail (detail.enabled, a depth camera set) is
+  // still to come.
+  bool DetailPending() const;
+  // Estimates a pending detail from the frames kept so far (the last round's, and fewer than
+  // detail.frames more): the sequence ended first. Returns true when it did.
+  bool FinishDetail();
   int rounds_done() const { return rounds_done_; }
   const Eigen::VectorXd& parameters() const { return q_; }  // Q entries
   BodyShape shape() const { return model_.Expand(q_); }
-  Template SubjectTemplate() const { return model_.Apply(q_); }
+  // The shape model applied, with the surface detail (detail.enabled) once estimated.
+  Template SubjectTemplate() const;
+  // The surface detail's offsets (V, rest units; empty until estimated) and its summary.
+  const Eigen::VectorXd& detail() const { return detail_; }
+  const ShapeDetailSummary& detail_summary() const { return detail_summary_; }
 
   // The depth camera (intrinsics, world_to_camera; its centre for the bias correction's
   // visibility) and the tracker's out-of-view test, for hold_unseen.
@@ -201,6 +215,8 @@ class ShapeEstimator {
   double refine_seconds() const { return refine_seconds_; }
 
  private:
+  // Estimates the detail once the last round's and detail.frames more frames are kept.
+  bool EstimateDetailWhenDue(bool now = false);
   void ClampToBounds(Eigen::VectorXd* q) const;
   void Bounds(int p, double* lo, double* hi) const;  // of q_p (factor - 1)
 
@@ -224,6 +240,8 @@ class ShapeEstimator {
   ShapeSolveSummary calibration_;
   int refinements_ = 0;
   double refine_seconds_ = 0.0;
+  Eigen::VectorXd detail_;
+  ShapeDetailSummary detail_summary_;
 };
 
 }  // namespace artex
