@@ -18,6 +18,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "experiments/config.h"
@@ -594,6 +595,54 @@ TEST(PipelineTest, ShapeCalibrationWritesTheSubjectTemplate) {
   bad.Set("shape.mode", "sculpted");
   const std::string msg = ErrorOf([&] { LoadPipelineOptions(bad); });
   EXPECT_NE(msg.find("shape.mode"), std::string::npos) << msg;
+}
+
+// Section shape.detail: the surface detail follows the last round after detail.frames more
+// frames and is swapped in (subject.glb carries it; the frames before the swap are tracked as
+// without it), or, when the sequence ends first, is estimated at the end (no frame tracked with
+// it); off, summary.json has no detail.
+TEST(PipelineTest, ShapeDetailFollowsTheCalibration) {
+  const auto run = [&](const std::string& name, const std::string& enabled,
+                       const std::string& frames) {
+    Config config = SmallShapeConfig();
+    config.Set("shape.detail.enabled", enabled);
+    config.Set("shape.detail.frames", frames);
+    const fs::path out = OutDir(name);
+    Track(TestData().sequence, out.string(), config);
+    std::ifstream in(out / "summary.json");
+    const nlohmann::json shape = nlohmann::json::parse(in).at("shape");
+    std::ifstream poses(out / "poses.csv");
+    std::vector<std::string> rows;
+    for (std::string line; std::getline(poses, line);) rows.push_back(line);
+    const Template subject = ReadTemplateGlb((out / "subject.glb").string());
+    return std::make_tuple(shape, rows, subject);
+  };
+  const auto [off, off_rows, off_subject] = run("run_detail_off", "false", "1");
+  const auto [on, on_rows, on_subject] = run("run_detail_on", "true", "1");
+  const auto [end, end_rows, end_subject] = run("run_detail_end", "true", "100");
+  EXPECT_FALSE(off.contains("detail"));
+  EXPECT_TRUE(off.at("calibrated").get<bool>());
+
+  const nlohmann::json& detail = on.at("detail");
+  EXPECT_TRUE(detail.at("estimated").get<bool>());
+  EXPECT_EQ(detail.at("frames").get<int>(), 2);  // the round's frame and one more
+  const int swap = detail.at("after_frame").get<int>();
+  EXPECT_GT(swap, on.at("final_calibration_after_frame").get<int>());
+  EXPECT_LT(swap, kFrames - 1);
+  EXPECT_GT(detail.at("observations").get<int>(), 0);
+  EXPECT_TRUE(detail.at("segments").contains("chest"));
+  EXPECT_TRUE(on.contains("mean_vertex_error_mm_after_detail"));
+  ASSERT_EQ(on_rows.size(), off_rows.size());
+  for (int f = 0; f <= swap; ++f) EXPECT_EQ(on_rows[1 + f], off_rows[1 + f]) << f;
+  EXPECT_EQ(on_subject.num_vertices(), off_subject.num_vertices());
+  EXPECT_EQ(on_subject.uvs, off_subject.uvs);
+  EXPECT_GT((on_subject.vertices - off_subject.vertices).cwiseAbs().maxCoeff(), 1e-5);
+
+  const nlohmann::json& late = end.at("detail");
+  EXPECT_TRUE(late.at("estimated").get<bool>());
+  EXPECT_EQ(late.at("after_frame").get<int>(), -1);
+  EXPECT_EQ(end_rows, off_rows);
+  EXPECT_GT((end_subject.vertices - off_subject.vertices).cwiseAbs().maxCoeff(), 1e-5);
 }
 
 // A parameter the solve pushes against its bound is named in a warning and in summary.json
