@@ -9,6 +9,8 @@
 //   BM_TrackSubjectTemplate: the same frames with the subject's template as the tracker's own
 //                    (no SetRestShape): what SetRestShape itself costs, if anything.
 //   BM_CalibrationSolve: ShapeEstimator::Solve over 5 frames (default shape options).
+//   BM_SurfaceDetail/<frames>: EstimateSurfaceDetail (the surface detail after the last round,
+//                    default options) over that many frames.
 // Counters: cpu_ms per frame (process CPU, all threads; the machine is shared), em_iterations per
 // frame, cpu_ms_per_iteration, candidates_per_iteration (scan points the E-step visits).
 #include <benchmark/benchmark.h>
@@ -20,6 +22,7 @@
 #include "models/shape.h"
 #include "models/template_generator.h"
 #include "solvers/em_fitter.h"
+#include "solvers/shape_detail.h"
 #include "solvers/shape_estimator.h"
 #include "tests/solvers/fitting_test_util.h"
 
@@ -134,10 +137,36 @@ void BM_CalibrationSolve(benchmark::State& state) {
   state.counters["cpu_ms"] = 1000.0 * cpu / std::max(1, solves);
 }
 
+// The surface detail of the template against the subject's scans over state.range(0) frames.
+void BM_SurfaceDetail(benchmark::State& state) {
+  const ShapeFixture& f = Fixture();
+  PinholeCamera camera;
+  camera.world_to_camera = PinholeCamera::LookAt(Eigen::Vector3d(0.0, 1.0, 3.0),
+                                                 Eigen::Vector3d(0.0, 1.0, 0.0),
+                                                 Eigen::Vector3d::UnitY());
+  const int frames = static_cast<int>(state.range(0));
+  std::vector<const Scan*> scans;
+  for (int i = 0; i < frames; ++i) scans.push_back(&f.subject_scans[i]);
+  const std::vector<Pose> poses(f.poses.begin(), f.poses.begin() + frames);
+  double cpu = 0.0;
+  int runs = 0;
+  ShapeDetailSummary summary;
+  for (auto _ : state) {
+    const double c0 = CpuSeconds();
+    benchmark::DoNotOptimize(
+        EstimateSurfaceDetail(f.base, scans, poses, camera, ShapeDetailOptions(), &summary));
+    cpu += CpuSeconds() - c0;
+    ++runs;
+  }
+  state.counters["cpu_ms"] = 1000.0 * cpu / std::max(1, runs);
+  state.counters["observations"] = summary.observations;
+}
+
 BENCHMARK(BM_TrackBase)->Unit(benchmark::kMillisecond)->Iterations(10);
 BENCHMARK(BM_TrackSubject)->Unit(benchmark::kMillisecond)->Iterations(10);
 BENCHMARK(BM_TrackSubjectTemplate)->Unit(benchmark::kMillisecond)->Iterations(10);
 BENCHMARK(BM_CalibrationSolve)->Unit(benchmark::kMillisecond)->Iterations(1)->Arg(0)->Arg(1);
+BENCHMARK(BM_SurfaceDetail)->Unit(benchmark::kMillisecond)->Iterations(3)->Arg(5)->Arg(8);
 
 }  // namespace
 }  // namespace artex
