@@ -566,6 +566,23 @@ Config SmallShapeConfig() {
   return config;
 }
 
+// A run of `config` into OutDir(name): summary.json's shape and poses.csv's rows.
+struct ShapeRun {
+  nlohmann::json shape;
+  std::vector<std::string> rows;
+  fs::path out;
+};
+ShapeRun RunShape(const std::string& name, const Config& config) {
+  ShapeRun run;
+  run.out = OutDir(name);
+  Track(TestData().sequence, run.out.string(), config);
+  std::ifstream in(run.out / "summary.json");
+  run.shape = nlohmann::json::parse(in).at("shape");
+  std::ifstream poses(run.out / "poses.csv");
+  for (std::string line; std::getline(poses, line);) run.rows.push_back(line);
+  return run;
+}
+
 TEST(PipelineTest, ShapeCalibrationWritesTheSubjectTemplate) {
   Config config = SmallShapeConfig();
   const fs::path out = OutDir("run_shape");
@@ -607,15 +624,9 @@ TEST(PipelineTest, ShapeDetailFollowsTheCalibration) {
     Config config = SmallShapeConfig();
     config.Set("shape.detail.enabled", enabled);
     config.Set("shape.detail.frames", frames);
-    const fs::path out = OutDir(name);
-    Track(TestData().sequence, out.string(), config);
-    std::ifstream in(out / "summary.json");
-    const nlohmann::json shape = nlohmann::json::parse(in).at("shape");
-    std::ifstream poses(out / "poses.csv");
-    std::vector<std::string> rows;
-    for (std::string line; std::getline(poses, line);) rows.push_back(line);
-    const Template subject = ReadTemplateGlb((out / "subject.glb").string());
-    return std::make_tuple(shape, rows, subject);
+    const ShapeRun r = RunShape(name, config);
+    const Template subject = ReadTemplateGlb((r.out / "subject.glb").string());
+    return std::make_tuple(r.shape, r.rows, subject);
   };
   const auto [off, off_rows, off_subject] = run("run_detail_off", "false", "1");
   const auto [on, on_rows, on_subject] = run("run_detail_on", "true", "1");
@@ -678,14 +689,8 @@ TEST(PipelineTest, ShapeJointLimitsApplyToTheShapeSolveOnly) {
                  "{weight: 0.1, joints: {neck: {min_deg: [0, 0, 0], max_deg: [0, 0, 0]},"
                  " head: {min_deg: [0, 0, 0], max_deg: [0, 0, 0]}}}");
     }
-    const fs::path out = OutDir(name);
-    Track(TestData().sequence, out.string(), config);
-    std::ifstream in(out / "summary.json");
-    const nlohmann::json shape = nlohmann::json::parse(in).at("shape");
-    std::ifstream poses(out / "poses.csv");
-    std::vector<std::string> rows;
-    for (std::string line; std::getline(poses, line);) rows.push_back(line);
-    return std::make_pair(shape, rows);
+    const ShapeRun r = RunShape(name, config);
+    return std::make_pair(r.shape, r.rows);
   };
   const auto [plain, plain_rows] = run("run_shape_plain", false);
   const auto [limited, limited_rows] = run("run_shape_limited", true);

@@ -20,6 +20,16 @@
 namespace artex {
 namespace testing_util {
 
+// A noise-free "scan": every vertex of the subject posed as `pose`, with its normal.
+inline Scan VertexScan(const Template& subject, const Pose& pose) {
+  Scan scan;
+  Skinning(subject).Apply(pose, &scan.points);
+  ComputeVertexNormals(scan.points, subject.triangles, &scan.normals);
+  scan.colors = Eigen::MatrixX3d::Zero(scan.points.rows(), 3);
+  scan.color_valid.assign(scan.points.rows(), 0);
+  return scan;
+}
+
 // A capped tube from joint `j`'s centre along `dir` (length, radius), vertices skinned to j.
 // The cross-section is an ellipse (semi-axes radius and 0.6 radius) so that twist about the
 // bone is observable.

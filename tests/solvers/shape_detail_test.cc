@@ -11,6 +11,7 @@
 #include "models/skinning.h"
 #include "models/so3.h"
 #include "solvers/shape_estimator.h"
+#include "tests/solvers/fitting_test_util.h"
 #include "tests/testing_util.h"
 
 namespace artex {
@@ -33,16 +34,6 @@ Pose Turned(const Template& t, double yaw_deg) {
   return p;
 }
 
-// A noise-free "scan": every vertex of the posed subject with its normal.
-Scan ScanOf(const Template& subject, const Pose& pose) {
-  Scan scan;
-  Skinning(subject).Apply(pose, &scan.points);
-  ComputeVertexNormals(scan.points, subject.triangles, &scan.normals);
-  scan.colors = Eigen::MatrixX3d::Zero(scan.points.rows(), 3);
-  scan.color_valid.assign(scan.points.rows(), 0);
-  return scan;
-}
-
 // A smooth field along the body's height: +-6 mm, 1.26 m per period.
 Eigen::VectorXd Bumps(const Template& t) {
   Eigen::VectorXd d(t.num_vertices());
@@ -61,7 +52,7 @@ Frames FourSides(const Template& posed_as, const Template& subject) {
   Frames f;
   for (double yaw : {0.0, 90.0, 180.0, 270.0}) {
     f.poses.push_back(Turned(posed_as, yaw));
-    f.scans.push_back(ScanOf(subject, f.poses.back()));
+    f.scans.push_back(testing_util::VertexScan(subject, f.poses.back()));
   }
   for (const Scan& s : f.scans) f.pointers.push_back(&s);
   return f;

@@ -9,6 +9,7 @@
 #include "models/normals.h"
 #include "models/skinning.h"
 #include "models/so3.h"
+#include "tests/solvers/fitting_test_util.h"
 #include "tests/testing_util.h"
 
 namespace artex {
@@ -25,23 +26,13 @@ Pose RandomPose(int joints, std::mt19937* rng, double spread) {
   return p;
 }
 
-// A noise-free "scan": every vertex of the posed subject with its normal.
-Scan ScanOf(const Template& subject, const Pose& pose) {
-  Scan scan;
-  Skinning(subject).Apply(pose, &scan.points);
-  ComputeVertexNormals(scan.points, subject.triangles, &scan.normals);
-  scan.colors = Eigen::MatrixX3d::Zero(scan.points.rows(), 3);
-  scan.color_valid.assign(scan.points.rows(), 0);
-  return scan;
-}
-
 // `frames` random poses (seeded) and noise-free scans of the subject in them.
 void PosesAndScans(const Template& subject, int frames, double spread, unsigned seed,
                    std::vector<Pose>* poses, std::vector<Scan>* scans) {
   std::mt19937 rng(seed);
   for (int f = 0; f < frames; ++f) {
     poses->push_back(RandomPose(subject.num_joints(), &rng, spread));
-    scans->push_back(ScanOf(subject, poses->back()));
+    scans->push_back(testing_util::VertexScan(subject, poses->back()));
   }
 }
 
@@ -88,7 +79,7 @@ TEST(ShapeEstimatorTest, RecoversKnownShapeFromNoiseFreeScans) {
     std::normal_distribution<double> noise(0.0, 0.03);
     for (int f = 0; f < 4; ++f) {
       const Pose pose = RandomPose(t.num_joints(), &rng, 0.35);
-      scans.push_back(ScanOf(subject, pose));
+      scans.push_back(testing_util::VertexScan(subject, pose));
       Eigen::VectorXd d = Eigen::VectorXd::Zero(pose.num_parameters());
       for (int i = 1; i < d.size(); ++i) d[i] = noise(rng);
       poses.push_back(pose.Retracted(d));  // the tracker's pose, a little off
@@ -260,7 +251,7 @@ TEST(ShapeEstimatorTest, CalibratesAfterTheConfiguredFramesThenFreezes) {
     const Pose pose = RandomPose(t.num_joints(), &rng, 0.2);
     Pose refined;
     // The first frame has no settled scale: it is no calibration frame.
-    if (estimator.AddFrame(ScanOf(subject, pose), pose, /*scale_settled=*/f > 0, &refined)) {
+    if (estimator.AddFrame(testing_util::VertexScan(subject, pose), pose, /*scale_settled=*/f > 0, &refined)) {
       EXPECT_EQ(changed_at, -1) << "frozen after calibration (refine_every 0)";
       changed_at = f;
       EXPECT_TRUE(refined.AllFinite());
@@ -280,7 +271,7 @@ TEST(ShapeEstimatorTest, FixedModeNeverChangesTheTemplate) {
   std::mt19937 rng(2);
   for (int f = 0; f < 12; ++f) {
     const Pose pose = RandomPose(t.num_joints(), &rng, 0.2);
-    EXPECT_FALSE(estimator.AddFrame(ScanOf(t, pose), pose, true));
+    EXPECT_FALSE(estimator.AddFrame(testing_util::VertexScan(t, pose), pose, true));
   }
   EXPECT_LT((estimator.SubjectTemplate().vertices - t.vertices).cwiseAbs().maxCoeff(), 1e-15);
 }
