@@ -257,9 +257,6 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
   result.shape_calibrated_frame = shape_calibrated_frame;
   result.shape_final_frame = track.shape_final_frame;
   result.shape_detail_frame = track.shape_detail_frame;
-  // A sequence that ended before the surface detail's frames were all kept: estimated from
-  // those kept, for subject.glb (and shape.retrack's second pass); no frame was tracked with it.
-  if (shape.FinishDetail()) tmpl = shape.SubjectTemplate();
   if (shape.enabled() && shape_calibrated_frame >= 0) AddShapeWarnings(shape, &result.warnings);
   const std::vector<Pose>& poses = output.poses;
   const std::vector<std::string>& failures = output.failures;
@@ -382,6 +379,10 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
   if (result.has_stream) WriteStreamFramesCsv(out_dir + "/stream_frames.csv", result);
   WriteSummaryJson(out_dir + "/summary.json", result, info);
   if (shape.enabled() || result.has_ground_truth) {
+    // A sequence that ended before the surface detail's frames were all kept: estimated from
+    // those kept, for subject.glb (and shape.retrack's second pass) only; no frame was tracked
+    // with it, so the exports above keep the template the frames were tracked with.
+    const bool late_detail = shape.FinishDetail();
     ShapeRunInfo shape_info;
     shape_info.estimator = &shape;
     shape_info.subject = &tmpl;
@@ -391,7 +392,10 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
     shape_info.detail_frame = track.shape_detail_frame;
     shape_info.truth = subject.get();
     AddShapeToSummary(out_dir + "/summary.json", result, shape_info);
-    if (shape.enabled()) WriteTemplateGlb(out_dir + "/subject.glb", tmpl, texturer ? &texture : nullptr);
+    if (shape.enabled()) {
+      WriteTemplateGlb(out_dir + "/subject.glb", late_detail ? shape.SubjectTemplate() : tmpl,
+                       texturer ? &texture : nullptr);
+    }
   }
   WriteMetricsJson(out_dir + "/metrics.json", result);
   WriteRealtimeJson(out_dir + "/realtime.json", result.realtime);
