@@ -188,8 +188,8 @@ struct PipelineResult {
   int shape_calibrated_frame = -1;
   // The frame of the last calibration round's swap (the calibration phase complete); -1: never.
   int shape_final_frame = -1;
-  // After it, the surface detail (shape.detail; -1: none during the frames, e.g. estimated at
-  // the end of the sequence from the frames kept).
+  // The frame after which the surface detail was swapped in (shape.detail); -1: none during
+  // the frames (e.g. estimated at the end of the sequence from the frames kept).
   int shape_detail_frame = -1;
   bool glb_written = false;
   AnimatedGlbSummary glb;  // tracked.glb against artex's skinning (residuals in mm)

@@ -5,6 +5,7 @@
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <vector>
 
 #include "models/error.h"
 #include "models/mesh_export.h"
@@ -135,19 +136,20 @@ void AddShapeToSummary(const std::string& summary_path, const PipelineResult& re
     // Per segment (the vertices of each joint): mean and rms offset (mm, + outwards).
     const Eigen::VectorXd& offsets = est.detail();
     if (offsets.size() == subject.num_vertices()) {
+      const int nj = subject.num_joints();
+      std::vector<double> sum(nj, 0.0), sum2(nj, 0.0);
+      std::vector<int> count(nj, 0);
+      for (int v = 0; v < subject.num_vertices(); ++v) {
+        const int j = subject.vertex_joint[v];
+        sum[j] += offsets[v];
+        sum2[j] += offsets[v] * offsets[v];
+        ++count[j];
+      }
       nlohmann::json by_joint = nlohmann::json::object();
-      for (int j = 0; j < subject.num_joints(); ++j) {
-        double sum = 0.0, sum2 = 0.0;
-        int n = 0;
-        for (int v = 0; v < subject.num_vertices(); ++v) {
-          if (subject.vertex_joint[v] != j) continue;
-          sum += offsets[v];
-          sum2 += offsets[v] * offsets[v];
-          ++n;
-        }
-        if (n == 0) continue;
-        by_joint[subject.joints[j].name] = {{"mean_mm", 1e3 * sum / n},
-                                            {"rms_mm", 1e3 * std::sqrt(sum2 / n)}};
+      for (int j = 0; j < nj; ++j) {
+        if (count[j] == 0) continue;
+        by_joint[subject.joints[j].name] = {{"mean_mm", 1e3 * sum[j] / count[j]},
+                                            {"rms_mm", 1e3 * std::sqrt(sum2[j] / count[j])}};
       }
       shape["detail"]["segments"] = by_joint;
     }

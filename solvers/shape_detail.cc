@@ -2,7 +2,6 @@
 
 #include <Eigen/SparseCholesky>
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -11,6 +10,7 @@
 
 #include "models/error.h"
 #include "models/normals.h"
+#include "models/numeric.h"
 #include "models/skinning.h"
 #include "render/rasterizer.h"
 #include "solvers/estep.h"
@@ -252,7 +252,7 @@ Eigen::VectorXd EstimateSurfaceDetail(const Template& shaped, const std::vector<
     s.max_offset = offsets.cwiseAbs().maxCoeff();
     s.at_bound = static_cast<int>((offsets.cwiseAbs().array() >= options.max_offset).count());
   }
-  s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  s.seconds = SecondsSince(start);
   if (summary) *summary = s;
   return offsets;
 }

@@ -128,7 +128,7 @@ struct ShapeOptions {
   int max_fit_vertices = 3000;        // template vertices in the solve (voxel subset; 0: all)
   EStepOptions estep;                 // the correspondence weights (colour term unused)
   // Per-vertex offsets along the normals after the last calibration round (solvers/
-  // shape_detail.h; off by default). Needs the depth camera (SetDepthCamera).
+  // shape_detail.h; on by default). Needs the depth camera (SetDepthCamera).
   ShapeDetailOptions detail;
 
   bool IsValid(std::string* error) const;
