@@ -169,6 +169,8 @@ void TrackStage::Evaluate(FrameRecord* r, Eigen::MatrixX3d* posed) {
 void TrackStage::Process(FrameWork* work) {
   FrameRecord& record = work->record;
   if (record.skipped) return;
+  work->rest_shape = std::move(rest_shape_);
+  rest_shape_.reset();
   const Frame& frame = work->frame;
   const auto t_pre = PipelineClock::now();
   PreprocessStats stats;
@@ -353,7 +355,7 @@ bool TextureStage::Process(FrameWork* work, Eigen::MatrixX3d* colours) {
     }
     for (int f : options_.atlas_frames) work->write_atlas = work->write_atlas || f == i;
   }
-  if (sinks_) sinks_->AddFrame(i, work->pose);
+  if (sinks_) sinks_->AddFrame(i, work->pose, work->rest_shape.get());
   const int every = options_.texture_quality_every;
   work->evaluate_texture =
       evaluate_texture_ && every > 0 && ((i - begin_ + 1) % every == 0 || i == end_ - 1);

@@ -44,6 +44,9 @@ struct FrameWork {
   Frame frame;          // depth is released after tracking, colour after texturing
   PipelineClock::time_point captured, textured;
   Pose pose;                // the frame's pose (fitted frames)
+  // Shape estimation swapped the tracking template after the previous frame: this frame's pose
+  // is of this template (the stream's rest shape; null: unchanged).
+  std::shared_ptr<const Template> rest_shape;
   Eigen::MatrixX3d posed;   // its skinned template (world, m)
   bool texture_frame = false;
   PreparedFrame prepared;   // the pool stage's work for the texture stage (texture frames)
@@ -110,6 +113,7 @@ class TrackStage {
   EMFitter* fitter_;
   ShapeEstimator* shape_ = nullptr;
   Template* tmpl_ = nullptr;
+  std::shared_ptr<const Template> rest_shape_;  // swapped in, for the next frame's FrameWork
   Scan scan_;
   bool need_init_ = true;
   int last_frame_ = -1;  // Frame::index of the last processed frame

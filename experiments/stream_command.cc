@@ -4,7 +4,9 @@
 #include <CLI/CLI.hpp>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -16,6 +18,18 @@
 
 namespace artex {
 namespace {
+
+// RUN/summary.json's first shape swap (shape estimation changed the tracking template after this
+// frame), -1 when there was none or the summary cannot be read.
+int ShapeSwapFrame(const std::string& run_dir) {
+  std::ifstream in(run_dir + "/summary.json");
+  if (!in) return -1;
+  const nlohmann::json summary = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
+  if (!summary.is_object() || !summary.contains("shape")) return -1;
+  const nlohmann::json& shape = summary["shape"];
+  const auto it = shape.find("calibrated_after_frame");
+  return it != shape.end() && it->is_number_integer() ? it->get<int>() : -1;
+}
 
 void PrintSummary(const StreamSummary& s, const std::string& path) {
   std::printf("stream: %s: %d frames (%d keyframes) at %.2f Hz\n", path.c_str(), s.frames,
@@ -59,6 +73,15 @@ void RegisterStreamCommands(CLI::App* app) {
       config.Set(o.substr(0, eq), o.substr(eq + 1));
     }
     const PipelineOptions options = LoadPipelineOptions(config);
+    const int swap = ShapeSwapFrame(e->run);
+    if (swap >= 0) {
+      std::fprintf(stderr,
+                   "stream encode: warning: %s was tracked with shape estimation (the template "
+                   "changed after frame %d); this stream skins every frame with one template, "
+                   "so the frames tracked with an earlier shape are rendered with the wrong body "
+                   "(artex track --stream writes each frame's shape)\n",
+                   e->run.c_str(), swap);
+    }
     PrintSummary(EncodeRunStream(e->run, e->template_path, e->out, options.stream), e->out);
   });
 

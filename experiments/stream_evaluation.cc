@@ -120,8 +120,8 @@ PlaybackReport PlayStream(const std::string& stream_path, const PlaybackOptions&
   if (!(options.link_kbps >= 0)) throw Error("stream play: link_kbps must be >= 0");
   StreamPlayer player(stream_path, options.from_frame);
   const StreamHeader& header = player.header();
-  const Template& model = player.model();
-  const Skinning skinning(model);
+  const Template& model = player.model();  // changes with the stream's rest shapes
+  auto skinning = std::make_unique<Skinning>(model);
   PlaybackReport report;
   report.stream_bytes = player.stream_bytes();
   report.glb_bytes = header.glb.size();
@@ -188,7 +188,8 @@ PlaybackReport PlayStream(const std::string& stream_path, const PlaybackOptions&
     const auto s = sender_ms.find(f.frame);
     if (s != sender_ms.end()) t.sender_ms = s->second;
     timing.push_back(t);
-    skinning.Apply(f.pose, &posed);
+    if (f.shape_changed) skinning = std::make_unique<Skinning>(model);
+    skinning->Apply(f.pose, &posed);
     const std::vector<int> triangle_frames = FramesOf(f.textured);
     const bool has_atlas = !f.atlas.empty();
     const Eigen::Vector3d centre = posed.colwise().mean().transpose();
@@ -211,7 +212,7 @@ PlaybackReport PlayStream(const std::string& stream_path, const PlaybackOptions&
     const auto sp = sender_poses.find(f.frame);
     if (sp != sender_poses.end() &&
         ReadExportedAtlas(options.reference_run, f.frame, &sender_atlas, &sender_frames)) {
-      skinning.Apply(sp->second, &sender_posed);
+      skinning->Apply(sp->second, &sender_posed);
       report.max_vertex_error_mm = std::max(
           report.max_vertex_error_mm, 1000.0 * (posed - sender_posed).rowwise().norm().maxCoeff());
       cv::Mat resized = f.atlas;

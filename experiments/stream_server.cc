@@ -19,6 +19,7 @@
 #include <sstream>
 
 #include "models/error.h"
+#include "stream/container.h"
 
 #ifndef ARTEX_VIEWER_DIR
 #define ARTEX_VIEWER_DIR "viewer"
@@ -161,6 +162,7 @@ void StreamServer::OnRecord(const std::vector<uint8_t>& record, bool keyframe, d
   const Message m = Stamped(record, stamp_ms, atlas_ms);
   std::lock_guard<std::mutex> lock(mutex_);
   ++stats_.records_published;
+  if (RecordCarriesRestShape(record)) shape_message_ = m;
   if (keyframe) {
     gop_.clear();
     gop_complete_ = true;
@@ -176,6 +178,7 @@ void StreamServer::OnRecord(const std::vector<uint8_t>& record, bool keyframe, d
     if (v->closed) continue;
     ++v->offered;
     if (v->waiting_for_keyframe && !keyframe) continue;
+    bool starts = v->waiting_for_keyframe;  // at this keyframe
     v->waiting_for_keyframe = false;
     if (static_cast<int>(v->queue.size()) >= options_.max_queued_records) {
       // The browser is slower than the sender: drop what it has not taken and restart at the
@@ -184,16 +187,27 @@ void StreamServer::OnRecord(const std::vector<uint8_t>& record, bool keyframe, d
       v->queue.clear();
       if (gop_complete_ && static_cast<int>(gop_.size()) <= options_.max_queued_records) {
         v->queue.assign(gop_.begin(), gop_.end());
+        PrependRestShape(v.get());
         continue;
       }
       if (!keyframe) {
         v->waiting_for_keyframe = true;
         continue;
       }
+      starts = true;
     }
     v->queue.push_back(m);
+    if (starts) PrependRestShape(v.get());
   }
   changed_.notify_all();
+}
+
+void StreamServer::PrependRestShape(Viewer* viewer) {
+  // The rest shape is state like the header's template: a viewer starting at a keyframe after
+  // the record that carried it gets that record (itself a keyframe) first.
+  if (!shape_message_ || viewer->queue.empty() || viewer->queue.front() == shape_message_) return;
+  viewer->queue.push_front(shape_message_);
+  ++viewer->offered;
 }
 
 void StreamServer::EndLive() {
@@ -393,6 +407,7 @@ void StreamServer::ServeLive(std::shared_ptr<void> opaque, void* request) {
       viewer->queue.assign(gop_.begin(), gop_.end());
       viewer->offered = static_cast<long>(gop_.size());
       viewer->waiting_for_keyframe = gop_.empty();
+      PrependRestShape(viewer.get());
     }
     viewers_.push_back(viewer);
     ++stats_.viewers;

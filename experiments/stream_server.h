@@ -88,6 +88,7 @@ class StreamServer : public StreamTap {
   void AcceptLoop();
   void Serve(std::shared_ptr<void> socket);
   void ServeLive(std::shared_ptr<void> socket, void* request);
+  void PrependRestShape(Viewer* viewer);  // with mutex_ held
 
   StreamServerOptions options_;
   std::string viewer_dir_;
@@ -100,6 +101,8 @@ class StreamServer : public StreamTap {
   bool live_ = false, live_ended_ = false, stopping_ = false;
   std::vector<uint8_t> header_message_;
   std::deque<std::shared_ptr<std::vector<uint8_t>>> gop_;  // since the last keyframe
+  // The last record that carried a rest shape (a keyframe), for viewers starting after it.
+  std::shared_ptr<std::vector<uint8_t>> shape_message_;
   bool gop_complete_ = false;
   std::vector<std::shared_ptr<Viewer>> viewers_;
   StreamServerStats stats_;

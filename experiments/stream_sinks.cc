@@ -45,8 +45,9 @@ FrameSinks::FrameSinks(const PipelineOptions& options, const Template& tmpl,
 
 FrameSinks::~FrameSinks() = default;
 
-void FrameSinks::AddFrame(int frame, const Pose& pose) {
+void FrameSinks::AddFrame(int frame, const Pose& pose, const Template* rest_shape) {
   if (atlas_dir_.empty() && !sender_) return;
+  if (sender_ && rest_shape) sender_->SetRestShape(*rest_shape);
   const auto wall_ms = [] {
     return std::chrono::duration<double, std::milli>(
                std::chrono::system_clock::now().time_since_epoch())

@@ -35,7 +35,9 @@ class FrameSinks {
   FrameSinks(const PipelineOptions& options, const Template& tmpl, const Calibration& calibration,
              const Texturer* texturer, const std::string& out_dir);
   ~FrameSinks();
-  void AddFrame(int frame, const Pose& pose);  // every fitted frame
+  // Every fitted frame; rest_shape: the template changed after the previous frame (shape
+  // estimation) and `pose` is of this one (null: unchanged).
+  void AddFrame(int frame, const Pose& pose, const Template* rest_shape = nullptr);
   void Finish(PipelineResult* result);         // closes the stream, fills result->stream
 
  private:

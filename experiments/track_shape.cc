@@ -12,6 +12,7 @@ void TrackStage::FeedShape(const Pose& pose, int frame) {
   if (!shape_->AddFrame(scan_, pose, scale_settled, &refined)) return;
   *tmpl_ = shape_->SubjectTemplate();
   fitter_->SetRestShape(*tmpl_);
+  rest_shape_ = std::make_shared<const Template>(*tmpl_);
   if (options_.shape.seed_pose && refined.AllFinite() &&
       refined.num_joints() == tmpl_->num_joints()) {
     // The tracked pose was fitted with the previous shape (e.g. the template's feet on the

@@ -234,7 +234,8 @@ int main(int argc, char** argv) {
       Put(out, "experiment", e.path().filename().string(), Read(e.path()));
     }
     // Streams of the small template, 3 frames, a keyframe every 2: poses only, and with a
-    // 32 x 32 atlas video (VP9, the default codec) and its coverage.
+    // 32 x 32 atlas video (VP9, the default codec) and its coverage; the textured one carries a
+    // rest shape on frame 1 (the template 2 % larger).
     for (const bool textured : {false, true}) {
       artex::StreamOptions options;
       options.keyframe_interval = 2;
@@ -246,6 +247,12 @@ int main(int argc, char** argv) {
         std::vector<int> triangle_frames(small.num_triangles(), 0);
         triangle_frames[0] = -1;
         for (int i = 0; i < 3; ++i) {
+          if (textured && i == 1) {
+            artex::Template shaped = small;
+            shaped.vertices *= 1.02;
+            for (artex::Joint& j : shaped.joints) j.center *= 1.02;
+            sender.SetRestShape(shaped);
+          }
           artex::Pose pose = artex::Pose::Identity(small.num_joints());
           pose.translation.x() = 0.01 * i;
           const cv::Mat atlas(32, 32, CV_8UC3, cv::Scalar(40 * i, 90, 160));

@@ -33,12 +33,14 @@ void PutCrc(std::vector<uint8_t>* b, std::size_t from, std::size_t to) {
 
 // Recomputes the header's CRC and that of every record whose framing fits (docs/streaming.md:
 // header size at byte 8; a record is "ARXF", frame u32, flags u8, reserved u8, pose u16,
-// mask u32, video u32, payloads, CRC-32).
+// mask u32, video u32, from version 2 with flag bit 2 a rest shape's size u32, payloads, CRC-32).
 void RepairCrcs(std::vector<uint8_t>* b) {
   if (b->size() < 12 || std::memcmp(b->data(), "ARTX", 4) != 0) return;
   const uint32_t header = U32(*b, 8);
   if (header < 24 || header > b->size()) return;
   PutCrc(b, 0, header - 4);
+  uint16_t version = 0;
+  std::memcpy(&version, b->data() + 4, 2);
   std::size_t at = header;
   while (at + 24 <= b->size()) {
     if (std::memcmp(b->data() + at, "ARXF", 4) != 0) {
@@ -47,7 +49,9 @@ void RepairCrcs(std::vector<uint8_t>* b) {
     }
     uint16_t pose = 0;
     std::memcpy(&pose, b->data() + at + 10, 2);
-    const uint64_t size = 24ull + pose + U32(*b, at + 12) + U32(*b, at + 16);
+    const bool shape = version >= 2 && ((*b)[at + 8] & 4);
+    const uint64_t size = 24ull + pose + U32(*b, at + 12) + U32(*b, at + 16) +
+                          (shape ? 4ull + U32(*b, at + 20) : 0ull);
     if (at + size > b->size()) {
       ++at;
       continue;

@@ -95,19 +95,24 @@ std::vector<uint8_t> EncodeStreamHeader(const StreamHeader& h) {
 }
 
 std::vector<uint8_t> EncodeStreamRecord(const StreamRecord& r) {
-  if (r.pose.size() > 0xffff || r.mask.size() > kMaxPayload || r.video.size() > kMaxPayload)
+  if (r.pose.size() > 0xffff || r.mask.size() > kMaxPayload || r.video.size() > kMaxPayload ||
+      r.shape.size() > kMaxPayload)
     throw Error("stream record of frame " + std::to_string(r.frame) + ": payload too large");
   Writer w;
   w.PutBytes(kSync, 4);
   w.Put<uint32_t>(r.frame);
-  w.Put<uint8_t>(static_cast<uint8_t>((r.keyframe ? 1 : 0) | (r.has_mask ? 2 : 0)));
+  const bool shape = !r.shape.empty();
+  w.Put<uint8_t>(
+      static_cast<uint8_t>((r.keyframe ? 1 : 0) | (r.has_mask ? 2 : 0) | (shape ? 4 : 0)));
   w.Put<uint8_t>(0);
   w.Put<uint16_t>(static_cast<uint16_t>(r.pose.size()));
   w.Put<uint32_t>(static_cast<uint32_t>(r.mask.size()));
   w.Put<uint32_t>(static_cast<uint32_t>(r.video.size()));
+  if (shape) w.Put<uint32_t>(static_cast<uint32_t>(r.shape.size()));
   w.PutBytes(r.pose.data(), r.pose.size());
   w.PutBytes(r.mask.data(), r.mask.size());
   w.PutBytes(r.video.data(), r.video.size());
+  w.PutBytes(r.shape.data(), r.shape.size());
   w.PutCrc(0);
   return w.bytes;
 }
@@ -137,9 +142,9 @@ void StreamReader::ParseHeader() {
   c.Get(&h.version);
   c.Get(&flags);
   c.Get(&size);
-  if (h.version != kStreamVersion)
-    fail("expected version " + std::to_string(kStreamVersion) + ", found " +
-         std::to_string(h.version));
+  if (h.version < kOldestStreamVersion || h.version > kStreamVersion)
+    fail("expected version " + std::to_string(kOldestStreamVersion) + " to " +
+         std::to_string(kStreamVersion) + ", found " + std::to_string(h.version));
   if (size < 24 || size > bytes_.size())
     fail("header size " + std::to_string(size) + " beyond the " + std::to_string(bytes_.size()) +
          " bytes of the stream (truncated)");
@@ -188,11 +193,19 @@ std::size_t StreamReader::RecordAt(std::size_t offset, StreamRecord* r, std::str
   c.Get(&pose);
   c.Get(&mask);
   c.Get(&video);
-  if (mask > kMaxPayload || video > kMaxPayload) {
+  // Flag bit 2: a rest-shape payload, its size after the video's (version 2).
+  const bool has_shape = (flags & 4) && header_.version >= 2;
+  uint32_t shape = 0;
+  if (has_shape && !c.Get(&shape)) {
+    *why = "truncated record (no room for the rest shape's size)";
+    return 0;
+  }
+  if (mask > kMaxPayload || video > kMaxPayload || shape > kMaxPayload) {
     *why = "implausible payload sizes";
     return 0;
   }
-  const std::size_t size = kRecordFraming + pose + mask + video;
+  const std::size_t head = 20 + (has_shape ? kShapeSizeField : 0);
+  const std::size_t size = kRecordFraming + (head - 20) + pose + mask + video + shape;
   if (offset + size > bytes_.size()) {
     *why = "truncated record (needs " + std::to_string(size) + " bytes, " +
            std::to_string(bytes_.size() - offset) + " left)";
@@ -204,7 +217,7 @@ std::size_t StreamReader::RecordAt(std::size_t offset, StreamRecord* r, std::str
     *why = "CRC mismatch (damaged record)";
     return 0;
   }
-  const uint8_t* p = bytes_.data() + offset + 20;
+  const uint8_t* p = bytes_.data() + offset + head;
   r->offset = offset;
   r->size = size;
   r->keyframe = flags & 1;
@@ -212,6 +225,7 @@ std::size_t StreamReader::RecordAt(std::size_t offset, StreamRecord* r, std::str
   r->pose.assign(p, p + pose);
   r->mask.assign(p + pose, p + pose + mask);
   r->video.assign(p + pose + mask, p + pose + mask + video);
+  r->shape.assign(p + pose + mask + video, p + pose + mask + video + shape);
   return size;
 }
 

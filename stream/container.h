@@ -1,7 +1,8 @@
-// The .artx stream container, version 1 (spec: docs/streaming.md): a header (codec, frame
+// The .artx stream container, version 2 (spec: docs/streaming.md): a header (codec, frame
 // rate, pose quantisation, atlas size, viewpoint, the template as GLB bytes) and one framed
 // record per frame (sync word, frame index, keyframe flag, pose / coverage / video payloads,
-// CRC-32). Little-endian throughout. The reader checks every length and CRC; a damaged or
+// from version 2 an optional rest-shape payload, CRC-32). Version 1 streams (no rest shapes)
+// are read as well. Little-endian throughout. The reader checks every length and CRC; a damaged or
 // truncated record is reported with its byte offset and the reader resynchronises on the next
 // sync word that starts an intact record.
 #pragma once
@@ -14,7 +15,8 @@
 
 namespace artex {
 
-constexpr uint16_t kStreamVersion = 1;
+constexpr uint16_t kStreamVersion = 2;
+constexpr uint16_t kOldestStreamVersion = 1;  // the oldest version the reader accepts
 
 struct StreamHeader {
   uint16_t version = kStreamVersion;
@@ -40,6 +42,8 @@ struct StreamRecord {
   bool keyframe = false;
   bool has_mask = false;
   std::vector<uint8_t> pose, mask, video;
+  // The subject's rest shape from this frame on (EncodeRestShape; empty: unchanged). Version 2.
+  std::vector<uint8_t> shape;
 };
 
 struct StreamIssue {
@@ -49,8 +53,14 @@ struct StreamIssue {
 };
 
 constexpr std::size_t kRecordFraming = 24;  // 20-byte record header + CRC-32
+// A record with a rest shape has 4 more header bytes (the shape payload's size).
+constexpr std::size_t kShapeSizeField = 4;
 
 std::vector<uint8_t> EncodeStreamHeader(const StreamHeader& header);
+// True when an encoded record's flags say it carries a rest shape (flag bit 2).
+inline bool RecordCarriesRestShape(const std::vector<uint8_t>& record) {
+  return record.size() > 8 && (record[8] & 4) != 0;
+}
 std::vector<uint8_t> EncodeStreamRecord(const StreamRecord& record);
 
 class StreamReader {

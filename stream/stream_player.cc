@@ -8,6 +8,7 @@
 
 #include "models/error.h"
 #include "models/template_io.h"
+#include "stream/rest_shape.h"
 #include "stream/stream_sender.h"
 
 namespace artex {
@@ -51,7 +52,8 @@ StreamPlayer::~StreamPlayer() = default;
 
 void StreamPlayer::Init(int from_frame) {
   const StreamHeader& h = reader_->header();
-  model_ = TemplateFromGlb(h.glb, "stream");
+  header_model_ = TemplateFromGlb(h.glb, "stream");
+  model_ = header_model_;
   if (model_.num_joints() != h.num_joints ||
       model_.num_triangles() != static_cast<int>(h.num_triangles))
     throw Error("stream header: joints/triangles disagree with its template");
@@ -76,6 +78,19 @@ bool StreamPlayer::Next(PlayedFrame* out) {
     const std::size_t before = issues_.size();
     if (!reader_->Next(&r, &issues_)) return false;
     if (issues_.size() != before) need_keyframe_ = true;
+    if (!r.shape.empty()) {
+      // The shape is state like the header's template: taken from skipped records too.
+      std::string why;
+      if (!DecodeRestShape(r.shape, header_model_, &model_, &why)) {
+        issues_.push_back({r.offset, static_cast<int>(r.frame),
+                           "frame " + std::to_string(r.frame) + ": " + why +
+                               "; waiting for a keyframe"});
+        need_keyframe_ = true;
+        ++skipped_;
+        continue;
+      }
+      shape_changed_ = true;
+    }
     if (static_cast<int>(r.frame) < from_frame_ || (need_keyframe_ && !r.keyframe)) {
       ++skipped_;
       continue;
@@ -126,6 +141,8 @@ bool StreamPlayer::Next(PlayedFrame* out) {
     out->video_bytes = r.video.size();
     out->record_bytes = r.size;
     out->pose = pose;
+    out->shape_changed = shape_changed_;
+    shape_changed_ = false;
     out->atlas = atlas_;
     out->textured = UnpackCoverage(coverage_, model_.num_triangles());
     out->decode_ms =

@@ -27,6 +27,9 @@ struct PlayedFrame {
   cv::Mat atlas;              // CV_8UC3, the receiver's current atlas (empty without texture)
   std::vector<int> textured;  // F: 1 textured, 0 not (the current coverage)
   double decode_ms = 0.0;     // pose + coverage + video decoding of this record
+  // StreamPlayer::model() changed since the previous frame (a rest shape, docs/streaming.md):
+  // this frame's pose is of the new shape.
+  bool shape_changed = false;
 };
 
 class StreamPlayer {
@@ -36,6 +39,8 @@ class StreamPlayer {
   explicit StreamPlayer(std::unique_ptr<StreamReader> reader, int from_frame = 0);
   ~StreamPlayer();
   const StreamHeader& header() const { return reader_->header(); }
+  // The receiver's model: the header's template with the latest rest shape read (also from
+  // records skipped before from_frame or while waiting for a keyframe).
   const Template& model() const { return model_; }
   std::size_t stream_bytes() const { return reader_->size(); }
   // The next decoded frame; false at the end of the stream.
@@ -48,7 +53,7 @@ class StreamPlayer {
   void Init(int from_frame);
 
   std::unique_ptr<StreamReader> reader_;
-  Template model_;
+  Template header_model_, model_;
   std::unique_ptr<PoseDecoder> pose_;
   std::unique_ptr<AtlasVideoDecoder> video_;
   std::vector<StreamIssue> issues_;
@@ -57,6 +62,7 @@ class StreamPlayer {
   int from_frame_ = 0;
   bool need_keyframe_ = true;
   bool started_ = false;
+  bool shape_changed_ = false;
   int skipped_ = 0;
 };
 

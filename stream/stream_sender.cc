@@ -14,6 +14,7 @@
 
 #include "models/error.h"
 #include "models/template_io.h"
+#include "stream/rest_shape.h"
 
 namespace artex {
 namespace {
@@ -163,7 +164,9 @@ StreamFrameStats StreamSender::AddFrame(int frame, const Pose& pose, const cv::M
   s.compose_ms = compose_ms;
   StreamRecord record;
   record.frame = static_cast<uint32_t>(frame);
-  bool keyframe = summary_.frames % options_.keyframe_interval == 0;
+  record.shape = std::move(pending_shape_);
+  pending_shape_.clear();
+  bool keyframe = summary_.frames % options_.keyframe_interval == 0 || !record.shape.empty();
   if (video_) {
     const auto t = std::chrono::steady_clock::now();
     const double cpu = ThreadCpuMs();
@@ -208,6 +211,7 @@ StreamFrameStats StreamSender::AddFrame(int frame, const Pose& pose, const cv::M
   s.pose_bytes = record.pose.size();
   s.mask_bytes = record.mask.size();
   s.video_bytes = record.video.size();
+  s.shape_bytes = record.shape.size();
   s.record_bytes = bytes.size();
   StreamSummary& m = summary_;
   ++m.frames;
@@ -215,9 +219,18 @@ StreamFrameStats StreamSender::AddFrame(int frame, const Pose& pose, const cv::M
   m.pose_bytes += s.pose_bytes;
   m.mask_bytes += s.mask_bytes;
   m.video_bytes += s.video_bytes;
-  m.framing_bytes += s.record_bytes - s.pose_bytes - s.mask_bytes - s.video_bytes;
+  m.shapes += s.shape_bytes > 0;
+  m.shape_bytes += s.shape_bytes;
+  m.framing_bytes +=
+      s.record_bytes - s.pose_bytes - s.mask_bytes - s.video_bytes - s.shape_bytes;
   m.per_frame.push_back(s);
   return s;
+}
+
+void StreamSender::SetRestShape(const Template& shaped) {
+  if (finished_) throw Error(path_ + ": rest shape set after Finish");
+  pending_shape_ = EncodeRestShape(template_, shaped);
+  if (skinning_) skinning_ = std::make_unique<Skinning>(shaped);
 }
 
 StreamSummary StreamSender::Finish() {
@@ -233,8 +246,9 @@ StreamSummary StreamSender::Finish() {
     const double per_frame_to_kbps = 8.0 * m.frame_rate / 1000.0 / m.frames;
     m.pose_kbps = m.pose_bytes * per_frame_to_kbps;
     m.texture_kbps = (m.video_bytes + m.mask_bytes) * per_frame_to_kbps;
-    m.total_kbps =
-        (m.pose_bytes + m.video_bytes + m.mask_bytes + m.framing_bytes) * per_frame_to_kbps;
+    m.total_kbps = (m.pose_bytes + m.video_bytes + m.mask_bytes + m.shape_bytes +
+                    m.framing_bytes) *
+                   per_frame_to_kbps;
     double sum = 0.0;
     for (const StreamFrameStats& s : m.per_frame) {
       m.max_hand_error_mm = std::max(m.max_hand_error_mm, s.hand_error_mm);

@@ -37,6 +37,7 @@ struct StreamFrameStats {
   int frame = 0;
   bool keyframe = false;
   std::size_t pose_bytes = 0, mask_bytes = 0, video_bytes = 0, record_bytes = 0;
+  std::size_t shape_bytes = 0;           // the rest shape (SetRestShape), 0 on most frames
   double pose_ms = 0.0, video_ms = 0.0;  // encoding time (wall)
   // CPU time of the calling thread while encoding the picture: the whole encoder's with
   // threads = 1 (wall above it means the thread waited for a core).
@@ -49,6 +50,8 @@ struct StreamSummary {
   int frames = 0, keyframes = 0;
   std::size_t header_bytes = 0, glb_bytes = 0;
   std::size_t pose_bytes = 0, mask_bytes = 0, video_bytes = 0, framing_bytes = 0;
+  int shapes = 0;                // records carrying a rest shape (SetRestShape)
+  std::size_t shape_bytes = 0;   // their rest-shape payloads
   double frame_rate = 30.0;
   double pose_kbps = 0.0;     // pose payloads at the frame rate
   double texture_kbps = 0.0;  // video + coverage payloads
@@ -72,6 +75,11 @@ class StreamSender {
   // (reported in the statistics only).
   StreamFrameStats AddFrame(int frame, const Pose& pose, const cv::Mat& atlas,
                             const std::vector<int>* triangle_frames, double compose_ms = 0.0);
+  // The subject's rest shape from the next AddFrame on (shape estimation swapped the tracking
+  // template; `shaped` has the header template's rig and mesh): that frame's record carries it
+  // (stream/rest_shape.h) and is a keyframe, so a receiver that starts there has it. Throws
+  // artex::Error for a template of another size.
+  void SetRestShape(const Template& shaped);
   // Closes the stream (renames it into place) and returns the totals.
   StreamSummary Finish();
   // The bytes written so far: the header, and the record of the last AddFrame (live taps).
@@ -81,8 +89,9 @@ class StreamSender {
  private:
   std::string path_, temp_path_;
   std::ofstream out_;
-  Template template_;
+  Template template_;  // the header's
   StreamOptions options_;
+  std::vector<uint8_t> pending_shape_;  // the next record's rest shape (SetRestShape)
   StreamHeader header_;
   std::unique_ptr<Skinning> skinning_;
   std::vector<int> hand_vertices_;

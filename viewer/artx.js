@@ -39,7 +39,7 @@ export function parseHeader(bytes) {
     fail('expected the magic ARTX, found another file or fewer than 12 bytes');
   const dv = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
   const version = dv.getUint16(4, true);
-  if (version !== 1) fail(`expected version 1, found ${version}`);
+  if (version < 1 || version > 2) fail(`expected version 1 to 2, found ${version}`);
   const size = dv.getUint32(8, true);
   if (size < 24 || size > bytes.length)
     fail(`header size ${size} beyond the ${bytes.length} bytes of the stream (truncated)`);
@@ -70,9 +70,10 @@ export function parseHeader(bytes) {
   return h;
 }
 
-// The intact record at `offset` ({frame, keyframe, hasMask, pose, mask, video, offset, size}),
-// or {error} saying what is wrong there.
-export function recordAt(bytes, offset) {
+// The intact record at `offset` ({frame, keyframe, hasMask, pose, mask, video, shape, offset,
+// size}; shape: the rest-shape payload, empty when the record has none), or {error} saying
+// what is wrong there. version: the stream's (rest shapes from version 2).
+export function recordAt(bytes, offset, version = 2) {
   if (offset + RECORD_FRAMING > bytes.length)
     return { error: `truncated record (${bytes.length - offset} bytes left)` };
   if (!isMagic(bytes, offset, 'ARXF')) return { error: 'no record sync word' };
@@ -82,17 +83,21 @@ export function recordAt(bytes, offset) {
   const p = dv.getUint16(offset + 10, true);
   const m = dv.getUint32(offset + 12, true);
   const v = dv.getUint32(offset + 16, true);
-  if (m > MAX_PAYLOAD || v > MAX_PAYLOAD) return { error: 'implausible payload sizes' };
-  const size = RECORD_FRAMING + p + m + v;
+  const hasShape = (flags & 4) !== 0 && version >= 2;
+  const s = hasShape ? dv.getUint32(offset + 20, true) : 0;
+  if (m > MAX_PAYLOAD || v > MAX_PAYLOAD || s > MAX_PAYLOAD) return { error: 'implausible payload sizes' };
+  const head = hasShape ? 24 : 20;
+  const size = RECORD_FRAMING + (head - 20) + p + m + v + s;
   if (offset + size > bytes.length)
     return { error: `truncated record (needs ${size} bytes, ${bytes.length - offset} left)` };
   if (dv.getUint32(offset + size - 4, true) !== crc32(bytes, offset, offset + size - 4))
     return { error: 'CRC mismatch (damaged record)' };
-  const b = offset + 20;
+  const b = offset + head;
   return {
     frame, keyframe: (flags & 1) !== 0, hasMask: (flags & 2) !== 0, offset, size,
     pose: bytes.subarray(b, b + p), mask: bytes.subarray(b + p, b + p + m),
     video: bytes.subarray(b + p + m, b + p + m + v),
+    shape: bytes.subarray(b + p + m + v, b + p + m + v + s),
   };
 }
 
@@ -102,13 +107,13 @@ export function indexRecords(bytes, header) {
   const records = [], issues = [];
   let at = header.headerSize, last = -1;
   while (at < bytes.length) {
-    let r = recordAt(bytes, at);
+    let r = recordAt(bytes, at, header.version);
     if (r.error) {
       const issue = { offset: at, frame: last + 1, what: r.error };
       let next = at + 1;
       for (; next + 4 <= bytes.length; ++next) {
         if (!isMagic(bytes, next, 'ARXF')) continue;
-        r = recordAt(bytes, next);
+        r = recordAt(bytes, next, header.version);
         if (!r.error) break;
       }
       if (r.error) { issue.what += '; no intact record after it'; issues.push(issue); break; }
@@ -319,14 +324,18 @@ export function parseTemplateGlb(glb) {
   });
   const vertexJoint = Int32Array.from(accessor(attr._ARTEX_JOINT, 'joints'), Math.round);
   // One glTF vertex per template vertex (the first copy; copies are sorted by template vertex).
+  // templateVertex: the template vertex of each glTF vertex (the rest shapes' order).
   const uniqueVertices = [];
+  let templateVertex;
   if (attr._ARTEX_VERTEX !== undefined) {
+    templateVertex = Int32Array.from(accessor(attr._ARTEX_VERTEX, 'template vertex indices'), Math.round);
     let last = -1;
-    accessor(attr._ARTEX_VERTEX, 'template vertex indices').forEach((tv, i) => {
-      if (Math.round(tv) !== last) uniqueVertices.push(i);
-      last = Math.round(tv);
+    templateVertex.forEach((tv, i) => {
+      if (tv !== last) uniqueVertices.push(i);
+      last = tv;
     });
   } else {
+    templateVertex = Int32Array.from(vertexJoint, (_, i) => i);
     for (let i = 0; i < vertexJoint.length; ++i) uniqueVertices.push(i);
   }
   const t = {
@@ -335,6 +344,7 @@ export function parseTemplateGlb(glb) {
     indices: Uint32Array.from(accessor(prim.indices, 'indices')),
     vertexJoint,
     uniqueVertices,
+    templateVertex,
     lbsWeight: accessor(attr._ARTEX_LBS_WEIGHT, 'LBS weights'),
     slerpTau: accessor(attr._ARTEX_SLERP_TAU, 'SLERP tau'),
     joints,
@@ -342,6 +352,36 @@ export function parseTemplateGlb(glb) {
   for (const k of vertexJoint)
     if (k < 0 || k >= joints.length) throw new Error(`template: vertex joint ${k} outside 0..${joints.length - 1}`);
   return t;
+}
+
+// ---- Rest shape of a record (stream/rest_shape.cc) ----
+
+// The header's template `base` with a record's rest shape: the payload's joint centres and
+// vertices (base vertex + int16 q * step, per template vertex), the rig, mesh and weights
+// unchanged. Throws an Error for a damaged payload or one of another template.
+export function applyRestShape(base, payload) {
+  const dv = new DataView(payload.buffer, payload.byteOffset, payload.byteLength);
+  const J = base.joints.length, V = base.uniqueVertices.length;
+  const expected = 14 + 24 * J + 6 * V;
+  if (payload.length < 14) throw new Error(`rest shape: ${payload.length} bytes, expected ${expected}`);
+  const joints = dv.getUint16(0, true), vertices = dv.getUint32(2, true), step = dv.getFloat64(6, true);
+  if (joints !== J || vertices !== V)
+    throw new Error(`rest shape: ${joints} joints and ${vertices} vertices, expected the header template's ${J} and ${V}`);
+  if (payload.length !== expected || !(step > 0) || !Number.isFinite(step))
+    throw new Error(`rest shape: ${payload.length} bytes with step ${step}, expected ${expected} bytes, step > 0`);
+  let at = 14;
+  const shapedJoints = base.joints.map((j) => {
+    const center = [0, 1, 2].map((i) => dv.getFloat64(at + 8 * i, true));
+    at += 24;
+    if (!center.every(Number.isFinite)) throw new Error(`rest shape: joint ${j.name}'s centre is not finite`);
+    return { ...j, center };
+  });
+  const positions = new Float64Array(base.positions.length);
+  for (let g = 0; g < base.templateVertex.length; ++g) {
+    const q = at + 6 * base.templateVertex[g];
+    for (let i = 0; i < 3; ++i) positions[3 * g + i] = base.positions[3 * g + i] + dv.getInt16(q + 2 * i, true) * step;
+  }
+  return { ...base, positions, joints: shapedJoints };
 }
 
 // ---- Skinning (models/skinning.cc) ----

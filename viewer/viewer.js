@@ -11,6 +11,7 @@ import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import {
   parseHeader, indexRecords, recordAt, PoseDecoder, applyCoverage, parseTemplateGlb, Skinning,
+  applyRestShape,
   heldOutEye, meanOf,
 } from './artx.js';
 
@@ -40,6 +41,7 @@ renderer.setPixelRatio(1);
 renderer.setClearColor(0x000000, 1);
 const scene = new THREE.Scene();
 const camera = new THREE.PerspectiveCamera();
+// tmpl: the header's template; skinning: of it with the latest rest shape read (docs/streaming.md).
 let controls, mesh, geometry, skinning, tmpl, header, texture, posed, yuv;
 // ?upload=frame: the VideoFrame itself as the texture (the browser converts it to RGB);
 // default: its I420 planes, converted in the shader (the same matrix as artex's decoder).
@@ -202,9 +204,11 @@ function decodeRecord(r, onShown) {
       state.needVideoReset = false;
     }
   }
+  if (r.shape.length && !applyShape(r)) return false;
   const t = performance.now();
   try {
     latestPose = poseDecoder.decode(r.pose, r.keyframe);
+    latestPose.skinning = skinning;  // the body this pose was fitted with
   } catch (e) {
     ++state.dropped;
     console.warn(`frame ${r.frame}: ${e.message}`);
@@ -228,10 +232,22 @@ function decodeRecord(r, onShown) {
   return true;
 }
 
+// A record's rest shape: the body its pose and the later ones are skinned with.
+function applyShape(r) {
+  try {
+    skinning = new Skinning(applyRestShape(tmpl, r.shape));
+    return true;
+  } catch (e) {
+    ++state.dropped;
+    console.warn(`frame ${r.frame}: ${e.message}`);
+    return false;
+  }
+}
+
 function showPose(pose = latestPose, frame = latestPoseFrame) {
   if (!pose) return;
   const t = performance.now();
-  skinning.apply(pose, posed);
+  (pose.skinning || skinning).apply(pose, posed);
   geometry.attributes.position.needsUpdate = true;
   state.poseMs.push(performance.now() - t);
   state.frame = frame;
@@ -246,6 +262,9 @@ async function seek(frame) {
   if (k < 0) k = records.length - 1;
   let key = k;
   while (key > 0 && !records[key].keyframe) --key;
+  // The rest shape is state: the latest before the keyframe (decodeRecord applies later ones).
+  skinning = new Skinning(tmpl);
+  for (let i = key - 1; i >= 0; --i) if (records[i].shape.length) { applyShape(records[i]); break; }
   state.needVideoReset = true;
   seeking = true;  // no playback ticks until the picture of `frame` is decoded
   // (not VideoDecoder.flush(): after a flush the decoder wants a keyframe again)
@@ -316,7 +335,7 @@ function playLive() {
       try { start(parseHeader(bytes)); } catch (e) { fail(e); ws.close(); }
       return;
     }
-    const r = recordAt(bytes, 0);
+    const r = recordAt(bytes, 0, header.version);
     if (r.error) { ++state.dropped; console.warn(`live record: ${r.error}`); ack(); return; }
     ++state.frames;
     const received = Date.now();

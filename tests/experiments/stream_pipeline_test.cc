@@ -12,7 +12,9 @@
 #include "experiments/config.h"
 #include "experiments/pipeline.h"
 #include "experiments/stream_evaluation.h"
+#include "models/template_io.h"
 #include "sensors/virtual_kinect.h"
+#include "stream/stream_player.h"
 #include "tests/solvers/virtual_kinect_scans.h"
 
 namespace artex {
@@ -113,6 +115,49 @@ TEST_F(StreamPipelineTest, PlayedStreamMatchesTheSender) {
   const PlaybackReport joined = PlayStream((data_->root / "track.artx").string(), p);
   EXPECT_EQ(joined.first_frame, 4);
   EXPECT_EQ(joined.frames, 4);
+}
+
+// With shape estimation (docs/shape.md) every swap of the tracking template reaches the
+// receiver: the record of the first frame posed with the new shape carries it, so the player's
+// model follows the sender's, ending at the template the last frames were tracked with.
+TEST_F(StreamPipelineTest, TheStreamCarriesTheSubjectsShape) {
+  Config config;
+  config.Set("texture.atlas_size", "256");
+  config.Set("pipeline.stream", "'" + (data_->root / "shape.artx").string() + "'");
+  config.Set("shape.mode", "bones_girth");
+  config.Set("shape.calibration_frames", "1");
+  config.Set("shape.calibration_rounds", "1");
+  config.Set("shape.iterations_per_stage", "2");
+  config.Set("shape.detail.frames", "1");
+  config.Set("fitting.scale_estimation_frames", "2");
+  const PipelineResult run =
+      RunPipeline(data_->sequence, data_->template_path, LoadPipelineOptions(config), config,
+                  (data_->root / "run_shape").string());
+  // The round's swap and the detail's, each after a frame that is not the last.
+  std::vector<int> swaps;
+  for (int f : {run.shape_calibrated_frame, run.shape_detail_frame})
+    if (f >= 0 && f + 1 < 8) swaps.push_back(f);
+  ASSERT_EQ(swaps.size(), 2u) << run.shape_calibrated_frame << " " << run.shape_detail_frame;
+  EXPECT_EQ(run.stream.shapes, 2);
+  StreamPlayer player((data_->root / "shape.artx").string());
+  const Template initial = player.model();
+  std::vector<int> changed;
+  PlayedFrame f;
+  while (player.Next(&f)) {
+    if (f.shape_changed) {
+      changed.push_back(f.frame - 1);
+      EXPECT_TRUE(f.keyframe) << f.frame;
+    }
+  }
+  EXPECT_EQ(changed, swaps);
+  EXPECT_TRUE(player.issues().empty());
+  const Template tracked = ReadTemplateGlb((data_->root / "run_shape" / "tracked.glb").string());
+  ASSERT_EQ(tracked.num_vertices(), player.model().num_vertices());
+  // Within the payload's 0.1 mm step (and the glTF's float32).
+  EXPECT_LT((player.model().vertices - tracked.vertices).rowwise().norm().maxCoeff(), 1e-4);
+  EXPECT_GT((initial.vertices - tracked.vertices).rowwise().norm().maxCoeff(), 1e-3);
+  for (int j = 0; j < tracked.num_joints(); ++j)
+    EXPECT_LT((player.model().joints[j].center - tracked.joints[j].center).norm(), 1e-5);
 }
 
 // The latency model: records sent one after another over the link, each after the sender's time.

@@ -71,6 +71,14 @@ std::vector<uint8_t> Record(uint32_t frame, bool key) {
   return r;
 }
 
+// A fake keyframe record carrying a rest shape: flag bit 2 of byte 8, as in the container.
+std::vector<uint8_t> ShapeRecord(uint32_t frame) {
+  std::vector<uint8_t> r = Record(frame, true);
+  r.resize(9, 0);
+  r[8] = 1 | 4;
+  return r;
+}
+
 struct Received {
   double stamps[3];
   std::vector<uint8_t> bytes;
@@ -158,6 +166,35 @@ TEST_F(StreamServerTest, LiveViewerJoinsAtTheLastKeyframeWithStamps) {
   EXPECT_EQ(ec, websocket::error::closed);
   const StreamServerStats s = server.Stats();
   EXPECT_EQ(s.viewers_total, 1);
+  EXPECT_EQ(s.records_sent, 3);
+  EXPECT_EQ(s.records_dropped, 0);
+}
+
+// The rest shape is state: a viewer joining at a keyframe after the record that carried it gets
+// that record first (itself a keyframe), then the records since the last keyframe.
+TEST_F(StreamServerTest, ALateViewerGetsTheLastRestShapeFirst) {
+  StreamServer server(options_);
+  server.OnHeader({'A', 'R', 'T', 'X'});
+  for (uint32_t f = 0; f < 7; ++f) {
+    const bool key = f == 0 || f == 2 || f == 5;
+    server.OnRecord(f == 2 ? ShapeRecord(f) : Record(f, key), key, f, f);
+  }
+  asio::io_context io;
+  websocket::stream<tcp::socket> ws(io);
+  ws.next_layer().connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), server.port()));
+  ws.handshake("127.0.0.1", "/live");
+  ws.text(true);
+  ReadMessage(ws);  // header
+  for (uint32_t f : {2u, 5u, 6u}) {
+    EXPECT_EQ(FrameOf(ReadMessage(ws)), f);
+    ws.write(asio::buffer(std::string("1")));
+  }
+  server.EndLive();
+  beast::flat_buffer rest;
+  beast::error_code ec;
+  ws.read(rest, ec);
+  EXPECT_EQ(ec, websocket::error::closed);
+  const StreamServerStats s = server.Stats();
   EXPECT_EQ(s.records_sent, 3);
   EXPECT_EQ(s.records_dropped, 0);
 }

@@ -1,11 +1,12 @@
 // Checks of the viewer's JavaScript receiver (viewer/artx.js) against artex itself, run by
 // scripts/viewer_test under node's test runner:
 //   ARTEX_BIN=build/experiments/artex ARTEX_STREAM=x.artx ARTEX_PLAYED=play/poses.csv \
-//     node --test viewer/test/artx_test.mjs
+//     ARTEX_TRACKED=run/tracked.glb node --test viewer/test/artx_test.mjs
 // - the container and pose decoder reproduce `artex stream play`'s decoded poses;
 // - a damaged record is reported and skipped, as stream/container.cc does;
 // - the skinning reproduces `artex template pose` (models/skinning.cc) on a pose with strong
-//   twists, where glTF's plain LBS (what three.js's SkinnedMesh computes) is millimetres off.
+//   twists, where glTF's plain LBS (what three.js's SkinnedMesh computes) is millimetres off;
+// - the stream's last rest shape (shape estimation) skins as the run's tracked template.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import fs from 'node:fs';
@@ -14,9 +15,10 @@ import path from 'node:path';
 import { spawnSync } from 'node:child_process';
 import {
   parseHeader, indexRecords, PoseDecoder, parseTemplateGlb, Skinning, expSO3, applyCoverage,
+  applyRestShape,
 } from '../artx.js';
 
-const { ARTEX_BIN, ARTEX_STREAM, ARTEX_PLAYED } = process.env;
+const { ARTEX_BIN, ARTEX_STREAM, ARTEX_PLAYED, ARTEX_TRACKED } = process.env;
 const skip = !ARTEX_BIN || !ARTEX_STREAM ? 'ARTEX_BIN and ARTEX_STREAM not set' : false;
 const bytes = skip ? null : new Uint8Array(fs.readFileSync(ARTEX_STREAM));
 
@@ -84,51 +86,82 @@ function plainLbs(tmpl, pose) {
   return out;
 }
 
-test('skinning reproduces artex template pose (LBS + SLERP), plain LBS does not', { skip }, () => {
-  const header = parseHeader(bytes);
-  const tmpl = parseTemplateGlb(header.glb);
-  const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'artex-viewer-'));
-  const glb = path.join(dir, 'template.glb'), ply = path.join(dir, 'posed.ply');
-  fs.writeFileSync(glb, header.glb);
+// A pose with strong twists about the limbs and the neck, and swings (degrees, as `artex
+// template pose --joint` takes them), for a template's joints.
+const TWISTS = { l_elbow: [0, 80, 40], neck: [10, 60, 0], r_wrist: [70, 20, 10], l_knee: [50, 30, 0], r_shoulder: [-30, 50, 40] };
+function twistedPose(tmpl) {
   const pose = new Float64Array(7 + 3 * tmpl.joints.length);
   pose.set([1.03, 0.1, -0.05, 0.2, 0.1, 0.4, -0.05]);
-  // Strong twists about the limbs and the neck, and swings (degrees, as --joint takes them).
-  const joints = { l_elbow: [0, 80, 40], neck: [10, 60, 0], r_wrist: [70, 20, 10], l_knee: [50, 30, 0], r_shoulder: [-30, 50, 40] };
   const names = tmpl.joints.map((j) => j.name);
-  for (const [name, deg] of Object.entries(joints)) {
+  for (const [name, deg] of Object.entries(TWISTS)) {
     const j = names.indexOf(name);
     assert.ok(j >= 0, `joint ${name}`);
     for (let i = 0; i < 3; ++i) pose[7 + 3 * j + i] = (deg[i] * Math.PI) / 180;
   }
-  const run = spawnSync(ARTEX_BIN, ['template', 'pose', glb, '--pose', Array.from(pose.slice(0, 7)).concat(Array(3 * tmpl.joints.length).fill(0)).join(' '),
-    ...Object.entries(joints).map(([n, d]) => ['--joint', `${n}=${d.join(',')}`]).flat(), '-o', ply], { encoding: 'utf8' });
+  return pose;
+}
+
+// `artex template pose` of the glb at `glbPath` in twistedPose: positions per template vertex
+// (x y z nx ny nz rows of its PLY).
+function artexPosed(glbPath, pose, joints) {
+  const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'artex-viewer-'));
+  const ply = path.join(dir, 'posed.ply');
+  const run = spawnSync(ARTEX_BIN, ['template', 'pose', glbPath, '--pose', Array.from(pose.slice(0, 7)).concat(Array(3 * joints).fill(0)).join(' '),
+    ...Object.entries(TWISTS).map(([n, d]) => ['--joint', `${n}=${d.join(',')}`]).flat(), '-o', ply], { encoding: 'utf8' });
   assert.equal(run.status, 0, run.stderr);
   const data = fs.readFileSync(ply);
+  fs.rmSync(dir, { recursive: true });
   const end = data.indexOf('end_header\n') + 'end_header\n'.length;
   const V = +/element vertex (\d+)/.exec(data.subarray(0, end).toString())[1];
-  const ref = new Float32Array(data.buffer.slice(data.byteOffset + end, data.byteOffset + end + V * 24));  // x y z nx ny nz
-  // glTF vertex -> template vertex (the _ARTEX_VERTEX order: copies sorted by template vertex).
-  assert.equal(tmpl.uniqueVertices.length, V);
-  const toTemplate = new Int32Array(tmpl.vertexJoint.length);
-  for (let u = 0, g = 0; g < toTemplate.length; ++g) {
-    if (u + 1 < V && tmpl.uniqueVertices[u + 1] === g) ++u;
-    toTemplate[g] = u;
-  }
-  const posed = new Skinning(tmpl).apply(pose, new Float64Array(tmpl.positions.length));
-  const lbs = plainLbs(tmpl, pose);
-  let worst = 0, worstLbs = 0;
-  for (let g = 0; g < toTemplate.length; ++g) {
-    const t = toTemplate[g];
-    let d = 0, dl = 0;
-    for (let i = 0; i < 3; ++i) {
-      d += (posed[3 * g + i] - ref[6 * t + i]) ** 2;
-      dl += (lbs[3 * g + i] - ref[6 * t + i]) ** 2;
-    }
+  return { V, rows: new Float32Array(data.buffer.slice(data.byteOffset + end, data.byteOffset + end + V * 24)) };
+}
+
+// Largest distance (m) between glTF-vertex positions and artex's rows (per template vertex).
+function worstAgainst(tmpl, positions, ref) {
+  let worst = 0;
+  for (let g = 0; g < tmpl.templateVertex.length; ++g) {
+    const t = tmpl.templateVertex[g];
+    let d = 0;
+    for (let i = 0; i < 3; ++i) d += (positions[3 * g + i] - ref.rows[6 * t + i]) ** 2;
     worst = Math.max(worst, Math.sqrt(d));
-    worstLbs = Math.max(worstLbs, Math.sqrt(dl));
   }
+  return worst;
+}
+
+test('skinning reproduces artex template pose (LBS + SLERP), plain LBS does not', { skip }, () => {
+  const header = parseHeader(bytes);
+  const tmpl = parseTemplateGlb(header.glb);
+  const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'artex-viewer-'));
+  const glb = path.join(dir, 'template.glb');
+  fs.writeFileSync(glb, header.glb);
+  const pose = twistedPose(tmpl);
+  const ref = artexPosed(glb, pose, tmpl.joints.length);
   fs.rmSync(dir, { recursive: true });
+  assert.equal(tmpl.uniqueVertices.length, ref.V);
+  const posed = new Skinning(tmpl).apply(pose, new Float64Array(tmpl.positions.length));
+  const worst = worstAgainst(tmpl, posed, ref), worstLbs = worstAgainst(tmpl, plainLbs(tmpl, pose), ref);
   console.log(`skinning vs artex: ${(1000 * worst).toFixed(4)} mm max; plain glTF LBS: ${(1000 * worstLbs).toFixed(1)} mm max`);
   assert.ok(worst < 2e-5, `viewer skinning ${1000 * worst} mm from artex's`);
   assert.ok(worstLbs > 5e-3, `plain LBS only ${1000 * worstLbs} mm off: the pose does not test the twist`);
+});
+
+// With shape estimation the stream's records carry the subject's rest shapes (docs/streaming.md):
+// the last one is the template the run's last frames were tracked with (its tracked.glb).
+test('the last rest shape skins as the run\'s tracked template', { skip: skip || (!ARTEX_TRACKED && 'ARTEX_TRACKED not set') }, () => {
+  const header = parseHeader(bytes);
+  assert.equal(header.version, 2);
+  const { records } = indexRecords(bytes, header);
+  const shaped = records.filter((r) => r.shape.length);
+  assert.ok(shaped.length >= 1, 'no record carries a rest shape');
+  for (const r of shaped) assert.ok(r.keyframe, `frame ${r.frame}: a rest shape on a delta frame`);
+  const base = parseTemplateGlb(header.glb);
+  const tmpl = applyRestShape(base, shaped[shaped.length - 1].shape);
+  const pose = twistedPose(tmpl);
+  const ref = artexPosed(ARTEX_TRACKED, pose, tmpl.joints.length);
+  const worst = worstAgainst(tmpl, new Skinning(tmpl).apply(pose, new Float64Array(tmpl.positions.length)), ref);
+  const header_ = worstAgainst(base, new Skinning(base).apply(pose, new Float64Array(base.positions.length)), ref);
+  console.log(`rest shapes: ${shaped.length}; the last one's skinning vs artex's tracked template: ${(1000 * worst).toFixed(3)} mm max (the header's template: ${(1000 * header_).toFixed(1)} mm)`);
+  assert.ok(worst < 1.5e-4, `${1000 * worst} mm from the tracked template (0.1 mm steps)`);
+  assert.ok(header_ > 2e-3, `the shape moved the body by only ${1000 * header_} mm`);
+  assert.throws(() => applyRestShape(base, shaped[0].shape.subarray(0, 100)), /rest shape: 100 bytes/);
 });
