@@ -189,13 +189,15 @@ void BindIcpInit(const Config& c, IcpInitOptions* o) {
 
 void BindQuality(const Config& c, FitQualityOptions* o) {
   c.CheckKeys({"inlier_distance", "max_scan_points", "raster_width", "support_tolerance",
-               "depth_truncation", "good_min_inlier_fraction", "good_min_support_fraction",
-               "good_max_depth_residual", "lost_min_inlier_fraction", "lost_min_support_fraction",
-               "lost_max_depth_residual", "part_min_visible", "part_min_support", "part_ignore"});
+               "layer_gap", "depth_truncation", "good_min_inlier_fraction",
+               "good_min_support_fraction", "good_max_depth_residual", "lost_min_inlier_fraction",
+               "lost_min_support_fraction", "lost_max_depth_residual", "part_min_visible",
+               "part_min_support", "part_ignore"});
   c.Get("inlier_distance", &o->inlier_distance);
   c.Get("max_scan_points", &o->max_scan_points);
   c.Get("raster_width", &o->raster_width);
   c.Get("support_tolerance", &o->support_tolerance);
+  c.Get("layer_gap", &o->layer_gap);
   c.Get("depth_truncation", &o->depth_truncation);
   c.Get("good_min_inlier_fraction", &o->good_min_inlier_fraction);
   c.Get("good_min_support_fraction", &o->good_min_support_fraction);

@@ -7,9 +7,10 @@
 //                     below the default distance), i.e. how much of the scan the fit explains;
 //   support_fraction: pixels of the template's rendering from the depth camera (its visible,
 //                     camera-facing surface) whose observed depth (scan points projected into
-//                     the same raster, nearest kept) is within support_tolerance, i.e. how
-//                     much of the fit the scan confirms (a model on the wall or beside the
-//                     person has none);
+//                     the same raster, the median of each pixel's front layer) is within
+//                     support_tolerance,
+//                     i.e. how much of the fit the scan confirms (a model on the wall or
+//                     beside the person has none);
 //   depth_residual_m: mean truncated |z_model - z_observed| over the union of the template's
 //                     silhouette and the scan's foreground; a pixel covered by one of them
 //                     only counts depth_truncation.
@@ -29,10 +30,10 @@ enum class FitQualityLabel { kGood, kDoubtful, kLost };
 const char* FitQualityLabelName(FitQualityLabel label);  // "good", "doubtful", "lost"
 
 // Label thresholds measured on the virtual Kinect walk at 2.5 m (tests/solvers/
-// fit_quality_test.cc): the true subject surface and the tracked fits reach inliers >= 0.96,
-// support >= 0.81, residual <= 34 mm (the residual includes the silhouette rims and the
+// fit_quality_test.cc): the true subject surface and the tracked fits reach inliers >= 0.97,
+// support >= 0.95, residual <= 20 mm (the residual includes the silhouette rims and the
 // projector shadow, one-sided pixels); the template upside down on the person, 1 m beside
-// it or against the back wall stay at inliers <= 0.31, support <= 0.32, residual >= 78 mm.
+// it or against the back wall stay at inliers <= 0.29, support <= 0.27, residual >= 79 mm.
 struct FitQualityOptions {
   double inlier_distance = 0.025;   // m: a scan point within this of the fit is explained
   int max_scan_points = 3000;       // inlier test on a fixed-stride subsample of the scan
@@ -40,6 +41,10 @@ struct FitQualityOptions {
   // raster_width)) (a subject of a few pixels would make support and residual meaningless).
   int raster_width = 160;
   double support_tolerance = 0.03;  // m: |z_model - z_observed| of a supported pixel
+  // A raster pixel's observed depth is the median of its front layer: its scan points, front to
+  // back, up to the first gap between consecutive depths wider than this (m; > 0): an arm in
+  // front of the torso is observed at the arm, and the sensor noise of the layer averages out.
+  double layer_gap = 0.05;
   double depth_truncation = 0.10;   // m: truncation of the depth residual
   // Labels: kLost when any lost_* bound is crossed, else kGood when all good_* bounds hold,
   // else kDoubtful.

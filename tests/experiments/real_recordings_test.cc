@@ -218,11 +218,16 @@ TEST(RealRecordingsTest, SkeltrackWithTheSubjectsShapeUprightAndClose) {
   // with the E-step's clouds per tracking radius as with one per frame
   // (fitting.tracking_shared_cloud), and the defaults 7 and 6; the frames' mean depth residual
   // stayed within 35.8-38.4 mm in all ten runs (docs/fitting-speed.md, "One cloud per tracking
-  // frame"). So the mean residual is bounded, and a third of the frames must be good.
+  // frame"). So the mean residual is bounded, and a third of the frames must be good. On a later
+  // machine the same build gave 39.2 mm; with the observed depth as the median of each raster
+  // pixel's front layer instead of its nearest point (fitting.quality.layer_gap) 39.5 mm: the
+  // first pass's poses are the same, its frames' residuals move by -0.7 to +1.0 mm, and frame 8's
+  // re-initialisation chose the template facing the camera, as in the other frames, instead of
+  // facing away (docs/fitting.md, "Initialisation and fit quality").
   double residual = 0.0;
   for (const FrameRecord& f : run.result.frames) residual += f.quality.depth_residual_m;
   residual /= static_cast<double>(run.result.frames.size());
-  EXPECT_LT(residual, 0.0395) << "mean depth residual (m)";
+  EXPECT_LT(residual, 0.0405) << "mean depth residual (m)";
   EXPECT_GE(run.result.good_frames, 4) << "good for a third of the frames";
   EXPECT_LE(FramesWithAShinInView(run), 1) << "the legs stay below the image";
   EXPECT_EQ(run.result.lost_frames, 0);
