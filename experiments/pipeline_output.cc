@@ -40,6 +40,8 @@ nlohmann::json StreamJson(const PipelineResult& result) {
           {"keyframes", s.keyframes},
           {"header_bytes", s.header_bytes},
           {"template_glb_bytes", s.glb_bytes},
+          {"rest_shapes", s.shapes},
+          {"rest_shape_bytes", s.shape_bytes},
           {"pose_kbit_per_s", s.pose_kbps},
           {"texture_kbit_per_s", s.texture_kbps},
           {"total_kbit_per_s", s.total_kbps},
@@ -99,12 +101,12 @@ void WriteFramesCsv(const std::string& path, const PipelineResult& result) {
 void WriteStreamFramesCsv(const std::string& path, const PipelineResult& result) {
   std::ostringstream csv;
   csv << "frame,keyframe,pose_bytes,coverage_bytes,video_bytes,record_bytes,compose_ms,"
-         "encode_ms,encode_cpu_ms,hand_error_mm\n";
+         "encode_ms,encode_cpu_ms,hand_error_mm,shape_bytes\n";
   for (const StreamFrameStats& s : result.stream.per_frame) {
     csv << s.frame << "," << s.keyframe << "," << s.pose_bytes << "," << s.mask_bytes << ","
         << s.video_bytes << "," << s.record_bytes << "," << Fixed(s.compose_ms) << ","
         << Fixed(s.pose_ms + s.video_ms) << "," << Fixed(s.video_cpu_ms) << ","
-        << Fixed(s.hand_error_mm) << "\n";
+        << Fixed(s.hand_error_mm) << "," << s.shape_bytes << "\n";
   }
   WriteFileAtomically(path, csv.str());
 }

@@ -169,8 +169,7 @@ void TrackStage::Evaluate(FrameRecord* r, Eigen::MatrixX3d* posed) {
 void TrackStage::Process(FrameWork* work) {
   FrameRecord& record = work->record;
   if (record.skipped) return;
-  work->rest_shape = std::move(rest_shape_);
-  rest_shape_.reset();
+  work->rest_shape = std::move(rest_shape_);  // leaves rest_shape_ empty
   const Frame& frame = work->frame;
   const auto t_pre = PipelineClock::now();
   PreprocessStats stats;

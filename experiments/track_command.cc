@@ -219,6 +219,10 @@ void RegisterTrackCommand(CLI::App* app) {
           args->stream.empty() ? (args->out + "/stream.artx").c_str() : args->stream.c_str(),
           s.pose_kbps, s.texture_kbps, s.total_kbps, s.keyframes, s.max_hand_error_mm,
           s.mean_compose_ms, s.mean_encode_ms, s.max_encode_ms, s.mean_encode_cpu_ms);
+      if (s.shapes > 0) {
+        std::printf("stream: %d rest shapes of the subject (%.1f kB, in the total)\n", s.shapes,
+                    s.shape_bytes / 1000.0);
+      }
     }
     if (result.has_ground_truth && result.novel_view_psnr_db == result.novel_view_psnr_db) {
       std::printf(
