@@ -136,6 +136,22 @@ TEST_F(StreamServerTest, RejectsBadOptionsAndAMissingPage) {
   }
 }
 
+// Opens the server's live stream (acknowledgements are text messages).
+void ConnectLive(websocket::stream<tcp::socket>* ws, int port) {
+  ws->next_layer().connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
+  ws->handshake("127.0.0.1", "/live");
+  ws->text(true);
+}
+
+// Ends the live stream; the server then closes the viewer's connection.
+void EndAndExpectClosed(StreamServer* server, websocket::stream<tcp::socket>* ws) {
+  server->EndLive();
+  beast::flat_buffer rest;
+  beast::error_code ec;
+  ws->read(rest, ec);
+  EXPECT_EQ(ec, websocket::error::closed);
+}
+
 TEST_F(StreamServerTest, LiveViewerJoinsAtTheLastKeyframeWithStamps) {
   StreamServer server(options_);
   server.OnHeader({'A', 'R', 'T', 'X'});
@@ -143,9 +159,7 @@ TEST_F(StreamServerTest, LiveViewerJoinsAtTheLastKeyframeWithStamps) {
     server.OnRecord(Record(f, f % 5 == 0), f % 5 == 0, 1000.0 + f, 2000.0 + f);
   asio::io_context io;
   websocket::stream<tcp::socket> ws(io);
-  ws.next_layer().connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), server.port()));
-  ws.handshake("127.0.0.1", "/live");
-  ws.text(true);
+  ConnectLive(&ws, server.port());
   const Received header = ReadMessage(ws);
   EXPECT_EQ(header.bytes, std::vector<uint8_t>({'A', 'R', 'T', 'X'}));
   // The records since the last keyframe (5, 6), then the new ones.
@@ -159,11 +173,7 @@ TEST_F(StreamServerTest, LiveViewerJoinsAtTheLastKeyframeWithStamps) {
   }
   server.OnRecord(Record(7, false), false, 1007.0, 2007.0);
   EXPECT_EQ(FrameOf(ReadMessage(ws)), 7u);
-  server.EndLive();
-  beast::flat_buffer rest;
-  beast::error_code ec;
-  ws.read(rest, ec);
-  EXPECT_EQ(ec, websocket::error::closed);
+  EndAndExpectClosed(&server, &ws);
   const StreamServerStats s = server.Stats();
   EXPECT_EQ(s.viewers_total, 1);
   EXPECT_EQ(s.records_sent, 3);
@@ -181,19 +191,13 @@ TEST_F(StreamServerTest, ALateViewerGetsTheLastRestShapeFirst) {
   }
   asio::io_context io;
   websocket::stream<tcp::socket> ws(io);
-  ws.next_layer().connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), server.port()));
-  ws.handshake("127.0.0.1", "/live");
-  ws.text(true);
+  ConnectLive(&ws, server.port());
   ReadMessage(ws);  // header
   for (uint32_t f : {2u, 5u, 6u}) {
     EXPECT_EQ(FrameOf(ReadMessage(ws)), f);
     ws.write(asio::buffer(std::string("1")));
   }
-  server.EndLive();
-  beast::flat_buffer rest;
-  beast::error_code ec;
-  ws.read(rest, ec);
-  EXPECT_EQ(ec, websocket::error::closed);
+  EndAndExpectClosed(&server, &ws);
   const StreamServerStats s = server.Stats();
   EXPECT_EQ(s.records_sent, 3);
   EXPECT_EQ(s.records_dropped, 0);
@@ -204,9 +208,7 @@ TEST_F(StreamServerTest, SlowViewerIsBoundedAndResumesAtAKeyframe) {
   server.OnHeader({'A', 'R', 'T', 'X'});
   asio::io_context io;
   websocket::stream<tcp::socket> ws(io);
-  ws.next_layer().connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), server.port()));
-  ws.handshake("127.0.0.1", "/live");
-  ws.text(true);
+  ConnectLive(&ws, server.port());
   ASSERT_TRUE(server.WaitForViewer(10.0));
   // 100 records (keyframes every 4) while the viewer acknowledges nothing.
   const int kRecords = 100, kInterval = 4;
