@@ -81,28 +81,6 @@ PinholeCamera Subsampled(const PinholeCamera& camera, int subsample) {
   return small;
 }
 
-}  // namespace
-
-Eigen::VectorXi FitQualityParts(const Eigen::VectorXi& vertex_joint,
-                                const std::vector<std::string>& joint_names,
-                                const FitQualityOptions& options) {
-  // Which joints are ignored, by name once per joint; then the vertices by their joint.
-  std::vector<bool> ignored(joint_names.size(), false);
-  for (size_t j = 0; j < joint_names.size(); ++j) {
-    for (const std::string& name : options.part_ignore) {
-      ignored[j] = ignored[j] || joint_names[j] == name;
-    }
-  }
-  Eigen::VectorXi parts = vertex_joint;
-  for (Eigen::Index v = 0; v < parts.size(); ++v) {
-    const int j = parts[v];
-    if (j >= 0 && j < static_cast<int>(ignored.size()) && ignored[j]) parts[v] = -1;
-  }
-  return parts;
-}
-
-namespace {
-
 // The scan's depth on the raster of `camera`: per pixel the median depth of the front layer of
 // the scan points that project into it (sorted front to back, up to the first gap wider than
 // layer_gap; the lower median of an even count; infinity where no point does). A raster pixel
@@ -151,6 +129,24 @@ std::vector<float> ObservedDepth(const Scan& scan, const PinholeCamera& camera, 
 }
 
 }  // namespace
+
+Eigen::VectorXi FitQualityParts(const Eigen::VectorXi& vertex_joint,
+                                const std::vector<std::string>& joint_names,
+                                const FitQualityOptions& options) {
+  // Which joints are ignored, by name once per joint; then the vertices by their joint.
+  std::vector<bool> ignored(joint_names.size(), false);
+  for (size_t j = 0; j < joint_names.size(); ++j) {
+    for (const std::string& name : options.part_ignore) {
+      ignored[j] = ignored[j] || joint_names[j] == name;
+    }
+  }
+  Eigen::VectorXi parts = vertex_joint;
+  for (Eigen::Index v = 0; v < parts.size(); ++v) {
+    const int j = parts[v];
+    if (j >= 0 && j < static_cast<int>(ignored.size()) && ignored[j]) parts[v] = -1;
+  }
+  return parts;
+}
 
 FitQuality EvaluateFitQuality(const Eigen::MatrixX3d& posed_vertices,
                               const Eigen::MatrixX3i& triangles, const Scan& scan,

@@ -8,9 +8,8 @@
 //   support_fraction: pixels of the template's rendering from the depth camera (its visible,
 //                     camera-facing surface) whose observed depth (scan points projected into
 //                     the same raster, the median of each pixel's front layer) is within
-//                     support_tolerance,
-//                     i.e. how much of the fit the scan confirms (a model on the wall or
-//                     beside the person has none);
+//                     support_tolerance, i.e. how much of the fit the scan confirms (a model
+//                     on the wall or beside the person has none);
 //   depth_residual_m: mean truncated |z_model - z_observed| over the union of the template's
 //                     silhouette and the scan's foreground; a pixel covered by one of them
 //                     only counts depth_truncation.

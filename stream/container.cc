@@ -204,8 +204,9 @@ std::size_t StreamReader::RecordAt(std::size_t offset, StreamRecord* r, std::str
     *why = "implausible payload sizes";
     return 0;
   }
-  const std::size_t head = 20 + (has_shape ? kShapeSizeField : 0);
-  const std::size_t size = kRecordFraming + (head - 20) + pose + mask + video + shape;
+  const std::size_t shape_field = has_shape ? kShapeSizeField : 0;
+  const std::size_t head = 20 + shape_field;  // the payloads start here
+  const std::size_t size = kRecordFraming + shape_field + pose + mask + video + shape;
   if (offset + size > bytes_.size()) {
     *why = "truncated record (needs " + std::to_string(size) + " bytes, " +
            std::to_string(bytes_.size() - offset) + " left)";
