@@ -632,7 +632,8 @@ void BindShape(const Config& c, ShapeOptions* o) {
                "girth_depth", "depth_prior_weight",
                "calibration_frames", "calibration_stride", "calibration_rounds", "radii",
                "iterations_per_stage", "over_relaxation", "bias_correction",
-               "visibility_min_cos", "bias_density", "girth_max_radius", "scan_to_model_weight",
+               "visibility_min_cos", "bias_density", "bias_scan_mask", "bias_mask_tolerance",
+               "bias_mask_radius_px", "girth_max_radius", "scan_to_model_weight",
                "scan_to_model_voxel", "scan_to_model_max_distance",
                "scan_to_model_normal_distance", "scan_to_model_girth", "hold_unseen",
                "chain_prior_weight", "limb_girth_prior_weight", "prior_weight", "pose_damping",
@@ -655,6 +656,9 @@ void BindShape(const Config& c, ShapeOptions* o) {
   c.Get("bias_correction", &o->bias_correction);
   c.Get("visibility_min_cos", &o->visibility_min_cos);
   c.Get("bias_density", &o->bias_density);
+  c.Get("bias_scan_mask", &o->bias_scan_mask);
+  c.Get("bias_mask_tolerance", &o->bias_mask_tolerance);
+  c.Get("bias_mask_radius_px", &o->bias_mask_radius_px);
   c.Get("girth_max_radius", &o->girth_max_radius);
   c.Get("scan_to_model_weight", &o->scan_to_model_weight);
   c.Get("scan_to_model_voxel", &o->scan_to_model_voxel);
@@ -714,6 +718,11 @@ PipelineOptions LoadPipelineOptions(const Config& config) {
   BindPipeline(config.Section("pipeline"), &o);
   BindStream(config.Section("stream"), &o.stream);
   BindShape(config.Section("shape"), &o.shape);
+  // So does the shape's scan mask (shape.bias_scan_mask: free space is no sensor hole).
+  if (o.shape.mode != ShapeMode::kFixed && o.shape.bias_correction && o.shape.bias_scan_mask &&
+      !config.Section("preprocess").Section("silhouette").Has("enabled")) {
+    o.preprocess.silhouette.enabled = true;
+  }
   BindJointLimits(config.Section("shape").Section("joint_limits"), &o.shape_joint_limits);
   o.shape.estep = o.fitting.estep;  // the tracker's correspondence weights
   std::string why;

@@ -13,6 +13,7 @@
 #include "models/error.h"
 #include "models/normals.h"
 #include "models/skinning.h"
+#include "sensors/silhouette.h"
 
 namespace artex {
 
@@ -50,6 +51,11 @@ bool ShapeOptions::IsValid(std::string* error) const {
         << scan_to_model_max_distance;
   } else if (!(std::isfinite(chain_prior_weight) && chain_prior_weight >= 0.0)) {
     msg << "shape.chain_prior_weight: expected a finite value >= 0, found " << chain_prior_weight;
+  } else if (!(std::isfinite(bias_mask_tolerance) && bias_mask_tolerance > 0.0)) {
+    msg << "shape.bias_mask_tolerance: expected a finite value > 0 (m), found "
+        << bias_mask_tolerance;
+  } else if (bias_mask_radius_px < 0 || bias_mask_radius_px > 8) {
+    msg << "shape.bias_mask_radius_px: expected 0..8, found " << bias_mask_radius_px;
   } else if (!(std::isfinite(limb_girth_prior_weight) && limb_girth_prior_weight >= 0.0)) {
     msg << "shape.limb_girth_prior_weight: expected a finite value >= 0, found "
         << limb_girth_prior_weight;
@@ -127,6 +133,20 @@ Eigen::MatrixX3d VoxelMeans(const Eigen::MatrixX3d& points, double cell,
     }
   }
   return out;
+}
+
+// bias_scan_mask: the frame's free-space map (scan.silhouette) shows, at x's pixel, a surface
+// other than the subject's behind x, or no surface where zero depth means free space: the
+// camera would have seen x there. Such a vertex is the fit's error, not a hole of the sensor,
+// and stays in the self E-step.
+bool OverFreeSpace(const Scan& scan, const Eigen::Vector3d& x) {
+  if (!scan.silhouette) return false;
+  const SilhouetteMap& map = *scan.silhouette;
+  double z = 0.0;
+  const Eigen::Vector2d px = map.camera.Project(x, &z);
+  if (!(z > 0.0)) return false;
+  const int i = map.RasterIndex(px.x(), px.y());
+  return i >= 0 && map.free_depth[i] > z;
 }
 
 // A fixed pseudo-random number in [0, 1) per index (splitmix64).
@@ -367,6 +387,39 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
   // Columns of q the frames do not show (hold_unseen), held throughout.
   summary.held_unseen = UnseenParameters(*poses);
   const Eigen::Vector3d camera_center = depth_camera_.Center();
+  // bias_scan_mask: per frame the nearest scan depth at each depth pixel (+inf: none).
+  std::vector<std::vector<float>> seen(
+      options_.bias_correction && options_.bias_scan_mask && has_depth_camera_ ? nf : 0);
+  const int width = depth_camera_.width, height = depth_camera_.height;
+  for (size_t f = 0; f < seen.size(); ++f) {
+    seen[f].assign(static_cast<std::size_t>(width) * height,
+                   std::numeric_limits<float>::infinity());
+    for (int i = 0; i < scans[f]->size(); ++i) {
+      double z = 0.0;
+      const Eigen::Vector2d px = depth_camera_.Project(scans[f]->points.row(i).transpose(), &z);
+      const long u = std::lround(px.x()), v = std::lround(px.y());
+      if (!(z > 0.0) || u < 0 || v < 0 || u >= width || v >= height) continue;
+      float& cell = seen[f][static_cast<std::size_t>(v) * width + u];
+      cell = std::min(cell, static_cast<float>(z));
+    }
+  }
+  // The frame's depth image has a point near x (pixel and depth): bias_scan_mask.
+  const auto seen_near = [&](int f, const Eigen::Vector3d& x) {
+    double z = 0.0;
+    const Eigen::Vector2d px = depth_camera_.Project(x, &z);
+    if (!(z > 0.0)) return false;
+    const long u = std::lround(px.x()), v = std::lround(px.y());
+    const int r = options_.bias_mask_radius_px;
+    for (long y = std::max(0L, v - r); y <= std::min<long>(height - 1, v + r); ++y) {
+      for (long c = std::max(0L, u - r); c <= std::min<long>(width - 1, u + r); ++c) {
+        if (std::abs(seen[f][static_cast<std::size_t>(y) * width + c] - z) <=
+            options_.bias_mask_tolerance) {
+          return true;
+        }
+      }
+    }
+    return false;
+  };
   bool first = true;
   for (double radius : options_.radii) {
     for (int it = 0; it < options_.iterations_per_stage; ++it) {
@@ -401,9 +454,8 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
             // the template's vertices are uniform: keep each with that probability (a fixed
             // pseudo-random number per vertex) so the self E-step sees the scan's sampling.
             if (options_.bias_density && has_depth_camera_ && Uniform01(v) > facing) continue;
-            {
-              visible.push_back(v);
-            }
+            if (!seen.empty() && !seen_near(f, x) && !OverFreeSpace(*scans[f], x)) continue;
+            visible.push_back(v);
           }
           const int nv = static_cast<int>(visible.size());
           self.points.resize(nv, 3);

@@ -84,6 +84,18 @@ struct ShapeOptions {
   // sampling density (the template's vertices are uniform over the surface; a scan thins out
   // towards the silhouette, which moves its E-step means further inwards).
   bool bias_density = true;
+  // ... and keeps only those the frame's depth image saw: a scan point projects within
+  // bias_mask_radius_px pixels of the vertex's pixel at a camera depth within
+  // bias_mask_tolerance (m) of the vertex's, or the frame's free-space map (scan.silhouette,
+  // built for it by the pipeline) shows another surface behind the vertex there (a misfit, no
+  // hole). The sensor's drop-outs (depth discontinuities and grazing angles together make the
+  // legs come out long) and the body's self-occlusion then leave the same holes in both
+  // E-steps. Needs the depth camera. Off by default: it helps the tall subjects and costs the
+  // MakeHuman body, and a short subject's legs ran away with it (docs/shape-measurements.md,
+  // "The self E-step with the sensor's holes").
+  bool bias_scan_mask = false;
+  double bias_mask_tolerance = 0.03;
+  int bias_mask_radius_px = 1;
   // Girths are held at stages with a radius above this (m): wide radii bias them most.
   double girth_max_radius = 0.04;
   // Scan-to-model term: every scan point (voxel-subsampled, cell `scan_to_model_voxel` m)

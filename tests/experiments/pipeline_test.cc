@@ -294,6 +294,29 @@ TEST(PipelineTest, InitialisationAndQualityKeysAreRead) {
   EXPECT_NE(msg2.find("inlier_distance"), std::string::npos) << msg2;
 }
 
+// The shape's scan mask reads the frames' free-space maps: the preprocessing builds them when
+// it is on (shape estimated, bias correction on), unless preprocess.silhouette.enabled says.
+TEST(PipelineTest, ShapeScanMaskBuildsTheFreeSpaceMaps) {
+  const auto built = [](const std::string& yaml) {
+    const Config config = Config::FromString(yaml, "shape.yaml");
+    return LoadPipelineOptions(config).preprocess.silhouette.enabled;
+  };
+  EXPECT_FALSE(built("shape:\n  mode: bones_girth\n"));
+  EXPECT_TRUE(built("shape:\n  mode: bones_girth\n  bias_scan_mask: true\n"));
+  EXPECT_FALSE(built("shape:\n  mode: fixed\n  bias_scan_mask: true\n"));
+  EXPECT_FALSE(
+      built("shape:\n  mode: bones\n  bias_scan_mask: true\n  bias_correction: false\n"));
+  EXPECT_FALSE(built("shape:\n  mode: bones\n  bias_scan_mask: true\n"
+                     "preprocess:\n  silhouette:\n    enabled: false\n"));
+  const PipelineOptions o = LoadPipelineOptions(Config::FromString(
+      "shape:\n  bias_mask_tolerance: 0.05\n  bias_mask_radius_px: 2\n", "shape.yaml"));
+  EXPECT_EQ(o.shape.bias_mask_tolerance, 0.05);
+  EXPECT_EQ(o.shape.bias_mask_radius_px, 2);
+  const Config bad = Config::FromString("shape:\n  bias_mask_radius_px: 9\n", "s.yaml");
+  EXPECT_NE(ErrorOf([&] { LoadPipelineOptions(bad); }).find("bias_mask_radius_px"),
+            std::string::npos);
+}
+
 TEST(PipelineTest, PredictionKeysAreReadAndTheOlderKeyMaps) {
   Config config = Config::Load(std::string(ARTEX_SOURCE_DIR) + "/configs/default.yaml");
   const PipelineOptions defaults = LoadPipelineOptions(config);

@@ -235,6 +235,62 @@ TEST(ShapeEstimatorTest, HoldsTheParametersOfPartsOutOfView) {
   EXPECT_TRUE(off.UnseenParameters(poses).empty());
 }
 
+// A depth camera's drop-outs (here the shanks, missing from every frame's one-sided scan, as
+// depth discontinuities and grazing angles thin a real one) bias the E-step's means next to the
+// hole; the bias correction's self E-step, run on every camera-facing template vertex, does not
+// have that hole and so does not cancel it. With bias_scan_mask the self E-step keeps only the
+// vertices the depth image saw: the legs of the template, which is the subject here, stay
+// closer to its own (measured: thigh and shank factors 0.8 and 1.3 % off without, 0.1 % with).
+TEST(ShapeEstimatorTest, ScanMaskGivesTheSelfScanTheSensorsHoles) {
+  const Template& t = CoarseTemplate();
+  PinholeCamera camera;  // identity world_to_camera: the subject at depth 2.5 m, whole in view
+  camera.fx = camera.fy = 500.0;
+  camera.cy = 240.0 - camera.fy * 0.85 / 2.5;
+  const int l_shank = t.FindJoint("l_knee"), r_shank = t.FindJoint("r_knee");
+  ASSERT_GE(l_shank, 0);
+  ASSERT_GE(r_shank, 0);
+  std::vector<Scan> scans;
+  std::vector<Pose> poses;
+  PosesAndScans(t, 4, 0.2, 3, &poses, &scans);
+  const Eigen::Vector3d eye = camera.Center();
+  for (Scan& scan : scans) {  // camera-facing points off the shanks
+    std::vector<int> keep;
+    for (int i = 0; i < scan.size(); ++i) {
+      const Eigen::Vector3d x = scan.points.row(i).transpose();
+      const int joint = t.vertex_joint[i];
+      if (joint == l_shank || joint == r_shank) continue;
+      if (scan.normals.row(i).dot((eye - x).normalized()) > 0.3) keep.push_back(i);
+    }
+    Scan cut;
+    cut.points = scan.points(keep, Eigen::all);
+    cut.normals = scan.normals(keep, Eigen::all);
+    cut.colors = Eigen::MatrixX3d::Zero(cut.points.rows(), 3);
+    cut.color_valid.assign(keep.size(), 0);
+    scan = cut;
+  }
+  std::vector<const Scan*> pointers;
+  for (const Scan& s : scans) pointers.push_back(&s);
+  double error[2] = {0.0, 0.0};
+  for (int mask = 0; mask < 2; ++mask) {
+    ShapeOptions o = Options(ShapeMode::kBones);
+    o.bias_scan_mask = mask == 1;
+    ShapeEstimator estimator(t, o);
+    estimator.SetDepthCamera(camera, OutOfViewOptions());
+    std::vector<Pose> fitted = poses;
+    estimator.Solve(pointers, &fitted, Eigen::VectorXd::Zero(estimator.model().num_parameters()),
+                    1e-8);
+    // The bones at the hole, thigh and shank (the truth is 0). Others drift alike in both runs
+    // (a one-sided scan of this coarse mesh: the hip offsets and the spine by 4-9 %).
+    for (const char* name : {"bone:l_knee", "bone:l_ankle"}) {
+      const int p = ParameterIndex(estimator.model(), name);
+      ASSERT_LT(p, estimator.model().num_parameters()) << name;
+      error[mask] = std::max(error[mask], std::abs(estimator.parameters()[p]));
+    }
+  }
+  EXPECT_GT(error[0], 0.008) << "the hole biases the legs without the mask";
+  EXPECT_LT(error[1], 0.3 * error[0]) << "without the mask " << error[0] << ", with " << error[1];
+}
+
 TEST(ShapeEstimatorTest, CalibratesAfterTheConfiguredFramesThenFreezes) {
   const Template& t = CoarseTemplate();
   ShapeOptions o = Options(ShapeMode::kScale);
@@ -384,6 +440,14 @@ TEST(ShapeEstimatorTest, BoundsHoldAndOptionsAreChecked) {
   bad.scan_to_model_normal_distance = -0.01;
   EXPECT_FALSE(bad.IsValid(&why));
   EXPECT_NE(why.find("scan_to_model_normal_distance"), std::string::npos) << why;
+  bad = ShapeOptions();
+  bad.bias_mask_tolerance = 0.0;
+  EXPECT_FALSE(bad.IsValid(&why));
+  EXPECT_NE(why.find("bias_mask_tolerance"), std::string::npos) << why;
+  bad = ShapeOptions();
+  bad.bias_mask_radius_px = -1;
+  EXPECT_FALSE(bad.IsValid(&why));
+  EXPECT_NE(why.find("bias_mask_radius_px"), std::string::npos) << why;
 }
 
 }  // namespace
