@@ -92,6 +92,10 @@ SynthSpec SynthSpecFromConfig(const Config& c) {
   d.width = depth_width;
   d.height = depth_height;
   c.Get("disparity_noise_px", &o.kinect.depth_noise.disparity_noise_px);
+  c.Get("disparity_step_px", &o.kinect.depth_noise.disparity_step_px);
+  c.Get("edge_drop_probability", &o.kinect.depth_noise.edge_drop_probability);
+  c.Get("grazing_angle_deg", &o.kinect.depth_noise.grazing_angle_deg);
+  c.Get("projector_shadow", &o.kinect.depth_noise.projector_shadow);
   c.Get("random_dropout", &o.kinect.depth_noise.random_dropout);
   c.Get("color_noise", &o.kinect.color_model.noise_std);
   c.Get("outlier_fraction", &spec.outlier_fraction);
@@ -191,7 +195,8 @@ std::vector<std::string> SynthSpecKeys() {
           "background_frames", "color_width", "color_height", "texture_size",
           "subject_resolution", "subject_height", "subject_girth", "subject_template", "yaw_deg",
           "depth_width",
-          "depth_height", "disparity_noise_px", "random_dropout", "color_noise",
+          "depth_height", "disparity_noise_px", "disparity_step_px", "edge_drop_probability",
+          "grazing_angle_deg", "projector_shadow", "random_dropout", "color_noise",
           "outlier_fraction", "outlier_range_m", "condition", "camera_pitch_deg",
           "camera_roll_deg", "world_frame", "boxes", "second_person"};
 }

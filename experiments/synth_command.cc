@@ -49,6 +49,7 @@ struct SynthCliOptions {
   double camera_pitch_deg = 0.0;
   double camera_roll_deg = 0.0;
   std::string world_frame = "scene";
+  DepthNoiseOptions depth_noise;  // the flags below override the --noise preset's
   int boxes = 0;
   bool second_person = false;
   std::string second_person_motion = "walk";
@@ -243,6 +244,13 @@ void Run(const SynthCliOptions& cli, const CLI::App& app) {
       throw Error(std::string("--world-frame: ") + e.what());
     }
   }
+  // The depth sensor's effects one by one, over the preset (docs/synthesis.md).
+  DepthNoiseOptions& d = options.kinect.depth_noise;
+  if (Given(app, "--disparity-noise")) d.disparity_noise_px = cli.depth_noise.disparity_noise_px;
+  if (Given(app, "--disparity-step")) d.disparity_step_px = cli.depth_noise.disparity_step_px;
+  if (Given(app, "--edge-drop")) d.edge_drop_probability = cli.depth_noise.edge_drop_probability;
+  if (Given(app, "--grazing-angle")) d.grazing_angle_deg = cli.depth_noise.grazing_angle_deg;
+  if (Given(app, "--projector-shadow")) d.projector_shadow = cli.depth_noise.projector_shadow;
   if (Given(app, "--boxes")) options.random_boxes = cli.boxes;
   SecondPersonOptions& person = options.second_person;
   if (cli.second_person) person.enabled = true;
@@ -330,6 +338,21 @@ void RegisterSynthCommand(CLI::App* app) {
       ->capture_default_str();
   sub->add_option("--noise", cli->noise, "Sensor noise preset: off, default, high")
       ->capture_default_str();
+  sub->add_option("--disparity-noise", cli->depth_noise.disparity_noise_px,
+                  "Depth: Gaussian disparity noise std (px), over the --noise preset")
+      ->check(CLI::Range(0.0, 10.0));
+  sub->add_option("--disparity-step", cli->depth_noise.disparity_step_px,
+                  "Depth: disparity quantisation step (px; 0: none), over the preset")
+      ->check(CLI::Range(0.0, 10.0));
+  sub->add_option("--edge-drop", cli->depth_noise.edge_drop_probability,
+                  "Depth: drop-out probability at depth discontinuities, over the preset")
+      ->check(CLI::Range(0.0, 1.0));
+  sub->add_option("--grazing-angle", cli->depth_noise.grazing_angle_deg,
+                  "Depth: surfaces seen beyond this angle to the view ray are missing (degrees; "
+                  "90: none), over the preset")
+      ->check(CLI::Range(1.0, 90.0));
+  sub->add_option("--projector-shadow", cli->depth_noise.projector_shadow,
+                  "Depth: the IR projector's shadow (true/false), over the preset");
   sub->add_option("--background-frames", cli->background_frames, "Empty-scene depth frames")
       ->capture_default_str()
       ->check(CLI::Range(0, 1000));

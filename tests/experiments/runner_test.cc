@@ -16,6 +16,7 @@
 #include <thread>
 #include <vector>
 
+#include "experiments/runner_internal.h"
 #include "models/error.h"
 #include "models/template_cache.h"
 #include "models/template_generator.h"
@@ -129,6 +130,20 @@ TEST(ExperimentParseTest, UnknownChoiceListsValidChoices) {
 TEST(ExperimentParseTest, InvalidValueIsRejectedBeforeRunning) {
   const std::string msg = ErrorOf([] { Parse("grid: {pipeline.max_frames: [-1]}\n"); });
   EXPECT_NE(msg.find("max_frames"), std::string::npos) << msg;
+}
+
+// The depth sensor's effects one by one (docs/synthesis.md), over the noise preset.
+TEST(ExperimentParseTest, SynthSpecSetsTheDepthEffects) {
+  const runner_internal::SynthSpec spec = runner_internal::SynthSpecFromConfig(Config::FromString(
+      "noise: off\nedge_drop_probability: 0.6\ngrazing_angle_deg: 78\n"
+      "projector_shadow: true\ndisparity_step_px: 0.25\n",
+      "synth.yaml"));
+  const DepthNoiseOptions& d = spec.options.kinect.depth_noise;
+  EXPECT_EQ(d.edge_drop_probability, 0.6);
+  EXPECT_EQ(d.grazing_angle_deg, 78.0);
+  EXPECT_TRUE(d.projector_shadow);
+  EXPECT_EQ(d.disparity_step_px, 0.25);
+  EXPECT_EQ(d.disparity_noise_px, 0.0) << "the off preset's";
 }
 
 TEST(ExperimentParseTest, BadSynthSpecListsValidKeys) {

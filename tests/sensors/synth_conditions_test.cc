@@ -499,5 +499,44 @@ TEST(SynthConditionsTest, CommandLineFlagsSetTheConditions) {
   fs::remove_all(dir);
 }
 
+// The depth effects' flags override the --noise preset both ways: the default preset without its
+// disparity noise, quantisation and shadow is the "off" preset with the default's drop-outs at
+// discontinuities and grazing angles, depth image for depth image; and those drop-outs remove
+// pixels.
+TEST(SynthConditionsTest, DepthEffectFlagsOverrideThePreset) {
+  ASSERT_TRUE(fs::exists(ARTEX_BINARY)) << "build the artex target first: " << ARTEX_BINARY;
+  const std::string base = std::string(ARTEX_BINARY) +
+                           " synth --frames 2 --subject-resolution 0 --texture-size 256 "
+                           "--color-width 200 --color-height 254 --background-frames 0 ";
+  const auto synth = [&](const std::string& name, const std::string& flags) {
+    const fs::path dir = TempDir(name);
+    const std::string command = base + flags + " -o " + dir.string() + " 2>/dev/null";
+    EXPECT_EQ(std::system(command.c_str()), 0) << command;
+    return dir;
+  };
+  const fs::path from_default = synth("fx_default", "--noise default --disparity-noise 0 "
+                                                    "--disparity-step 0 --projector-shadow false");
+  const fs::path from_off = synth("fx_off", "--noise off --edge-drop 0.6 --grazing-angle 78");
+  const fs::path off = synth("fx_plain", "--noise off");
+  const auto read = [](const fs::path& dir) {
+    std::ifstream in(dir / "depth" / "000001.png", std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  EXPECT_FALSE(read(from_off).empty());
+  EXPECT_EQ(read(from_default), read(from_off));
+  const auto valid = [](const fs::path& dir) {
+    SequenceReader reader(dir.string());
+    Frame frame;
+    std::string warning;
+    EXPECT_TRUE(reader.ReadFrame(1, &frame, &warning)) << warning;
+    return frame.depth.empty() ? 0 : cv::countNonZero(frame.depth);
+  };
+  EXPECT_LT(valid(from_off), valid(off) - 50) << "the drop-outs remove pixels";
+  const std::string bad =
+      base + "--grazing-angle 0 -o " + (from_off.string() + "_bad") + " 2>/dev/null";
+  EXPECT_NE(std::system(bad.c_str()), 0);
+  for (const fs::path& dir : {from_default, from_off, off}) fs::remove_all(dir);
+}
+
 }  // namespace
 }  // namespace artex
