@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <vector>
 
 #include "models/error.h"
 #include "sensors/image_io.h"
@@ -61,40 +64,46 @@ void BackgroundModel::Train(const std::vector<cv::Mat>& frames, double depth_sca
   }
   median_.create(h, w, CV_32FC1);
   sigma_.create(h, w, CV_32FC1);
-  std::vector<uint16_t> samples(frames.size());
-  std::vector<float> deviations(frames.size());
   const float inv_scale = static_cast<float>(1.0 / depth_scale);
-  int known = 0;
-  for (int y = 0; y < h; ++y) {
-    float* med = median_.ptr<float>(y);
-    float* sig = sigma_.ptr<float>(y);
-    for (int x = 0; x < w; ++x) {
-      int n = 0;
-      for (const cv::Mat& f : frames) {
-        const uint16_t d = f.ptr<uint16_t>(y)[x];
-        if (d != 0) samples[n++] = d;
+  // Rows in parallel (each pixel is its own: the same model with any number of threads); the
+  // first frame of a run waits for it.
+  std::vector<int> known_in_row(h, 0);
+  tbb::parallel_for(tbb::blocked_range<int>(0, h, 8), [&](const tbb::blocked_range<int>& rows) {
+    std::vector<uint16_t> samples(frames.size());
+    std::vector<float> deviations(frames.size());
+    for (int y = rows.begin(); y < rows.end(); ++y) {
+      float* med = median_.ptr<float>(y);
+      float* sig = sigma_.ptr<float>(y);
+      for (int x = 0; x < w; ++x) {
+        int n = 0;
+        for (const cv::Mat& f : frames) {
+          const uint16_t d = f.ptr<uint16_t>(y)[x];
+          if (d != 0) samples[n++] = d;
+        }
+        if (n < options_.min_valid_samples) {
+          med[x] = 0;
+          sig[x] = 0;
+          continue;
+        }
+        std::sort(samples.begin(), samples.begin() + n);
+        const float m = (n % 2 == 1)
+                            ? samples[n / 2]
+                            : 0.5f * (static_cast<float>(samples[n / 2 - 1]) + samples[n / 2]);
+        for (int k = 0; k < n; ++k) deviations[k] = std::abs(static_cast<float>(samples[k]) - m);
+        std::sort(deviations.begin(), deviations.begin() + n);
+        const float mad =
+            (n % 2 == 1) ? deviations[n / 2] : 0.5f * (deviations[n / 2 - 1] + deviations[n / 2]);
+        const double z = m * inv_scale;
+        double s = options_.noise_sigma_at_1m * z * z;
+        if (options_.use_mad) s = std::max(s, kMadToSigma * mad * inv_scale);
+        med[x] = static_cast<float>(z);
+        sig[x] = static_cast<float>(s);
+        ++known_in_row[y];
       }
-      if (n < options_.min_valid_samples) {
-        med[x] = 0;
-        sig[x] = 0;
-        continue;
-      }
-      std::sort(samples.begin(), samples.begin() + n);
-      const float m = (n % 2 == 1)
-                          ? samples[n / 2]
-                          : 0.5f * (static_cast<float>(samples[n / 2 - 1]) + samples[n / 2]);
-      for (int k = 0; k < n; ++k) deviations[k] = std::abs(static_cast<float>(samples[k]) - m);
-      std::sort(deviations.begin(), deviations.begin() + n);
-      const float mad =
-          (n % 2 == 1) ? deviations[n / 2] : 0.5f * (deviations[n / 2 - 1] + deviations[n / 2]);
-      const double z = m * inv_scale;
-      double s = options_.noise_sigma_at_1m * z * z;
-      if (options_.use_mad) s = std::max(s, kMadToSigma * mad * inv_scale);
-      med[x] = static_cast<float>(z);
-      sig[x] = static_cast<float>(s);
-      ++known;
     }
-  }
+  });
+  long long known = 0;
+  for (int k : known_in_row) known += k;
   known_fraction_ = static_cast<double>(known) / (static_cast<double>(w) * h);
   FinishLimits(depth_scale);
 }

@@ -1,6 +1,7 @@
 #include "sensors/preprocess.h"
 
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
@@ -161,6 +162,30 @@ TEST(BackgroundModelTest, SeparatesSubjectFromSceneAtDefaultNoise) {
   }
   ::testing::Test::RecordProperty("background_through_without_margin", loose_through);
   EXPECT_GT(static_cast<double>(loose_through) / bg, 0.05);
+}
+
+// The model's rows are trained in parallel: the same medians, sigmas and known fraction with one
+// thread as with every core.
+TEST(BackgroundModelTest, TrainingIsTheSameOnOneThread) {
+  const PinholeCamera cam = DepthCamera();
+  std::mt19937_64 rng(7);
+  cv::Mat z_empty, none;
+  RenderTruth(cam, false, &z_empty, &none);
+  std::vector<cv::Mat> background;
+  for (int i = 0; i < 10; ++i) background.push_back(Measure(z_empty, &rng));
+  for (cv::Mat& f : background) f(cv::Rect(0, 0, 40, 30)) = 0;  // some pixels never measured
+  BackgroundModel all;
+  all.Train(background, 1000.0);
+  BackgroundModel one;
+  {
+    tbb::global_control single(tbb::global_control::max_allowed_parallelism, 1);
+    one.Train(background, 1000.0);
+  }
+  EXPECT_EQ(cv::norm(all.background_depth(), one.background_depth(), cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::norm(all.background_sigma(), one.background_sigma(), cv::NORM_INF), 0.0);
+  EXPECT_EQ(all.known_fraction(), one.known_fraction());
+  EXPECT_LT(all.known_fraction(), 1.0);
+  EXPECT_GT(all.known_fraction(), 0.9);
 }
 
 TEST(BackgroundModelTest, UnknownBackgroundIsForegroundWithinRange) {
