@@ -65,8 +65,8 @@ void BackgroundModel::Train(const std::vector<cv::Mat>& frames, double depth_sca
   median_.create(h, w, CV_32FC1);
   sigma_.create(h, w, CV_32FC1);
   const float inv_scale = static_cast<float>(1.0 / depth_scale);
-  // Rows in parallel (each pixel is its own: the same model with any number of threads); the
-  // first frame of a run waits for it.
+  // Rows in parallel (each pixel is its own: the same model with any number of threads); a
+  // run's set-up waits for it.
   std::vector<int> known_in_row(h, 0);
   tbb::parallel_for(tbb::blocked_range<int>(0, h, 8), [&](const tbb::blocked_range<int>& rows) {
     std::vector<uint16_t> samples(frames.size());

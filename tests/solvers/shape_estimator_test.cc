@@ -36,6 +36,16 @@ void PosesAndScans(const Template& subject, int frames, double spread, unsigned 
   }
 }
 
+// The scan's points `keep` (colourless).
+Scan Subset(const Scan& scan, const std::vector<int>& keep) {
+  Scan cut;
+  cut.points = scan.points(keep, Eigen::all);
+  cut.normals = scan.normals(keep, Eigen::all);
+  cut.colors = Eigen::MatrixX3d::Zero(cut.points.rows(), 3);
+  cut.color_valid.assign(keep.size(), 0);
+  return cut;
+}
+
 // Index of the named shape parameter (num_parameters() when absent).
 int ParameterIndex(const ShapeModel& model, const std::string& name) {
   const auto& names = model.parameter_names();
@@ -203,12 +213,7 @@ TEST(ShapeEstimatorTest, HoldsTheParametersOfPartsOutOfView) {
     }
     ASSERT_GT(keep.size(), 100u);
     ASSERT_LT(keep.size(), static_cast<size_t>(scan.size()));
-    Scan cut;
-    cut.points = scan.points(keep, Eigen::all);
-    cut.normals = scan.normals(keep, Eigen::all);
-    cut.colors = Eigen::MatrixX3d::Zero(cut.points.rows(), 3);
-    cut.color_valid.assign(keep.size(), 0);
-    scan = cut;
+    scan = Subset(scan, keep);
   }
   estimator.SetDepthCamera(camera, OutOfViewOptions());
   const std::vector<int> unseen = estimator.UnseenParameters(poses);
@@ -261,12 +266,7 @@ TEST(ShapeEstimatorTest, ScanMaskGivesTheSelfScanTheSensorsHoles) {
       if (joint == l_shank || joint == r_shank) continue;
       if (scan.normals.row(i).dot((eye - x).normalized()) > 0.3) keep.push_back(i);
     }
-    Scan cut;
-    cut.points = scan.points(keep, Eigen::all);
-    cut.normals = scan.normals(keep, Eigen::all);
-    cut.colors = Eigen::MatrixX3d::Zero(cut.points.rows(), 3);
-    cut.color_valid.assign(keep.size(), 0);
-    scan = cut;
+    scan = Subset(scan, keep);
   }
   std::vector<const Scan*> pointers;
   for (const Scan& s : scans) pointers.push_back(&s);
