@@ -704,11 +704,6 @@ PipelineOptions LoadPipelineOptions(const Config& config) {
   BindInput(config.Section("input"), &o.input);
   BindPreprocess(config.Section("preprocess"), &o.preprocess);
   BindFitting(config.Section("fitting"), &o.fitting);
-  // The silhouette term needs the preprocessing's free-space map; build it unless told not to.
-  if (o.fitting.silhouette.weight > 0.0 &&
-      !config.Section("preprocess").Section("silhouette").Has("enabled")) {
-    o.preprocess.silhouette.enabled = true;
-  }
   BindInitializer(config.Section("fitting").Section("init"), &o.initializer);
   BindQuality(config.Section("fitting").Section("quality"), &o.quality);
   o.initializer.quality = o.quality;  // the initialiser ranks and labels with the same options
@@ -718,8 +713,11 @@ PipelineOptions LoadPipelineOptions(const Config& config) {
   BindPipeline(config.Section("pipeline"), &o);
   BindStream(config.Section("stream"), &o.stream);
   BindShape(config.Section("shape"), &o.shape);
-  // So does the shape's scan mask (shape.bias_scan_mask: free space is no sensor hole).
-  if (o.shape.mode != ShapeMode::kFixed && o.shape.bias_correction && o.shape.bias_scan_mask &&
+  // The silhouette term and the shape's scan mask (shape.bias_scan_mask: free space is no
+  // sensor hole) need the preprocessing's free-space maps; build them unless told not to.
+  const bool scan_mask = o.shape.mode != ShapeMode::kFixed && o.shape.bias_correction &&
+                         o.shape.bias_scan_mask;
+  if ((o.fitting.silhouette.weight > 0.0 || scan_mask) &&
       !config.Section("preprocess").Section("silhouette").Has("enabled")) {
     o.preprocess.silhouette.enabled = true;
   }

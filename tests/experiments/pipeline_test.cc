@@ -294,14 +294,18 @@ TEST(PipelineTest, InitialisationAndQualityKeysAreRead) {
   EXPECT_NE(msg2.find("inlier_distance"), std::string::npos) << msg2;
 }
 
-// The shape's scan mask reads the frames' free-space maps: the preprocessing builds them when
-// it is on (shape estimated, bias correction on), unless preprocess.silhouette.enabled says.
+// The shape's scan mask reads the frames' free-space maps, as the silhouette term does: the
+// preprocessing builds them when either is on (the mask: shape estimated, bias correction on),
+// unless preprocess.silhouette.enabled says.
 TEST(PipelineTest, ShapeScanMaskBuildsTheFreeSpaceMaps) {
   const auto built = [](const std::string& yaml) {
     const Config config = Config::FromString(yaml, "shape.yaml");
     return LoadPipelineOptions(config).preprocess.silhouette.enabled;
   };
   EXPECT_FALSE(built("shape:\n  mode: bones_girth\n"));
+  EXPECT_TRUE(built("fitting:\n  silhouette:\n    weight: 1.0\n"));
+  EXPECT_FALSE(built("fitting:\n  silhouette:\n    weight: 1.0\n"
+                     "preprocess:\n  silhouette:\n    enabled: false\n"));
   EXPECT_TRUE(built("shape:\n  mode: bones_girth\n  bias_scan_mask: true\n"));
   EXPECT_FALSE(built("shape:\n  mode: fixed\n  bias_scan_mask: true\n"));
   EXPECT_FALSE(
