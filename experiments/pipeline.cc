@@ -89,6 +89,20 @@ FrameWorld ChooseWorldFrame(FrameSource* source, int begin, int end,
   return world;
 }
 
+// The floor (world frame of `calibration`) in the first readable frame, for the shape's floor
+// term; none without a readable frame or a floor in it.
+std::optional<ScenePlane> FirstFrameFloor(FrameSource* source, int begin, int end,
+                                          const Calibration& calibration,
+                                          const PreprocessOptions& options) {
+  Frame frame;
+  std::string warning;
+  int i = begin;
+  while (i < end && !source->ReadFrame(i, &frame, &warning)) ++i;
+  if (i >= end) return std::nullopt;
+  return FindWorldFloor(frame.depth, calibration.depth, calibration.depth_distortion,
+                        calibration.depth_scale, options.segmentation.planes);
+}
+
 // The error of a run without one usable frame: every reason, the first kListedReasons of each
 // kind listed (a long all-black recording would otherwise give one line per frame).
 std::string NoUsableFrameMessage(const std::string& sequence_dir, int frames,
@@ -241,6 +255,11 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
                               "; those pairs are not coupled");
   }
   shape.SetDepthCamera(calibration.depth, options.fitting.out_of_view);
+  if (shape.enabled() && options.shape.floor_weight > 0.0) {
+    const std::optional<ScenePlane> floor =
+        FirstFrameFloor(&reader, begin, end, calibration, options.preprocess);
+    if (floor) shape.SetFloor(floor->normal, floor->offset);
+  }
   TrackStage track(options, calibration, &preprocessor, &fitter);
   track.SetShape(&shape, &tmpl);
   PoolStage pooling(options, calibration, texturer.get());

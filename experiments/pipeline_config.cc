@@ -633,7 +633,7 @@ void BindShape(const Config& c, ShapeOptions* o) {
                "calibration_frames", "calibration_stride", "calibration_rounds", "radii",
                "iterations_per_stage", "over_relaxation", "bias_correction",
                "visibility_min_cos", "bias_density", "bias_scan_mask", "bias_mask_tolerance",
-               "bias_mask_radius_px", "girth_max_radius", "scan_to_model_weight",
+               "bias_mask_radius_px", "floor_weight", "girth_max_radius", "scan_to_model_weight",
                "scan_to_model_voxel", "scan_to_model_max_distance",
                "scan_to_model_normal_distance", "scan_to_model_girth", "hold_unseen",
                "chain_prior_weight", "limb_girth_prior_weight", "prior_weight", "pose_damping",
@@ -659,6 +659,7 @@ void BindShape(const Config& c, ShapeOptions* o) {
   c.Get("bias_scan_mask", &o->bias_scan_mask);
   c.Get("bias_mask_tolerance", &o->bias_mask_tolerance);
   c.Get("bias_mask_radius_px", &o->bias_mask_radius_px);
+  c.Get("floor_weight", &o->floor_weight);
   c.Get("girth_max_radius", &o->girth_max_radius);
   c.Get("scan_to_model_weight", &o->scan_to_model_weight);
   c.Get("scan_to_model_voxel", &o->scan_to_model_voxel);
@@ -713,11 +714,9 @@ PipelineOptions LoadPipelineOptions(const Config& config) {
   BindPipeline(config.Section("pipeline"), &o);
   BindStream(config.Section("stream"), &o.stream);
   BindShape(config.Section("shape"), &o.shape);
-  // The silhouette term and the shape's scan mask (shape.bias_scan_mask: free space is no
-  // sensor hole) need the preprocessing's free-space maps; build them unless told not to.
-  const bool scan_mask = o.shape.mode != ShapeMode::kFixed && o.shape.bias_correction &&
-                         o.shape.bias_scan_mask;
-  if ((o.fitting.silhouette.weight > 0.0 || scan_mask) &&
+  // The silhouette term needs the preprocessing's free-space maps; build them unless told not
+  // to. (The shape's scan mask builds its own on the frames it keeps: TrackStage::FeedShape.)
+  if (o.fitting.silhouette.weight > 0.0 &&
       !config.Section("preprocess").Section("silhouette").Has("enabled")) {
     o.preprocess.silhouette.enabled = true;
   }

@@ -271,7 +271,7 @@ void TrackStage::Process(FrameWork* work) {
   // A lost frame's pose is not texture: it would paint the room onto the body.
   work->texture_frame = !lost_frame && (options_.texture_doubtful_frames ||
                                         record.quality.label == FitQualityLabel::kGood);
-  if (!lost_frame && record.fit.ok()) FeedShape(work->pose, record.frame);
+  if (!lost_frame && record.fit.ok()) FeedShape(frame, work->pose, record.frame);
   if (lost_frame) {
     // Re-initialise on the next frame with enough points; the scale estimate and the
     // texture survive (the same person), the tracked subject component does not.

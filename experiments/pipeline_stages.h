@@ -105,7 +105,7 @@ class TrackStage {
   void Evaluate(FrameRecord* record, Eigen::MatrixX3d* posed);
   // An accepted frame's scan_ and pose to the shape estimator; swaps the subject's template
   // into *tmpl_ and the fitter when it solves (experiments/track_shape.cc).
-  void FeedShape(const Pose& pose, int frame);
+  void FeedShape(const Frame& input, const Pose& pose, int frame);
 
   const PipelineOptions& options_;
   const Calibration& calibration_;

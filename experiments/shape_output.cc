@@ -154,6 +154,12 @@ void AddShapeToSummary(const std::string& summary_path, const PipelineResult& re
       shape["detail"]["segments"] = by_joint;
     }
   }
+  // The floor plane of the floor term (shape.floor_weight; null: none found or off).
+  shape["floor"] = nullptr;
+  if (est.has_floor()) {
+    const Eigen::Vector3d& n = est.floor_normal();
+    shape["floor"] = {{"normal", {n.x(), n.y(), n.z()}}, {"offset", est.floor_offset()}};
+  }
   shape["refinements"] = est.refinements();
   shape["refine_seconds"] = est.refine_seconds();
   shape["rounds"] = est.rounds_done();

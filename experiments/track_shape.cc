@@ -1,13 +1,22 @@
 // TrackStage's part of the subject shape estimation (section shape, docs/shape.md): feeding
 // accepted frames to the estimator and swapping the subject's template into the fitter.
 #include "experiments/pipeline_stages.h"
+#include "sensors/silhouette.h"
 
 namespace artex {
 
-void TrackStage::FeedShape(const Pose& pose, int frame) {
+void TrackStage::FeedShape(const Frame& input, const Pose& pose, int frame) {
   if (shape_ == nullptr || tmpl_ == nullptr || !shape_->enabled()) return;
   const bool scale_settled = !fitter_->ScaleIsFree() ||
                              fitter_->scale_samples() >= options_.fitting.scale_estimation_frames;
+  if (shape_->NeedsFreeSpace() && !scan_.silhouette && shape_->KeepsNextFrame(scale_settled)) {
+    // The scan mask's free space, built for the frames the estimator keeps only (the
+    // preprocessing builds it for every frame when the silhouette term needs it).
+    scan_.silhouette =
+        BuildSilhouetteMap(input.depth, calibration_.depth_scale,
+                           preprocessor_->foreground_mask(), calibration_.depth,
+                           options_.preprocess.silhouette);
+  }
   Pose refined;
   if (!shape_->AddFrame(scan_, pose, scale_settled, &refined)) return;
   *tmpl_ = shape_->SubjectTemplate();

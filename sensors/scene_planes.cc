@@ -339,4 +339,27 @@ WorldFrameEstimate EstimateWorldFrame(const cv::Mat& depth, const PinholeCamera&
   return estimate;
 }
 
+std::optional<ScenePlane> FindWorldFloor(const cv::Mat& depth, const PinholeCamera& camera,
+                                         const Distortion& distortion, double depth_scale,
+                                         const PlaneDetectionOptions& options) {
+  const Eigen::Matrix3d r = camera.world_to_camera.linear();
+  const Eigen::Vector3d t = camera.world_to_camera.translation();
+  const std::vector<ScenePlane> planes = DetectScenePlanes(
+      depth, camera, distortion, depth_scale, r * Eigen::Vector3d::UnitY(), options);
+  const ScenePlane* floor = nullptr;
+  for (const ScenePlane& p : planes) {
+    if (p.kind == PlaneKind::kFloor && (!floor || p.inliers > floor->inliers)) floor = &p;
+  }
+  if (!floor) return std::nullopt;
+  // n_c . (R x + t) + d = 0  <=>  (R^T n_c) . x + (n_c . t + d) = 0.
+  ScenePlane world = *floor;
+  world.normal = r.transpose() * floor->normal;
+  world.offset = floor->normal.dot(t) + floor->offset;
+  if (world.normal.y() < 0.0) {
+    world.normal = -world.normal;
+    world.offset = -world.offset;
+  }
+  return world;
+}
+
 }  // namespace artex

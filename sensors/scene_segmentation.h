@@ -120,6 +120,13 @@ WorldFrameEstimate EstimateWorldFrame(const cv::Mat& depth, const PinholeCamera&
                                       const std::optional<Eigen::Vector3d>& gravity_up,
                                       const WorldFrameOptions& options);
 
+// The floor of a depth frame in the world frame of `camera` (its world_to_camera, world +Y up):
+// the floor-labelled plane (up prior: world +Y) with the most inliers, its normal pointing up;
+// none when no plane is labelled a floor (a camera framing the upper body sees none).
+std::optional<ScenePlane> FindWorldFloor(const cv::Mat& depth, const PinholeCamera& camera,
+                                         const Distortion& distortion, double depth_scale,
+                                         const PlaneDetectionOptions& options);
+
 // How the subject is chosen among the person-sized components.
 enum class SubjectChoice { kCentral, kNearest, kLargest, kPixel };
 const std::map<std::string, SubjectChoice>& SubjectChoiceNames();

@@ -56,6 +56,8 @@ bool ShapeOptions::IsValid(std::string* error) const {
         << bias_mask_tolerance;
   } else if (bias_mask_radius_px < 0 || bias_mask_radius_px > 8) {
     msg << "shape.bias_mask_radius_px: expected 0..8, found " << bias_mask_radius_px;
+  } else if (!(std::isfinite(floor_weight) && floor_weight >= 0.0)) {
+    msg << "shape.floor_weight: expected a finite value >= 0 (0: off), found " << floor_weight;
   } else if (!(std::isfinite(limb_girth_prior_weight) && limb_girth_prior_weight >= 0.0)) {
     msg << "shape.limb_girth_prior_weight: expected a finite value >= 0, found "
         << limb_girth_prior_weight;
@@ -304,6 +306,15 @@ void ShapeEstimator::SetDepthCamera(const PinholeCamera& camera,
   has_depth_camera_ = true;
 }
 
+void ShapeEstimator::SetFloor(const Eigen::Vector3d& normal, double offset) {
+  if (!normal.allFinite() || !(normal.norm() > 1e-9) || !std::isfinite(offset)) {
+    throw Error("shape floor: expected a finite plane with a non-zero normal");
+  }
+  floor_normal_ = normal.normalized();
+  floor_offset_ = offset / normal.norm();
+  has_floor_ = true;
+}
+
 std::vector<int> ShapeEstimator::UnseenParameters(const std::vector<Pose>& poses) const {
   std::vector<int> unseen;
   const int nq = model_.num_parameters();
@@ -370,6 +381,9 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
     }
   }
   const double max_d2 = options_.scan_to_model_max_distance * options_.scan_to_model_max_distance;
+  // Floor term: per fit vertex below the floor, relative to the data term (normalised per frame).
+  const bool floor = has_floor_ && options_.floor_weight > 0.0 && n > 0;
+  const double floor_weight = floor ? options_.floor_weight / n : 0.0;
   std::vector<double> reverse_count, self_count;
   Eigen::MatrixX3d reverse_sum, self_sum;
   const Eigen::MatrixXd ete = model_.expansion().transpose() * model_.expansion();
@@ -510,7 +524,11 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
           const double w1 = c * targets.weight[i];
           const double w2 = c_reverse * reverse_count[i];
           const double w = (w1 > 0.0 ? w1 : 0.0) + w2;
-          if (!(w > 0.0)) continue;
+          // Floor term: the vertex's signed height above the floor, when below it.
+          const double height =
+              floor ? floor_normal_.dot(sub_posed.row(i).transpose()) + floor_offset_ : 0.0;
+          const bool below = height < 0.0;
+          if (!(w > 0.0) && !below) continue;
           const int v = fit_vertices_[i];
           const std::vector<int>& cols = jacobian.Columns(v);
           const auto block = jacobian.Block(v);
@@ -535,6 +553,10 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
             cost += weight * e.squaredNorm();
           };
           if (w1 > 0.0) accumulate(w1, x - targets.mean.row(i).transpose(), local);
+          if (below) {  // w_f h^2 with h = n . x + offset: the residual n h, the Jacobian n n^T J
+            const Eigen::Vector3d& up = floor_normal_;
+            accumulate(floor_weight, up * height, up * (up.transpose() * local));
+          }
           if (w2 > 0.0) {
             const Eigen::Vector3d b = reverse_sum.row(i).transpose() / reverse_count[i];
             if (options_.scan_to_model_girth) {
@@ -628,6 +650,13 @@ Template ShapeEstimator::SubjectTemplate() const {
 
 bool ShapeEstimator::DetailPending() const {
   return calibrated_ && options_.detail.enabled && has_depth_camera_ && detail_.size() == 0;
+}
+
+bool ShapeEstimator::KeepsNextFrame(bool scale_settled) const {
+  if (!enabled()) return false;
+  if (!calibrated_) return scale_settled && accepted_ % options_.calibration_stride == 0;
+  if (DetailPending()) return accepted_ % options_.calibration_stride == 0;
+  return options_.refine_every > 0 && (after_ + 1) % options_.refine_every == 0;
 }
 
 bool ShapeEstimator::AddFrame(const Scan& scan, const Pose& pose, bool scale_settled,

@@ -96,6 +96,13 @@ struct ShapeOptions {
   bool bias_scan_mask = false;
   double bias_mask_tolerance = 0.03;
   int bias_mask_radius_px = 1;
+  // Floor term: a posed template vertex below the floor (SetFloor: the plane the pipeline finds
+  // in the first frame) is pushed up onto it, floor_weight / (fit vertices) per vertex and
+  // frame, relative to the data term (normalised per frame). The preprocessing removes the floor
+  // and with it the feet's underside; nothing else keeps the legs from growing into it (with
+  // bias_scan_mask a short subject's legs ran 76 mm long, its feet 12-19 cm under the floor:
+  // docs/shape-measurements.md, "The floor term"). 0, or no floor set: off.
+  double floor_weight = 1.0;
   // Girths are held at stages with a radius above this (m): wide radii bias them most.
   double girth_max_radius = 0.04;
   // Scan-to-model term: every scan point (voxel-subsampled, cell `scan_to_model_voxel` m)
@@ -192,6 +199,12 @@ class ShapeEstimator {
   // The depth camera (intrinsics, world_to_camera; its centre for the bias correction's
   // visibility) and the tracker's out-of-view test, for hold_unseen.
   void SetDepthCamera(const PinholeCamera& camera, const OutOfViewOptions& out_of_view);
+  // The floor plane (world frame): normal . x + offset = 0 on it, the normal (unit) pointing up
+  // into the room. For the floor term (floor_weight).
+  void SetFloor(const Eigen::Vector3d& normal, double offset);
+  bool has_floor() const { return has_floor_; }
+  const Eigen::Vector3d& floor_normal() const { return floor_normal_; }
+  double floor_offset() const { return floor_offset_; }
   // Names of the parameters the last calibration round held as unseen (hold_unseen), sorted as
   // the parameters.
   const std::vector<std::string>& unseen_parameters() const { return unseen_names_; }
@@ -207,6 +220,14 @@ class ShapeEstimator {
   // tracker's energy, not the data alone. Kept by shared ownership.
   void SetPosePriors(std::vector<std::shared_ptr<const FittingTerm>> priors) {
     pose_priors_ = std::move(priors);
+  }
+
+  // AddFrame keeps the next accepted frame (a calibration or surface detail frame, or a
+  // refinement's): the caller builds what it needs only then (its free-space map, NeedsFreeSpace).
+  bool KeepsNextFrame(bool scale_settled) const;
+  // bias_scan_mask: the frames AddFrame keeps need their free-space maps (scan.silhouette).
+  bool NeedsFreeSpace() const {
+    return enabled() && options_.bias_correction && options_.bias_scan_mask;
   }
 
   // Feeds an accepted frame (scan and fitted pose, world frame). scale_settled: the tracker's
@@ -238,6 +259,9 @@ class ShapeEstimator {
   PinholeCamera depth_camera_;
   OutOfViewOptions out_of_view_;
   bool has_depth_camera_ = false;
+  Eigen::Vector3d floor_normal_ = Eigen::Vector3d::UnitY();
+  double floor_offset_ = 0.0;
+  bool has_floor_ = false;
   std::vector<std::string> unseen_names_;
   std::vector<int> fit_vertices_;
   Eigen::MatrixXd chain_;  // collinear bone pairs x Q: difference of their length factors
