@@ -98,14 +98,14 @@ TEST(PipelineTest, ShapeScanMaskBuildsTheFreeSpaceMapsItNeeds) {
   EXPECT_NE(ErrorOf([&] { LoadPipelineOptions(bad); }).find("bias_mask_radius_px"),
             std::string::npos);
 
-  Config lazy = SmallShapeConfig();
-  lazy.Set("shape.bias_scan_mask", "true");
+  Config lazy = SmallShapeConfig();  // the mask is on by default
   Config every = lazy;
   every.Set("preprocess.silhouette.enabled", "true");
   const ShapeRun a = RunShape("mask_lazy", lazy), b = RunShape("mask_every", every);
   ASSERT_TRUE(a.shape.at("calibrated").get<bool>());
   EXPECT_EQ(a.rows, b.rows);
   Config off = SmallShapeConfig();
+  off.Set("shape.bias_scan_mask", "false");
   const ShapeRun c = RunShape("mask_off", off);
   EXPECT_NE(a.rows, c.rows) << "the mask changes the solve";
 }
