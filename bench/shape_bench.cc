@@ -8,7 +8,8 @@
 //                    larger subject gives more scan points, which the E-step pays for.)
 //   BM_TrackSubjectTemplate: the same frames with the subject's template as the tracker's own
 //                    (no SetRestShape): what SetRestShape itself costs, if anything.
-//   BM_CalibrationSolve: ShapeEstimator::Solve over 5 frames (default shape options).
+//   BM_CalibrationSolve/<hold_unseen>/<bias_scan_mask>: ShapeEstimator::Solve over 5 frames
+//                    (default shape options otherwise).
 //   BM_SurfaceDetail/<frames>: EstimateSurfaceDetail (the surface detail after the last round,
 //                    default options) over that many frames.
 // Counters: cpu_ms per frame (process CPU, all threads; the machine is shared), em_iterations per
@@ -109,13 +110,16 @@ void BM_TrackBase(benchmark::State& state) { Track(state, Tracker::kBase); }
 void BM_TrackSubject(benchmark::State& state) { Track(state, Tracker::kSubjectShape); }
 void BM_TrackSubjectTemplate(benchmark::State& state) { Track(state, Tracker::kSubjectTemplate); }
 
-// One calibration solve over 5 frames, the depth camera set; /0 without, /1 with
-// shape.hold_unseen's out-of-view test (the whole body is in view: nothing is held).
+// One calibration solve over 5 frames, the depth camera and the floor (y = 0) set. First
+// argument: shape.hold_unseen's out-of-view test (1; the whole body is in view: nothing is
+// held); second: shape.bias_scan_mask (1, the default; the scans have no free-space maps, so
+// the mask keeps the vertices the scan saw).
 void BM_CalibrationSolve(benchmark::State& state) {
   const ShapeFixture& f = Fixture();
   ShapeOptions o;
   o.mode = ShapeMode::kBonesGirth;
   o.hold_unseen = state.range(0) != 0;
+  o.bias_scan_mask = state.range(1) != 0;
   PinholeCamera camera;
   camera.world_to_camera = PinholeCamera::LookAt(Eigen::Vector3d(0.0, 1.0, 3.0),
                                                  Eigen::Vector3d(0.0, 1.0, 0.0),
@@ -127,6 +131,7 @@ void BM_CalibrationSolve(benchmark::State& state) {
   for (auto _ : state) {
     ShapeEstimator estimator(f.base, o);
     estimator.SetDepthCamera(camera, OutOfViewOptions());
+    estimator.SetFloor(Eigen::Vector3d::UnitY(), 0.0);
     std::vector<Pose> poses(f.poses.begin(), f.poses.begin() + 5);
     const double c0 = CpuSeconds();
     benchmark::DoNotOptimize(estimator.Solve(
@@ -165,7 +170,12 @@ void BM_SurfaceDetail(benchmark::State& state) {
 BENCHMARK(BM_TrackBase)->Unit(benchmark::kMillisecond)->Iterations(10);
 BENCHMARK(BM_TrackSubject)->Unit(benchmark::kMillisecond)->Iterations(10);
 BENCHMARK(BM_TrackSubjectTemplate)->Unit(benchmark::kMillisecond)->Iterations(10);
-BENCHMARK(BM_CalibrationSolve)->Unit(benchmark::kMillisecond)->Iterations(1)->Arg(0)->Arg(1);
+BENCHMARK(BM_CalibrationSolve)
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(1)
+    ->Args({0, 1})
+    ->Args({1, 0})
+    ->Args({1, 1});
 BENCHMARK(BM_SurfaceDetail)->Unit(benchmark::kMillisecond)->Iterations(3)->Arg(5)->Arg(8);
 
 }  // namespace

@@ -30,6 +30,12 @@ void AddShapeWarnings(const ShapeEstimator& shape, std::vector<std::string>* war
                         "calibration frame; shape.hold_unseen): " + JoinNames(unseen) +
                         "; the subject template keeps the template's proportions there");
   }
+  if (shape.floor_contradicted()) {
+    warnings->push_back(std::string(kShapeWarningPrefix) +
+                        "the floor found in the first frame lies above the subject's scan in a "
+                        "calibration solve, which left the floor term out there "
+                        "(shape.floor_weight; summary.json shape.floor)");
+  }
   const std::vector<std::string> bounded = shape.ParametersAtBounds();
   if (!bounded.empty()) {
     warnings->push_back(std::string(kShapeWarningPrefix) + std::to_string(bounded.size()) +
@@ -158,7 +164,9 @@ void AddShapeToSummary(const std::string& summary_path, const PipelineResult& re
   shape["floor"] = nullptr;
   if (est.has_floor()) {
     const Eigen::Vector3d& n = est.floor_normal();
-    shape["floor"] = {{"normal", {n.x(), n.y(), n.z()}}, {"offset", est.floor_offset()}};
+    shape["floor"] = {{"normal", {n.x(), n.y(), n.z()}},
+                      {"offset", est.floor_offset()},
+                      {"contradicted", est.floor_contradicted()}};
   }
   shape["refinements"] = est.refinements();
   shape["refine_seconds"] = est.refine_seconds();

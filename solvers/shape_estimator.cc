@@ -381,8 +381,22 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
     }
   }
   const double max_d2 = options_.scan_to_model_max_distance * options_.scan_to_model_max_distance;
-  // Floor term: per fit vertex below the floor, relative to the data term (normalised per frame).
-  const bool floor = has_floor_ && options_.floor_weight > 0.0 && n > 0;
+  // Floor term: per fit vertex below the floor, relative to the data term (normalised per frame);
+  // not when the scans lie below that floor.
+  bool floor = has_floor_ && options_.floor_weight > 0.0 && n > 0;
+  if (floor) {
+    std::size_t below = 0, total = 0;
+    for (const Scan* scan : scans) {
+      const Eigen::VectorXd height =
+          scan->points * floor_normal_ + Eigen::VectorXd::Constant(scan->size(), floor_offset_);
+      below += static_cast<std::size_t>((height.array() < -kFloorBelowMargin).count());
+      total += static_cast<std::size_t>(scan->size());
+    }
+    if (static_cast<double>(below) > kFloorMaxBelowFraction * static_cast<double>(total)) {
+      floor = false;
+      floor_contradicted_ = true;
+    }
+  }
   const double floor_weight = floor ? options_.floor_weight / n : 0.0;
   std::vector<double> reverse_count, self_count;
   Eigen::MatrixX3d reverse_sum, self_sum;

@@ -201,9 +201,15 @@ class ShapeEstimator {
   // visibility) and the tracker's out-of-view test, for hold_unseen.
   void SetDepthCamera(const PinholeCamera& camera, const OutOfViewOptions& out_of_view);
   // The floor plane (world frame): normal . x + offset = 0 on it, the normal (unit) pointing up
-  // into the room. For the floor term (floor_weight).
+  // into the room. For the floor term (floor_weight). A solve whose scans have more than
+  // kFloorMaxBelowFraction of their points further than kFloorBelowMargin below it does not
+  // apply it (a plane mistaken for the floor, e.g. a table top): floor_contradicted().
   void SetFloor(const Eigen::Vector3d& normal, double offset);
+  static constexpr double kFloorBelowMargin = 0.05;        // m
+  static constexpr double kFloorMaxBelowFraction = 0.01;  // of a solve's scan points
   bool has_floor() const { return has_floor_; }
+  // Some solve left the floor term out: its scans lay below the floor.
+  bool floor_contradicted() const { return floor_contradicted_; }
   const Eigen::Vector3d& floor_normal() const { return floor_normal_; }
   double floor_offset() const { return floor_offset_; }
   // Names of the parameters the last calibration round held as unseen (hold_unseen), sorted as
@@ -263,6 +269,7 @@ class ShapeEstimator {
   Eigen::Vector3d floor_normal_ = Eigen::Vector3d::UnitY();
   double floor_offset_ = 0.0;
   bool has_floor_ = false;
+  bool floor_contradicted_ = false;
   std::vector<std::string> unseen_names_;
   std::vector<int> fit_vertices_;
   Eigen::MatrixXd chain_;  // collinear bone pairs x Q: difference of their length factors

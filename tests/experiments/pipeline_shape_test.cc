@@ -117,6 +117,7 @@ TEST(PipelineTest, ShapeFindsTheFloor) {
   ASSERT_TRUE(floor.is_object()) << run.shape.dump();
   EXPECT_NEAR(floor.at("normal")[1].get<double>(), 1.0, 1e-3);
   EXPECT_NEAR(floor.at("offset").get<double>(), 0.0, 0.01);
+  EXPECT_FALSE(floor.at("contradicted").get<bool>());
   Config off = SmallShapeConfig();
   off.Set("shape.floor_weight", "0");
   EXPECT_TRUE(RunShape("floor_off", off).shape.at("floor").is_null());

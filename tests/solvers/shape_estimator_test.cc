@@ -330,6 +330,7 @@ TEST(ShapeEstimatorTest, FloorTermKeepsTheFeetOnTheFloor) {
     std::vector<Pose> fitted = poses;
     estimator.Solve(pointers, &fitted, q_ref, 3e-4);
     shank[with_floor] = estimator.parameters()[p];
+    EXPECT_FALSE(estimator.floor_contradicted());
     Eigen::MatrixX3d posed;
     double low = 0.0;
     for (const Pose& pose : fitted) {
@@ -343,6 +344,18 @@ TEST(ShapeEstimatorTest, FloorTermKeepsTheFeetOnTheFloor) {
   EXPECT_LT(lowest[0], -0.06);
   EXPECT_LT(shank[1], 0.1) << "without the floor term " << shank[0];
   EXPECT_GT(lowest[1], -0.03);
+  // A "floor" half a metre up, above the scan's lower part (a table top taken for the floor):
+  // the solve leaves the term out and says so.
+  ShapeOptions o = Options(ShapeMode::kBones);
+  ShapeEstimator raised(t, o);
+  raised.SetFloor(Eigen::Vector3d::UnitY(), -0.5);
+  const int p = ParameterIndex(raised.model(), "bone:l_ankle");
+  Eigen::VectorXd q_ref = Eigen::VectorXd::Zero(raised.model().num_parameters());
+  q_ref[p] = 0.3;
+  std::vector<Pose> fitted = poses;
+  raised.Solve(pointers, &fitted, q_ref, 3e-4);
+  EXPECT_TRUE(raised.floor_contradicted());
+  EXPECT_EQ(raised.parameters()[p], shank[0]);
   ShapeEstimator estimator(t, Options(ShapeMode::kBones));
   EXPECT_THROW(estimator.SetFloor(Eigen::Vector3d::Zero(), 0.0), Error);
   EXPECT_FALSE(estimator.has_floor());
