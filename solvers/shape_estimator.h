@@ -4,7 +4,8 @@
 // several poses), by Gauss-Newton over the same one-to-many correspondence energy the tracker
 // minimises (solvers/estep.h E-steps, radius schedule, data term normalised per frame):
 //   E(q, delta_1..N) = sum_f (1 / sum_t P_ft) sum_t P_ft |S(v_t; q, theta_f (+) delta_f) - mu_ft|^2
-//                      + prior_weight |E (q - q_ref)|^2 + pose_damping sum_f |delta_f|^2,
+//                      + prior_weight |E (q - q_ref)|^2 + pose_damping sum_f |delta_f|^2
+//                      (+ the scan-to-model, floor and prior terms of ShapeOptions),
 // q clamped to the bounds after every step. The global scale s0 of each pose is held (it is the
 // tracker's estimate; the shape is relative to it). Afterwards the shape is frozen, or refined
 // every `refine_every` frames by the same solve on that one frame with a strong prior

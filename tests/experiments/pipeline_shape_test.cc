@@ -5,21 +5,13 @@
 #include "experiments/pipeline.h"
 
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <functional>
-#include <mutex>
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
-#include <sstream>
 #include <string>
-#include <tuple>
 #include <vector>
 
 #include "experiments/config.h"
@@ -29,7 +21,6 @@
 #include "models/template_generator.h"
 #include "models/template_io.h"
 #include "sensors/sequence.h"
-#include "sensors/virtual_kinect.h"
 #include "tests/error_of.h"
 #include "tests/experiments/pipeline_test_util.h"
 #include "tests/solvers/virtual_kinect_scans.h"
@@ -45,9 +36,6 @@ namespace {
 namespace fs = std::filesystem;
 using namespace pipeline_test;  // NOLINT: the shared set-up
 
-// Section shape: a bones_girth calibration swaps the subject's template in, which is written as
-// subject.glb (same rig, vertex count and UVs) with its parameters in summary.json; a bad mode
-// is an error naming the key.
 // A bones_girth calibration after one frame of one round, with few iterations.
 Config SmallShapeConfig() {
   Config config = SmallConfig();
@@ -123,6 +111,9 @@ TEST(PipelineTest, ShapeFindsTheFloor) {
   EXPECT_TRUE(RunShape("floor_off", off).shape.at("floor").is_null());
 }
 
+// A bones_girth calibration swaps the subject's template in, which is written as subject.glb
+// (same rig, vertex count and UVs) with its parameters in summary.json; a bad mode is an error
+// naming the key.
 TEST(PipelineTest, ShapeCalibrationWritesTheSubjectTemplate) {
   Config config = SmallShapeConfig();
   const fs::path out = OutDir("run_shape");
