@@ -53,6 +53,14 @@ struct FrameWorld {
   Eigen::Isometry3d to_calibration_world = Eigen::Isometry3d::Identity();  // tracking -> sequence
 };
 
+// Reads the first readable frame of [begin, end) into *frame; its number, or end when none is.
+int ReadFirstFrame(FrameSource* source, int begin, int end, Frame* frame) {
+  std::string warning;
+  int i = begin;
+  while (i < end && !source->ReadFrame(i, frame, &warning)) ++i;
+  return i;
+}
+
 FrameWorld ChooseWorldFrame(FrameSource* source, int begin, int end,
                             const PreprocessOptions& options,
                             const std::optional<Eigen::Vector3d>& gravity, PipelineResult* result) {
@@ -65,9 +73,7 @@ FrameWorld ChooseWorldFrame(FrameSource* source, int begin, int end,
     return world;
   }
   Frame frame;
-  std::string warning;
-  int i = begin;
-  while (i < end && !source->ReadFrame(i, &frame, &warning)) ++i;
+  const int i = ReadFirstFrame(source, begin, end, &frame);
   if (i >= end) return world;  // nothing readable: the frame loop reports it
   WorldFrameOptions wo;
   wo.planes = options.segmentation.planes;
@@ -95,10 +101,7 @@ std::optional<ScenePlane> FirstFrameFloor(FrameSource* source, int begin, int en
                                           const Calibration& calibration,
                                           const PreprocessOptions& options) {
   Frame frame;
-  std::string warning;
-  int i = begin;
-  while (i < end && !source->ReadFrame(i, &frame, &warning)) ++i;
-  if (i >= end) return std::nullopt;
+  if (ReadFirstFrame(source, begin, end, &frame) >= end) return std::nullopt;
   return FindWorldFloor(frame.depth, calibration.depth, calibration.depth_distortion,
                         calibration.depth_scale, options.segmentation.planes);
 }

@@ -48,6 +48,15 @@ bool FitPlane(const std::vector<Eigen::Vector3d>& points, const std::vector<int>
   return true;
 }
 
+// The floor-labelled plane with the most inliers; null when none is labelled a floor.
+const ScenePlane* LargestFloor(const std::vector<ScenePlane>& planes) {
+  const ScenePlane* floor = nullptr;
+  for (const ScenePlane& p : planes) {
+    if (p.kind == PlaneKind::kFloor && (!floor || p.inliers > floor->inliers)) floor = &p;
+  }
+  return floor;
+}
+
 }  // namespace
 
 bool PlaneDetectionOptions::IsValid(std::string* error) const {
@@ -319,10 +328,7 @@ WorldFrameEstimate EstimateWorldFrame(const cv::Mat& depth, const PinholeCamera&
   const Eigen::Vector3d prior = gravity ? gravity_up->normalized() : Eigen::Vector3d(0, -1, 0);
   estimate.planes =
       DetectScenePlanes(depth, intrinsics, distortion, depth_scale, prior, options.planes);
-  const ScenePlane* floor = nullptr;
-  for (const ScenePlane& p : estimate.planes) {
-    if (p.kind == PlaneKind::kFloor && (!floor || p.inliers > floor->inliers)) floor = &p;
-  }
+  const ScenePlane* floor = LargestFloor(estimate.planes);
   if (floor) {
     estimate.source = WorldFrameSource::kFloor;
     estimate.up_camera = floor->normal;
@@ -346,10 +352,7 @@ std::optional<ScenePlane> FindWorldFloor(const cv::Mat& depth, const PinholeCame
   const Eigen::Vector3d t = camera.world_to_camera.translation();
   const std::vector<ScenePlane> planes = DetectScenePlanes(
       depth, camera, distortion, depth_scale, r * Eigen::Vector3d::UnitY(), options);
-  const ScenePlane* floor = nullptr;
-  for (const ScenePlane& p : planes) {
-    if (p.kind == PlaneKind::kFloor && (!floor || p.inliers > floor->inliers)) floor = &p;
-  }
+  const ScenePlane* floor = LargestFloor(planes);
   if (!floor) return std::nullopt;
   // n_c . (R x + t) + d = 0  <=>  (R^T n_c) . x + (n_c . t + d) = 0.
   ScenePlane world = *floor;

@@ -676,9 +676,12 @@ bool ShapeEstimator::KeepsNextFrame(bool scale_settled) const {
 bool ShapeEstimator::AddFrame(const Scan& scan, const Pose& pose, bool scale_settled,
                               Pose* refined) {
   if (!enabled()) return false;
+  // Which frames are kept is KeepsNextFrame's rule; here the counters it reads advance.
+  const bool keep = KeepsNextFrame(scale_settled);
   if (!calibrated_) {
     if (!scale_settled) return false;
-    if (accepted_++ % options_.calibration_stride != 0) return false;
+    ++accepted_;
+    if (!keep) return false;
     scans_.push_back(scan);
     poses_.push_back(pose);
     if (static_cast<int>(scans_.size()) < options_.calibration_frames) return false;
@@ -708,12 +711,15 @@ bool ShapeEstimator::AddFrame(const Scan& scan, const Pose& pose, bool scale_set
   }
   if (DetailPending()) {
     // Tracked with the final shape: every calibration_stride-th accepted frame is one more.
-    if (accepted_++ % options_.calibration_stride != 0) return false;
+    ++accepted_;
+    if (!keep) return false;
     scans_.push_back(scan);
     poses_.push_back(pose);
     return EstimateDetailWhenDue();
   }
-  if (options_.refine_every <= 0 || ++after_ % options_.refine_every != 0) return false;
+  if (options_.refine_every <= 0) return false;
+  ++after_;
+  if (!keep) return false;
   std::vector<Pose> one = {pose};
   const Eigen::VectorXd reference = q_;
   const ShapeSolveSummary s = Solve({&scan}, &one, reference, options_.refine_prior_weight);
