@@ -69,3 +69,21 @@ TEST(InstallTest, ExternalProjectBuildsAndRunsAgainstInstalledTree) {
 }
 
 }  // namespace
+
+// Flags that make Eigen use AVX are refused at configure time, naming the flags and the way
+// out: Debian's libceres.a is compiled for plain x86-64, and Eigen compiled for AVX allocates
+// its matrices with another allocator (docs/install.md, "Compiler flags"). The check comes
+// before the dependencies are looked for, so the configure step stops within seconds.
+TEST(InstallTest, ConfigureRefusesFlagsThatMakeEigenUseAvx) {
+  const fs::path build =
+      fs::temp_directory_path() / ("artex-avx-configure-test-" + std::to_string(getpid()));
+  fs::remove_all(build);
+  std::string out;
+  const std::string configure = "cmake -S " + Quoted(ARTEX_SOURCE_DIR) + " -B " + Quoted(build) +
+                                " -G Ninja -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_FLAGS=-mavx2";
+  EXPECT_NE(RunCommand(configure, &out), 0) << out;
+  EXPECT_NE(out.find("compile for AVX"), std::string::npos) << out;
+  EXPECT_NE(out.find("-mavx2"), std::string::npos) << out;
+  EXPECT_NE(out.find("ARTEX_ALLOW_AVX_EIGEN"), std::string::npos) << out;
+  fs::remove_all(build);
+}
