@@ -68,8 +68,6 @@ TEST(InstallTest, ExternalProjectBuildsAndRunsAgainstInstalledTree) {
   fs::remove_all(root);
 }
 
-}  // namespace
-
 // Flags that make Eigen use AVX are refused at configure time, naming the flags and the way
 // out: Debian's libceres.a is compiled for plain x86-64, and Eigen compiled for AVX allocates
 // its matrices with another allocator (docs/install.md, "Compiler flags"). The check comes
@@ -87,3 +85,5 @@ TEST(InstallTest, ConfigureRefusesFlagsThatMakeEigenUseAvx) {
   EXPECT_NE(out.find("ARTEX_ALLOW_AVX_EIGEN"), std::string::npos) << out;
   fs::remove_all(build);
 }
+
+}  // namespace
