@@ -2,6 +2,15 @@
 find_package(Threads REQUIRED)
 find_package(Eigen3 3.4 REQUIRED NO_MODULE)
 find_package(Ceres 2.1 REQUIRED)
+# Ceres as its shared library where Debian ships one (cmake/ArtexCeresShared.cmake): artex's
+# Eigen code then never mixes with the static library's, which allows an AVX2 build
+# (cmake/ArtexArch.cmake). OFF: the static libceres.a that Ceres's package names.
+option(ARTEX_CERES_SHARED "Link Ceres's shared library (libceres.so) where present" ON)
+include(ArtexCeresShared)
+set(ARTEX_CERES_IS_SHARED OFF)
+if(ARTEX_CERES_SHARED)
+  artex_use_shared_ceres()
+endif()
 find_package(OpenCV 4.6 REQUIRED COMPONENTS core imgproc imgcodecs)
 find_package(OpenMesh REQUIRED CONFIG)
 find_package(nanoflann 1.4 REQUIRED)

@@ -21,6 +21,9 @@ function(artex_add_library)
   install(DIRECTORY ${CMAKE_CURRENT_SOURCE_DIR}/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/artex/${ARG_NAME}
           COMPONENT devel FILES_MATCHING PATTERN "*.h")
   target_link_libraries(artex_${ARG_NAME} PUBLIC ${ARG_PUBLIC_DEPS} PRIVATE ${ARG_PRIVATE_DEPS})
+  # The instruction set (cmake/ArtexArch.cmake), passed on: whatever includes artex's headers
+  # must compile Eigen alike, or its matrices are allocated one way and freed another.
+  target_compile_options(artex_${ARG_NAME} PUBLIC ${ARTEX_ARCH_FLAGS})
   if(ARTEX_SANITIZE)
     # An installed sanitizer build needs its runtime in every executable that links it (inside
     # this project the global link option of CMakeLists.txt does that).

@@ -68,22 +68,58 @@ TEST(InstallTest, ExternalProjectBuildsAndRunsAgainstInstalledTree) {
   fs::remove_all(root);
 }
 
-// Flags that make Eigen use AVX are refused at configure time, naming the flags and the way
-// out: Debian's libceres.a is compiled for plain x86-64, and Eigen compiled for AVX allocates
-// its matrices with another allocator (docs/install.md, "Compiler flags"). The check comes
-// before the dependencies are looked for, so the configure step stops within seconds.
-TEST(InstallTest, ConfigureRefusesFlagsThatMakeEigenUseAvx) {
+// Configures the source tree into a fresh folder with `options` (no tests, benchmarks or Python
+// module: only the configure step's checks matter); its output in *out, its exit status returned.
+int ConfigureWith(const std::string& name, const std::string& options, std::string* out) {
   const fs::path build =
-      fs::temp_directory_path() / ("artex-avx-configure-test-" + std::to_string(getpid()));
+      fs::temp_directory_path() / ("artex-" + name + "-test-" + std::to_string(getpid()));
   fs::remove_all(build);
+  const std::string configure =
+      "cmake -S " + Quoted(ARTEX_SOURCE_DIR) + " -B " + Quoted(build) +
+      " -G Ninja -DCMAKE_BUILD_TYPE=Release -DARTEX_BUILD_TESTS=OFF -DARTEX_BUILD_BENCH=OFF"
+      " -DARTEX_BUILD_PYTHON=OFF " +
+      options;
+  const int status = RunCommand(configure, out);
+  fs::remove_all(build);
+  return status;
+}
+
+// With the static libceres.a (compiled for plain x86-64), flags that make Eigen use AVX are
+// refused at configure time, naming the flags and the ways out: Eigen compiled for AVX allocates
+// its matrices with another allocator than the library's copy of the same functions
+// (docs/install.md, "Compiler flags").
+TEST(InstallTest, ConfigureRefusesAvxFlagsWithStaticCeres) {
   std::string out;
-  const std::string configure = "cmake -S " + Quoted(ARTEX_SOURCE_DIR) + " -B " + Quoted(build) +
-                                " -G Ninja -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_FLAGS=-mavx2";
-  EXPECT_NE(RunCommand(configure, &out), 0) << out;
+  EXPECT_NE(ConfigureWith("avx-static", "-DARTEX_CERES_SHARED=OFF -DCMAKE_CXX_FLAGS=-mavx2", &out),
+            0)
+      << out;
   EXPECT_NE(out.find("compile for AVX"), std::string::npos) << out;
   EXPECT_NE(out.find("-mavx2"), std::string::npos) << out;
+  EXPECT_NE(out.find("ARTEX_CERES_SHARED"), std::string::npos) << out;
   EXPECT_NE(out.find("ARTEX_ALLOW_AVX_EIGEN"), std::string::npos) << out;
-  fs::remove_all(build);
+}
+
+// ARTEX_ARCH=auto never picks AVX with the static Ceres; a -march given by hand is refused there.
+TEST(InstallTest, AutoArchKeepsPlainX86WithStaticCeres) {
+  std::string out;
+  EXPECT_EQ(ConfigureWith("arch-static", "-DARTEX_CERES_SHARED=OFF", &out), 0) << out;
+  EXPECT_NE(out.find("compiling for the compiler's default instruction set"), std::string::npos)
+      << out;
+  EXPECT_NE(ConfigureWith("arch-static-v3", "-DARTEX_CERES_SHARED=OFF -DARTEX_ARCH=x86-64-v3",
+                          &out),
+            0)
+      << out;
+  EXPECT_NE(out.find("-march=x86-64-v3"), std::string::npos) << out;
+}
+
+// With Ceres's shared library (the default where Debian ships it) the same flags configure:
+// libceres.so keeps its Eigen code to itself.
+TEST(InstallTest, ConfigureAcceptsAvxFlagsWithSharedCeres) {
+  if (!fs::exists("/usr/lib/x86_64-linux-gnu/libceres.so"))
+    GTEST_SKIP() << "no shared libceres.so on this machine";
+  std::string out;
+  EXPECT_EQ(ConfigureWith("avx-shared", "-DCMAKE_CXX_FLAGS=-mavx2", &out), 0) << out;
+  EXPECT_EQ(out.find("compile for AVX"), std::string::npos) << out;
 }
 
 }  // namespace
