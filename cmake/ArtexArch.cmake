@@ -1,7 +1,8 @@
-# The instruction set artex is compiled for (docs/install.md, "Compiler flags"). Included after
-# ArtexDependencies (it needs to know how Ceres is linked). Sets ARTEX_ARCH_FLAGS (cache,
-# internal): the flags every artex library passes on PUBLIC, so that its tests, tools, the
-# Python module, the fuzz project and projects using the installed libraries compile alike.
+# The instruction set artex is compiled for (docs/install.md, "Instruction set and Ceres").
+# Included after ArtexDependencies (it needs to know how Ceres is linked). Sets
+# ARTEX_ARCH_FLAGS (cache, internal): the flags every artex library passes on PUBLIC, so that
+# its tests, tools, the Python module, the fuzz project and projects using the installed
+# libraries compile alike.
 #
 # ARTEX_ARCH:
 #   auto (default)  x86-64-v3 (AVX2, FMA: Eigen's products four doubles wide) when Ceres is linked
@@ -24,7 +25,8 @@ if(ARTEX_ARCH STREQUAL "auto")
       set(CMAKE_REQUIRED_FLAGS "-march=x86-64-v3")
       set(CMAKE_REQUIRED_QUIET ON)
       check_cxx_source_runs(
-          "int main() { __builtin_cpu_init(); return __builtin_cpu_supports(\"x86-64-v3\") ? 0 : 1; }"
+          "int main() { __builtin_cpu_init();\n"
+          "  return __builtin_cpu_supports(\"x86-64-v3\") ? 0 : 1; }"
           ARTEX_HOST_RUNS_X86_64_V3)
       set(_artex_v3 ${ARTEX_HOST_RUNS_X86_64_V3})
     endblock()
@@ -45,7 +47,7 @@ endif()
 
 # With the static libceres.a (compiled for plain x86-64), flags that make Eigen use AVX are
 # refused: the library shares Eigen's inline code with artex at link time, and Eigen compiled for
-# AVX allocates its matrices differently (docs/install.md, "Compiler flags").
+# AVX allocates its matrices differently (docs/install.md, "Instruction set and Ceres").
 # ARTEX_ALLOW_AVX_EIGEN=ON overrides, e.g. with a Ceres built alike.
 option(ARTEX_ALLOW_AVX_EIGEN "Build even when Eigen would use AVX and Ceres is static" OFF)
 if(NOT ARTEX_CERES_IS_SHARED AND NOT ARTEX_ALLOW_AVX_EIGEN)
@@ -64,10 +66,10 @@ if(NOT ARTEX_CERES_IS_SHARED AND NOT ARTEX_ALLOW_AVX_EIGEN)
             "artex: the compiler flags (\"${_artex_flags}\") compile for AVX, so Eigen would use "
             "32-byte alignment and its own allocator, while the static libceres.a, compiled for "
             "plain x86-64, uses glibc's malloc for the same functions: the heap gets corrupted "
-            "when a matrix crosses between the two (docs/install.md, \"Compiler flags\"). Link "
-            "Ceres's shared library (-DARTEX_CERES_SHARED=ON, the default, where libceres.so "
-            "exists), remove -march/-mavx* from CMAKE_CXX_FLAGS, CMAKE_CXX_FLAGS_<build type> "
-            "and ARTEX_ARCH, or set -DARTEX_ALLOW_AVX_EIGEN=ON with a Ceres compiled with the "
-            "same flags.")
+            "when a matrix crosses between the two (docs/install.md, \"Instruction set and "
+            "Ceres\"). Link Ceres's shared library (-DARTEX_CERES_SHARED=ON, the default, "
+            "where libceres.so exists), remove -march/-mavx* from CMAKE_CXX_FLAGS, "
+            "CMAKE_CXX_FLAGS_<build type> and ARTEX_ARCH, or set -DARTEX_ALLOW_AVX_EIGEN=ON with "
+            "a Ceres compiled with the same flags.")
   endif()
 endif()

@@ -3,12 +3,13 @@
 # the same build, in libceres-dev and libceres3). Sets ARTEX_CERES_IS_SHARED in the caller's
 # scope: ON when Ceres::ceres now names a shared library.
 #
-# Why (docs/install.md, "Compiler flags"): the static library brings its own copies of Eigen's
-# inline functions, which the linker merges with artex's; compiled for other instruction sets
-# the two copies allocate matrices differently and corrupt the heap. The shared library exports
-# none of Eigen's functions (only Ceres's own API, which passes raw pointers), so artex may then
-# compile Eigen for AVX2 whatever Ceres was compiled for. Included by the main project, the fuzz
-# project and the installed artexConfig.cmake, so that all of them link Ceres the same way.
+# Why (docs/install.md, "Instruction set and Ceres"): the static library brings its own copies
+# of Eigen's inline functions, which the linker merges with artex's; compiled for other
+# instruction sets the two copies allocate matrices differently and corrupt the heap. The shared
+# library exports none of Eigen's functions (only Ceres's own API, which passes raw pointers),
+# so artex may then compile Eigen for AVX2 whatever Ceres was compiled for. Included by the main
+# project, the fuzz project and the installed artexConfig.cmake, so that all of them link Ceres
+# the same way.
 function(artex_use_shared_ceres)
   set(ARTEX_CERES_IS_SHARED OFF PARENT_SCOPE)
   if(NOT TARGET Ceres::ceres)
