@@ -112,6 +112,14 @@ TEST(InstallTest, AutoArchKeepsPlainX86WithStaticCeres) {
   EXPECT_NE(out.find("-march=x86-64-v3"), std::string::npos) << out;
 }
 
+// An ARTEX_ARCH the compiler does not know stops the configure step, naming the value.
+TEST(InstallTest, ConfigureRejectsAnUnknownArch) {
+  std::string out;
+  EXPECT_NE(ConfigureWith("arch-unknown", "-DARTEX_ARCH=no-such-cpu", &out), 0) << out;
+  EXPECT_NE(out.find("ARTEX_ARCH: expected auto"), std::string::npos) << out;
+  EXPECT_NE(out.find("\"no-such-cpu\""), std::string::npos) << out;
+}
+
 // With Ceres's shared library (the default where Debian ships it) the same flags configure:
 // libceres.so keeps its Eigen code to itself.
 TEST(InstallTest, ConfigureAcceptsAvxFlagsWithSharedCeres) {
