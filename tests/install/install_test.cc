@@ -87,7 +87,7 @@ int ConfigureWith(const std::string& name, const std::string& options, std::stri
 // With the static libceres.a (compiled for plain x86-64), flags that make Eigen use AVX are
 // refused at configure time, naming the flags and the ways out: Eigen compiled for AVX allocates
 // its matrices with another allocator than the library's copy of the same functions
-// (docs/install.md, "Compiler flags").
+// (docs/install.md, "Instruction set and Ceres").
 TEST(InstallTest, ConfigureRefusesAvxFlagsWithStaticCeres) {
   std::string out;
   EXPECT_NE(ConfigureWith("avx-static", "-DARTEX_CERES_SHARED=OFF -DCMAKE_CXX_FLAGS=-mavx2", &out),
