@@ -13,6 +13,7 @@
 #include "models/error.h"
 #include "models/normals.h"
 #include "models/skinning.h"
+#include "render/rasterizer.h"
 #include "sensors/silhouette.h"
 
 namespace artex {
@@ -158,6 +159,76 @@ double Uniform01(std::uint64_t i) {
   z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
   z ^= z >> 31;
   return static_cast<double>(z >> 11) * 0x1.0p-53;
+}
+
+// The bias correction's self scan from the posed template's vertices: those facing the depth
+// camera (visibility_min_cos; all without a camera), each kept with probability cos(angle to
+// the view ray) (bias_density), and where `keep` (the scan mask) says the sensor saw them.
+template <typename Keep>
+void VertexSelfScan(const Eigen::MatrixX3d& posed, const Eigen::MatrixX3d& normals,
+                    const ShapeOptions& options, bool has_camera, const Eigen::Vector3d& eye,
+                    const Keep& keep, Scan* out) {
+  std::vector<int> visible;
+  for (int v = 0; v < posed.rows(); ++v) {
+    const Eigen::Vector3d x = posed.row(v).transpose();
+    const double facing = has_camera ? normals.row(v).dot((eye - x).normalized()) : 1.0;
+    if (facing <= options.visibility_min_cos) continue;
+    // A depth camera samples a surface with a density ~ cos(angle to the view ray); the
+    // template's vertices are uniform: keep each with that probability (a fixed pseudo-random
+    // number per vertex) so the self E-step sees the scan's sampling.
+    if (options.bias_density && has_camera && Uniform01(v) > facing) continue;
+    if (!keep(x)) continue;
+    visible.push_back(v);
+  }
+  const int n = static_cast<int>(visible.size());
+  out->points.resize(n, 3);
+  out->normals.resize(n, 3);
+  for (int k = 0; k < n; ++k) {
+    out->points.row(k) = posed.row(visible[k]);
+    out->normals.row(k) = normals.row(visible[k]);
+  }
+  out->colors = Eigen::MatrixX3d::Zero(n, 3);
+  out->color_valid.assign(n, 0);
+}
+
+// The self scan as `camera` samples the posed template: every pixel of its z-buffer,
+// back-projected, the normal interpolated from the hit triangle's vertex normals, kept when it
+// faces the camera by more than min_cos and `keep` (the scan mask) says the sensor saw it.
+// `raster` is scratch space.
+template <typename Keep>
+void RenderedSelfScan(const Eigen::MatrixX3d& posed, const Eigen::MatrixX3d& normals,
+                      const Eigen::MatrixX3i& triangles, const PinholeCamera& camera,
+                      double min_cos, const Keep& keep, RasterBuffers* raster, Scan* out) {
+  Rasterize(posed, triangles, camera, RasterOptions(), raster);
+  const Eigen::Vector3d eye = camera.Center();
+  std::vector<Eigen::Vector3d> points, point_normals;
+  for (int v = 0; v < raster->height; ++v) {
+    for (int u = 0; u < raster->width; ++u) {
+      const int p = raster->index(u, v);
+      if (!std::isfinite(raster->depth[p])) continue;
+      const int t = raster->triangle_id[p];
+      const Eigen::Vector2f b = raster->barycentric[p];
+      const Eigen::Vector3d sum =
+          (1.0 - b.x() - b.y()) * normals.row(triangles(t, 0)).transpose() +
+          b.x() * normals.row(triangles(t, 1)).transpose() +
+          b.y() * normals.row(triangles(t, 2)).transpose();
+      if (!(sum.norm() > 0.0)) continue;
+      const Eigen::Vector3d normal = sum.normalized();
+      const Eigen::Vector3d x = camera.Unproject(u, v, raster->depth[p]);
+      if (normal.dot((eye - x).normalized()) <= min_cos || !keep(x)) continue;
+      points.push_back(x);
+      point_normals.push_back(normal);
+    }
+  }
+  const int n = static_cast<int>(points.size());
+  out->points.resize(n, 3);
+  out->normals.resize(n, 3);
+  for (int k = 0; k < n; ++k) {
+    out->points.row(k) = points[k].transpose();
+    out->normals.row(k) = point_normals[k].transpose();
+  }
+  out->colors = Eigen::MatrixX3d::Zero(n, 3);
+  out->color_valid.assign(n, 0);
 }
 
 // Per point of `index` (the fit vertices): how many of `samples` have it as their nearest
@@ -448,6 +519,7 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
     }
     return false;
   };
+  RasterBuffers raster;  // the rendered self scans' scratch space
   bool first = true;
   for (double radius : options_.radii) {
     for (int it = 0; it < options_.iterations_per_stage; ++it) {
@@ -470,30 +542,25 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
         esteps[f]->Compute(view, radius, &targets);
         const double total = targets.total_weight();
         if (!(total > 0.0)) continue;
-        Scan self;  // the posed template's camera-facing vertices (bias_correction)
+        // The self scans (bias_correction): the camera-facing template vertices, or the
+        // template as the depth camera samples it (bias_rendered_*), where the sensor saw it.
+        const auto keep = [&](const Eigen::Vector3d& x) {
+          return seen.empty() || seen_near(f, x) || OverFreeSpace(*scans[f], x);
+        };
+        const auto self_scan = [&](bool rendered, Scan* out) {
+          if (rendered && has_depth_camera_) {
+            RenderedSelfScan(posed, normals, shaped.triangles, depth_camera_,
+                             options_.visibility_min_cos, keep, &raster, out);
+          } else {
+            VertexSelfScan(posed, normals, options_, has_depth_camera_, camera_center, keep, out);
+          }
+        };
+        // The scan-to-model term's self scan differs from the E-step's (else it is that one).
+        Scan self, self_other;
+        const bool separate = has_depth_camera_ && options_.bias_rendered_estep !=
+                                                       options_.bias_rendered_scan_to_model;
         if (options_.bias_correction) {
-          std::vector<int> visible;
-          for (int v = 0; v < posed.rows(); ++v) {
-            const Eigen::Vector3d x = posed.row(v).transpose();
-            const double facing =
-                has_depth_camera_ ? normals.row(v).dot((camera_center - x).normalized()) : 1.0;
-            if (facing <= options_.visibility_min_cos) continue;
-            // A depth camera samples a surface with a density ~ cos(angle to the view ray);
-            // the template's vertices are uniform: keep each with that probability (a fixed
-            // pseudo-random number per vertex) so the self E-step sees the scan's sampling.
-            if (options_.bias_density && has_depth_camera_ && Uniform01(v) > facing) continue;
-            if (!seen.empty() && !seen_near(f, x) && !OverFreeSpace(*scans[f], x)) continue;
-            visible.push_back(v);
-          }
-          const int nv = static_cast<int>(visible.size());
-          self.points.resize(nv, 3);
-          self.normals.resize(nv, 3);
-          for (int k = 0; k < nv; ++k) {
-            self.points.row(k) = posed.row(visible[k]);
-            self.normals.row(k) = normals.row(visible[k]);
-          }
-          self.colors = Eigen::MatrixX3d::Zero(nv, 3);
-          self.color_valid.assign(nv, 0);
+          self_scan(options_.bias_rendered_estep, &self);
           EStep self_estep(self, estep_options);
           self_estep.Compute(view, radius, &self_targets);
           for (int i = 0; i < n; ++i) {
@@ -514,10 +581,12 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
           if (options_.bias_correction) {
             // The same bias as the E-step's: a one-sided scan's samples pull a limb's side
             // vertices towards the camera and inwards. Measured on the template's own
-            // camera-facing vertices (sampled alike) and subtracted: the truth is a fixed point.
+            // camera-facing surface (sampled alike) and subtracted: the truth is a fixed point.
+            if (separate) self_scan(options_.bias_rendered_scan_to_model, &self_other);
+            const Scan& source = separate ? self_other : self;
             Eigen::MatrixX3d self_normals;
             const Eigen::MatrixX3d self_samples = VoxelMeans(
-                self.points, options_.scan_to_model_voxel, &self.normals, &self_normals);
+                source.points, options_.scan_to_model_voxel, &source.normals, &self_normals);
             NearestSums(index, self_samples, max_d2, &self_count, &self_sum, &self_normals,
                         &sub_normals, normal_distance);
             for (int i = 0; i < n; ++i) {
