@@ -633,7 +633,7 @@ void BindShape(const Config& c, ShapeOptions* o) {
                "calibration_frames", "calibration_stride", "calibration_rounds", "radii",
                "iterations_per_stage", "over_relaxation", "bias_correction",
                "visibility_min_cos", "bias_density", "bias_scan_mask", "bias_mask_tolerance",
-               "bias_rendered_scan_to_model", "bias_rendered_estep",
+               "bias_rendered_scan_to_model", "bias_rendered_estep_max_radius",
                "bias_mask_radius_px", "floor_weight", "girth_max_radius", "scan_to_model_weight",
                "scan_to_model_voxel", "scan_to_model_max_distance",
                "scan_to_model_normal_distance", "scan_to_model_girth", "hold_unseen",
@@ -659,7 +659,7 @@ void BindShape(const Config& c, ShapeOptions* o) {
   c.Get("bias_density", &o->bias_density);
   c.Get("bias_scan_mask", &o->bias_scan_mask);
   c.Get("bias_rendered_scan_to_model", &o->bias_rendered_scan_to_model);
-  c.Get("bias_rendered_estep", &o->bias_rendered_estep);
+  c.Get("bias_rendered_estep_max_radius", &o->bias_rendered_estep_max_radius);
   c.Get("bias_mask_tolerance", &o->bias_mask_tolerance);
   c.Get("bias_mask_radius_px", &o->bias_mask_radius_px);
   c.Get("floor_weight", &o->floor_weight);

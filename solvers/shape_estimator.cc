@@ -57,6 +57,11 @@ bool ShapeOptions::IsValid(std::string* error) const {
         << bias_mask_tolerance;
   } else if (bias_mask_radius_px < 0 || bias_mask_radius_px > 8) {
     msg << "shape.bias_mask_radius_px: expected 0..8, found " << bias_mask_radius_px;
+  } else if (!(std::isfinite(bias_rendered_estep_max_radius) &&
+               bias_rendered_estep_max_radius >= 0.0)) {
+    msg << "shape.bias_rendered_estep_max_radius: expected a finite value >= 0 (m; 0: never), "
+           "found "
+        << bias_rendered_estep_max_radius;
   } else if (!(std::isfinite(floor_weight) && floor_weight >= 0.0)) {
     msg << "shape.floor_weight: expected a finite value >= 0 (0: off), found " << floor_weight;
   } else if (!(std::isfinite(limb_girth_prior_weight) && limb_girth_prior_weight >= 0.0)) {
@@ -557,10 +562,11 @@ ShapeSolveSummary ShapeEstimator::Solve(const std::vector<const Scan*>& scans,
         };
         // The scan-to-model term's self scan differs from the E-step's (else it is that one).
         Scan self, self_other;
-        const bool separate = has_depth_camera_ && options_.bias_rendered_estep !=
+        const bool estep_rendered = radius <= options_.bias_rendered_estep_max_radius;
+        const bool separate = has_depth_camera_ && estep_rendered !=
                                                        options_.bias_rendered_scan_to_model;
         if (options_.bias_correction) {
-          self_scan(options_.bias_rendered_estep, &self);
+          self_scan(estep_rendered, &self);
           EStep self_estep(self, estep_options);
           self_estep.Compute(view, radius, &self_targets);
           for (int i = 0; i < n; ++i) {

@@ -102,14 +102,16 @@ struct ShapeOptions {
   // every pixel of its z-buffer, back-projected, its normal interpolated from the triangle's
   // vertex normals, kept by the same facing test and scan mask; instead of its vertices thinned
   // by bias_density. A scan is a pixel grid several times denser than the template's vertices,
-  // so the self scan then has the scan's sampling, its voxel subsampling and its occlusions.
-  // For the scan-to-model term's bias (on by default): with the vertices the legs of the default
-  // subject came out 17 mm long per segment, with the pixel grid 11-14 mm; the mean joint error
-  // of nine generated subjects fell 1.1 mm (docs/shape-measurements.md, "The self scans on the
-  // depth camera's pixel grid"). For the E-step's bias (off by default): the default subject's
-  // legs come out right, but every tall subject's hips sink 5 cm.
+  // so the self scan then has the scan's sampling, its voxel subsampling and its occlusions:
+  // for a noise-free camera the truth is a fixed point only with both self scans rendered
+  // (tests/solvers/shape_estimator_test.cc). The scan-to-model term's is rendered in every
+  // stage (bias_rendered_scan_to_model); the E-step's in the radius stages up to
+  // bias_rendered_estep_max_radius (m; 0: never; the default, 0.03, is the last of the default
+  // radii). Rendered in the wide stages too, where the shape is still far off, it sends the tall
+  // subjects' hips 5 cm low (docs/shape-measurements.md, "The self scans on the depth camera's
+  // pixel grid").
   bool bias_rendered_scan_to_model = true;
-  bool bias_rendered_estep = false;
+  double bias_rendered_estep_max_radius = 0.03;
   // Floor term: a posed template vertex below the floor (SetFloor: the plane the pipeline finds
   // in the first frame) is pushed up onto it, floor_weight / (fit vertices) per vertex and
   // frame, relative to the data term (normalised per frame). The preprocessing removes the floor

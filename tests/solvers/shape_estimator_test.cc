@@ -277,6 +277,7 @@ TEST(ShapeEstimatorTest, ScanMaskGivesTheSelfScanTheSensorsHoles) {
     o.bias_scan_mask = mask == 1;
     // The scans are the subject's vertices: the self scans from the vertices sample alike.
     o.bias_rendered_scan_to_model = false;
+    o.bias_rendered_estep_max_radius = 0.0;
     ShapeEstimator estimator(t, o);
     estimator.SetDepthCamera(camera, OutOfViewOptions());
     std::vector<Pose> fitted = poses;
@@ -337,10 +338,10 @@ Scan DepthCameraScan(const Template& subject, const Pose& pose, const PinholeCam
 // term measured on the template's thinned vertices are not the scan's: the template, scanned
 // in exact poses by a noise-free camera, drifts from its own shape by about 2 % per factor,
 // whichever of the two self scans comes from the vertices. With both rendered as the camera
-// samples the template (bias_rendered_estep, bias_rendered_scan_to_model) it stays put. (The
-// defaults render only the scan-to-model term's: on the virtual Kinect, with its noise, the
-// rendered E-step's self scan sends the tall subjects' hips 5 cm low; docs/shape-measurements.md,
-// "The self scans on the depth camera's pixel grid".)
+// samples the template (bias_rendered_scan_to_model, bias_rendered_estep_max_radius) in every
+// stage it stays put. (By default the E-step's is rendered in the last stage only: on the
+// virtual Kinect, rendered in the wide stages too, it sends the tall subjects' hips 5 cm low;
+// docs/shape-measurements.md, "The self scans on the depth camera's pixel grid".)
 TEST(ShapeEstimatorTest, RenderedSelfScansKeepTheTruthAFixedPoint) {
   const Template& t = CoarseTemplate();
   PinholeCamera camera;  // identity world_to_camera: the subject at depth 2.5 m, whole in view
@@ -358,7 +359,7 @@ TEST(ShapeEstimatorTest, RenderedSelfScansKeepTheTruthAFixedPoint) {
   double drift[4] = {0.0, 0.0, 0.0, 0.0};  // E-step / scan-to-model: vv, vr, rv, rr
   for (int variant = 0; variant < 4; ++variant) {
     ShapeOptions o = Options(ShapeMode::kBonesGirth);
-    o.bias_rendered_estep = variant >= 2;
+    o.bias_rendered_estep_max_radius = variant >= 2 ? 1.0 : 0.0;  // every stage or none
     o.bias_rendered_scan_to_model = variant % 2 == 1;
     ShapeEstimator estimator(t, o);
     estimator.SetDepthCamera(camera, OutOfViewOptions());
@@ -592,6 +593,10 @@ TEST(ShapeEstimatorTest, BoundsHoldAndOptionsAreChecked) {
   std::string why;
   EXPECT_FALSE(bad.IsValid(&why));
   EXPECT_NE(why.find("bone_min"), std::string::npos) << why;
+  bad = ShapeOptions();
+  bad.bias_rendered_estep_max_radius = -0.01;
+  EXPECT_FALSE(bad.IsValid(&why));
+  EXPECT_NE(why.find("bias_rendered_estep_max_radius"), std::string::npos) << why;
   bad = ShapeOptions();
   bad.scan_to_model_normal_distance = -0.01;
   EXPECT_FALSE(bad.IsValid(&why));
