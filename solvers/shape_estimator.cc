@@ -1,5 +1,8 @@
 #include "solvers/shape_estimator.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <Eigen/Cholesky>
 #include <algorithm>
 #include <array>
@@ -206,31 +209,38 @@ void RenderedSelfScan(const Eigen::MatrixX3d& posed, const Eigen::MatrixX3d& nor
                       double min_cos, const Keep& keep, RasterBuffers* raster, Scan* out) {
   Rasterize(posed, triangles, camera, RasterOptions(), raster);
   const Eigen::Vector3d eye = camera.Center();
-  std::vector<Eigen::Vector3d> points, point_normals;
-  for (int v = 0; v < raster->height; ++v) {
-    for (int u = 0; u < raster->width; ++u) {
-      const int p = raster->index(u, v);
-      if (!std::isfinite(raster->depth[p])) continue;
-      const int t = raster->triangle_id[p];
-      const Eigen::Vector2f b = raster->barycentric[p];
-      const Eigen::Vector3d sum =
-          (1.0 - b.x() - b.y()) * normals.row(triangles(t, 0)).transpose() +
-          b.x() * normals.row(triangles(t, 1)).transpose() +
-          b.y() * normals.row(triangles(t, 2)).transpose();
-      if (!(sum.norm() > 0.0)) continue;
-      const Eigen::Vector3d normal = sum.normalized();
-      const Eigen::Vector3d x = camera.Unproject(u, v, raster->depth[p]);
-      if (normal.dot((eye - x).normalized()) <= min_cos || !keep(x)) continue;
-      points.push_back(x);
-      point_normals.push_back(normal);
+  // Rows in parallel, each into its own list; concatenated in row order.
+  std::vector<std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>>> rows(raster->height);
+  tbb::parallel_for(tbb::blocked_range<int>(0, raster->height, 16), [&](const auto& range) {
+    for (int v = range.begin(); v < range.end(); ++v) {
+      for (int u = 0; u < raster->width; ++u) {
+        const int p = raster->index(u, v);
+        if (!std::isfinite(raster->depth[p])) continue;
+        const int t = raster->triangle_id[p];
+        const Eigen::Vector2f b = raster->barycentric[p];
+        const Eigen::Vector3d sum =
+            (1.0 - b.x() - b.y()) * normals.row(triangles(t, 0)).transpose() +
+            b.x() * normals.row(triangles(t, 1)).transpose() +
+            b.y() * normals.row(triangles(t, 2)).transpose();
+        if (!(sum.norm() > 0.0)) continue;
+        const Eigen::Vector3d normal = sum.normalized();
+        const Eigen::Vector3d x = camera.Unproject(u, v, raster->depth[p]);
+        if (normal.dot((eye - x).normalized()) <= min_cos || !keep(x)) continue;
+        rows[v].emplace_back(x, normal);
+      }
     }
-  }
-  const int n = static_cast<int>(points.size());
+  });
+  int n = 0;
+  for (const auto& row : rows) n += static_cast<int>(row.size());
   out->points.resize(n, 3);
   out->normals.resize(n, 3);
-  for (int k = 0; k < n; ++k) {
-    out->points.row(k) = points[k].transpose();
-    out->normals.row(k) = point_normals[k].transpose();
+  int k = 0;
+  for (const auto& row : rows) {
+    for (const auto& [x, normal] : row) {
+      out->points.row(k) = x.transpose();
+      out->normals.row(k) = normal.transpose();
+      ++k;
+    }
   }
   out->colors = Eigen::MatrixX3d::Zero(n, 3);
   out->color_valid.assign(n, 0);
