@@ -113,17 +113,18 @@ void BM_TrackSubjectTemplate(benchmark::State& state) { Track(state, Tracker::kS
 // One calibration solve over 5 frames, the depth camera and the floor (y = 0) set. First
 // argument: shape.hold_unseen's out-of-view test (1; the whole body is in view: nothing is
 // held); second: shape.bias_scan_mask (1, the default; the scans have no free-space maps, so
-// the mask keeps the vertices the scan saw); third: the self scans rendered on the depth
-// camera's pixel grid (1, the defaults: bias_rendered_scan_to_model and the E-step's in the last
-// radius stage) or from the template's vertices (0: the previous version).
+// the mask keeps the vertices the scan saw); third: the self scans from the template's vertices
+// (0: the previous version), the scan-to-model term's rendered on the depth camera's pixel grid
+// (1, the default), and the E-step's too in the last radius stage (2:
+// shape.bias_rendered_estep_max_radius 0.03).
 void BM_CalibrationSolve(benchmark::State& state) {
   const ShapeFixture& f = Fixture();
   ShapeOptions o;
   o.mode = ShapeMode::kBonesGirth;
   o.hold_unseen = state.range(0) != 0;
   o.bias_scan_mask = state.range(1) != 0;
-  o.bias_rendered_scan_to_model = state.range(2) != 0;
-  if (state.range(2) == 0) o.bias_rendered_estep_max_radius = 0.0;
+  o.bias_rendered_scan_to_model = state.range(2) >= 1;
+  o.bias_rendered_estep_max_radius = state.range(2) == 2 ? 0.03 : 0.0;
   PinholeCamera camera;
   camera.world_to_camera = PinholeCamera::LookAt(Eigen::Vector3d(0.0, 1.0, 3.0),
                                                  Eigen::Vector3d(0.0, 1.0, 0.0),
@@ -180,7 +181,8 @@ BENCHMARK(BM_CalibrationSolve)
     ->Args({0, 1, 1})
     ->Args({1, 0, 1})
     ->Args({1, 1, 0})
-    ->Args({1, 1, 1});
+    ->Args({1, 1, 1})
+    ->Args({1, 1, 2});
 BENCHMARK(BM_SurfaceDetail)->Unit(benchmark::kMillisecond)->Iterations(3)->Arg(5)->Arg(8);
 
 }  // namespace

@@ -339,9 +339,9 @@ Scan DepthCameraScan(const Template& subject, const Pose& pose, const PinholeCam
 // in exact poses by a noise-free camera, drifts from its own shape by about 2 % per factor,
 // whichever of the two self scans comes from the vertices. With both rendered as the camera
 // samples the template (bias_rendered_scan_to_model, bias_rendered_estep_max_radius) in every
-// stage it stays put. (By default the E-step's is rendered in the last stage only: on the
-// virtual Kinect, rendered in the wide stages too, it sends the tall subjects' hips 5 cm low;
-// docs/shape-measurements.md, "The self scans on the depth camera's pixel grid".)
+// stage it stays put. (By default only the scan-to-model term's is rendered: on the virtual
+// Kinect, with its noise, the E-step's rendered in the wide stages too sends the tall subjects'
+// hips 5 cm low; docs/shape-measurements.md, "The self scans on the depth camera's pixel grid".)
 TEST(ShapeEstimatorTest, RenderedSelfScansKeepTheTruthAFixedPoint) {
   const Template& t = CoarseTemplate();
   PinholeCamera camera;  // identity world_to_camera: the subject at depth 2.5 m, whole in view
