@@ -336,7 +336,7 @@ Scan DepthCameraScan(const Template& subject, const Pose& pose, const PinholeCam
 // A depth camera's scan is a pixel grid, several times denser than the template's vertices and
 // subsampled by the scan-to-model term on a voxel grid. The biases of the E-step and of that
 // term measured on the template's thinned vertices are not the scan's: the template, scanned
-// in exact poses by a noise-free camera, drifts from its own shape by about 2 % per factor,
+// in exact poses by a noise-free camera, drifts from its own shape by 2-3.5 % per factor,
 // whichever of the two self scans comes from the vertices. With both rendered as the camera
 // samples the template (bias_rendered_scan_to_model, bias_rendered_estep_max_radius) in every
 // stage it stays put. (By default only the scan-to-model term's is rendered: on the virtual
@@ -344,13 +344,19 @@ Scan DepthCameraScan(const Template& subject, const Pose& pose, const PinholeCam
 // hips 5 cm low; docs/shape-measurements.md, "The self scans on the depth camera's pixel grid".)
 TEST(ShapeEstimatorTest, RenderedSelfScansKeepTheTruthAFixedPoint) {
   const Template& t = CoarseTemplate();
-  PinholeCamera camera;  // identity world_to_camera: the subject at depth 2.5 m, whole in view
-  camera.fx = camera.fy = 500.0;
-  camera.cy = 240.0 - camera.fy * 0.85 / 2.5;
+  // Identity world_to_camera: the subject at depth 2.5 m, whole in view; 320x240 pixels (1 cm
+  // apart there, still denser than this coarse template's vertices) keep the test short under
+  // the sanitizers.
+  PinholeCamera camera;
+  camera.width = 320;
+  camera.height = 240;
+  camera.fx = camera.fy = 250.0;
+  camera.cx = 160.0;
+  camera.cy = 120.0 - camera.fy * 0.85 / 2.5;
   std::mt19937 rng(5);
   std::vector<Pose> poses;
   std::vector<Scan> scans;
-  for (int f = 0; f < 4; ++f) {
+  for (int f = 0; f < 2; ++f) {
     poses.push_back(RandomPose(t.num_joints(), &rng, 0.2));
     scans.push_back(DepthCameraScan(t, poses.back(), camera));
   }
@@ -361,6 +367,7 @@ TEST(ShapeEstimatorTest, RenderedSelfScansKeepTheTruthAFixedPoint) {
     ShapeOptions o = Options(ShapeMode::kBonesGirth);
     o.bias_rendered_estep_max_radius = variant >= 2 ? 1.0 : 0.0;  // every stage or none
     o.bias_rendered_scan_to_model = variant % 2 == 1;
+    o.radii = {0.04, 0.03};  // two stages: short under the sanitizers
     ShapeEstimator estimator(t, o);
     estimator.SetDepthCamera(camera, OutOfViewOptions());
     std::vector<Pose> fitted = poses;
@@ -368,7 +375,7 @@ TEST(ShapeEstimatorTest, RenderedSelfScansKeepTheTruthAFixedPoint) {
                     1e-8);
     drift[variant] = estimator.parameters().cwiseAbs().mean();
   }
-  // Measured: 0.023, 0.025, 0.020 and below 1e-5.
+  // Measured: 0.026, 0.035, 0.018 and below 1e-7.
   EXPECT_GT(drift[0], 0.01) << "both self scans from the vertices";
   EXPECT_GT(drift[1], 0.01) << "the E-step's self scan from the vertices";
   EXPECT_GT(drift[2], 0.01) << "the scan-to-model term's self scan from the vertices";
