@@ -24,10 +24,11 @@ if(ARTEX_ARCH STREQUAL "auto")
     block(SCOPE_FOR VARIABLES PROPAGATE _artex_v3)
       set(CMAKE_REQUIRED_FLAGS "-march=x86-64-v3")
       set(CMAKE_REQUIRED_QUIET ON)
-      check_cxx_source_runs(
-          "int main() { __builtin_cpu_init();\n"
-          "  return __builtin_cpu_supports(\"x86-64-v3\") ? 0 : 1; }"
-          ARTEX_HOST_RUNS_X86_64_V3)
+      # The program as one argument (adjacent quoted strings would be two: the check then
+      # compiled half a program and every fresh configure fell back to plain x86-64).
+      string(CONCAT _artex_v3_probe "int main() { __builtin_cpu_init(); "
+             "return __builtin_cpu_supports(\"x86-64-v3\") ? 0 : 1; }")
+      check_cxx_source_runs("${_artex_v3_probe}" ARTEX_HOST_RUNS_X86_64_V3)
       set(_artex_v3 ${ARTEX_HOST_RUNS_X86_64_V3})
     endblock()
     if(_artex_v3)

@@ -11,7 +11,12 @@ set(ARTEX_CERES_IS_SHARED OFF)
 if(ARTEX_CERES_SHARED)
   artex_use_shared_ceres()
 endif()
+# imgcodecs for the tests only: artex reads and writes PNG and JPEG through libpng and libjpeg-turbo
+# (sensors/image_codec.h), since imgcodecs loads GDAL and ~100 more libraries at every start.
 find_package(OpenCV 4.6 REQUIRED COMPONENTS core imgproc imgcodecs)
+find_package(PNG 1.6 REQUIRED)
+find_package(JPEG REQUIRED)
+find_package(ZLIB REQUIRED)
 find_package(OpenMesh REQUIRED CONFIG)
 find_package(nanoflann 1.4 REQUIRED)
 find_package(yaml-cpp 0.7 REQUIRED)

@@ -13,7 +13,6 @@
 #include <nanoflann.hpp>
 #include <nlohmann/json.hpp>
 #include <opencv2/core/utility.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <optional>
 #include <sstream>
 #include <tbb/global_control.h>
@@ -36,6 +35,7 @@
 #include "sensors/bvh_export.h"
 #include "sensors/calibration.h"
 #include "sensors/frame_source.h"
+#include "sensors/image_codec.h"
 #include "sensors/scene_segmentation.h"
 #include "sensors/sequence.h"
 #include "solvers/particle_predictor.h"
@@ -193,7 +193,7 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
         subject_skinning = std::make_unique<Skinning>(*subject);
         if (options.texture && options.texture_quality_every > 0 && subject->has_uvs() &&
             !sequence->GroundTruthTexturePath().empty()) {
-          truth_texture = cv::imread(sequence->GroundTruthTexturePath(), cv::IMREAD_COLOR);
+          truth_texture = ReadImageFile(sequence->GroundTruthTexturePath(), ImageRead::kColor);
         }
       });
     }

@@ -5,7 +5,6 @@
 #include <cstdio>
 #include <exception>
 #include <limits>
-#include <opencv2/imgcodecs.hpp>
 
 #include "experiments/atomic_output.h"
 #include "experiments/bounded_queue.h"
@@ -14,6 +13,7 @@
 #include "models/mesh_export.h"
 #include "models/normals.h"
 #include "models/numeric.h"
+#include "sensors/image_codec.h"
 #include "solvers/particle_predictor.h"
 
 namespace artex {
@@ -25,7 +25,8 @@ std::size_t TextureUpdateBytes(const Texturer& texturer) {
   const cv::Mat patch = texturer.ChangedPatch();
   if (patch.empty()) return 0;
   std::vector<unsigned char> bytes;
-  cv::imencode(".jpg", patch, bytes, {cv::IMWRITE_JPEG_QUALITY, 90});
+  std::string error;
+  if (!EncodeJpeg(patch, 90, &bytes, &error)) throw Error("texture update: " + error);
   return bytes.size();
 }
 
@@ -93,7 +94,8 @@ bool RealtimeOptions::IsValid(std::string* error) const {
 
 std::vector<unsigned char> WritePngFile(const std::string& path, const cv::Mat& image) {
   std::vector<unsigned char> bytes;
-  if (!cv::imencode(".png", image, bytes)) throw Error(path + ": PNG encoding failed");
+  std::string error;
+  if (!EncodePng(image, &bytes, &error)) throw Error(path + ": " + error);
   WriteFileAtomically(path, std::string(bytes.begin(), bytes.end()));
   return bytes;
 }

@@ -6,7 +6,6 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <sstream>
 #include <string>
@@ -19,6 +18,7 @@
 #include "models/mesh_export.h"
 #include "models/skinning.h"
 #include "models/template_io.h"
+#include "sensors/image_codec.h"
 #include "sensors/motion.h"
 #include "texture/texturer.h"
 
@@ -48,7 +48,8 @@ PinholeCamera OrbitCamera(const Eigen::Vector3d& center, double radius, double a
 
 void WriteImage(const std::string& path, const cv::Mat& image) {
   std::vector<unsigned char> bytes;
-  if (!cv::imencode(".png", image, bytes)) throw Error(path + ": PNG encoding failed");
+  std::string error;
+  if (!EncodePng(image, &bytes, &error)) throw Error(path + ": " + error);
   WriteFileAtomically(path, std::string(bytes.begin(), bytes.end()));
 }
 
@@ -81,8 +82,11 @@ void RegisterRenderCommand(CLI::App* app) {
     GlbTexture texture;
     const Template tmpl = ReadTemplateGlb(glb, &texture);
     if (texture.png.empty()) throw Error(glb + ": no embedded texture (was the run made with --no-texture?)");
-    const cv::Mat atlas = cv::imdecode(texture.png, cv::IMREAD_COLOR);
-    if (atlas.empty()) throw Error(glb + ": the embedded texture is not a readable PNG");
+    cv::Mat atlas;
+    std::string error;
+    if (!DecodeImage(texture.png.data(), texture.png.size(), ImageRead::kColor, &atlas, &error)) {
+      throw Error(glb + ": the embedded texture is not a readable PNG (" + error + ")");
+    }
     const Skinning skinning(tmpl);
     std::vector<Pose> poses;
     if (!args->motion.empty()) {

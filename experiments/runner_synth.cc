@@ -6,7 +6,6 @@
 #include <cstdint>
 #include <filesystem>
 #include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <random>
 #include <sstream>
 #include <string>
@@ -15,6 +14,7 @@
 #include "experiments/runner.h"
 #include "experiments/runner_internal.h"
 #include "models/error.h"
+#include "sensors/image_codec.h"
 #include "sensors/sequence.h"
 #include "sensors/synth_conditions.h"
 #include "sensors/virtual_kinect.h"
@@ -168,8 +168,8 @@ void AddDepthOutliers(const SynthSpec& spec, const std::string& folder) {
   std::sort(files.begin(), files.end());
   const double scale = spec.options.kinect.depth_scale;
   for (std::size_t i = 0; i < files.size(); ++i) {
-    cv::Mat depth = cv::imread(files[i].string(), cv::IMREAD_UNCHANGED);
-    if (depth.empty() || depth.type() != CV_16UC1) {
+    cv::Mat depth = ReadImageFile(files[i].string(), ImageRead::kUnchanged);
+    if (depth.type() != CV_16UC1) {
       throw Error(files[i].string() + ": expected a 16-bit depth PNG");
     }
     std::mt19937_64 rng(spec.options.kinect.seed * 1000003ull + i);

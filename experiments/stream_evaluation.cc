@@ -9,7 +9,6 @@
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <sstream>
 
@@ -22,6 +21,7 @@
 #include "models/template_cache.h"
 #include "models/template_io.h"
 #include "sensors/calibration.h"
+#include "sensors/image_codec.h"
 #include "sensors/sequence.h"
 #include "stream/stream_player.h"
 #include "texture/texturer.h"
@@ -38,7 +38,8 @@ nlohmann::json Number(double v) {
 
 void WritePng(const std::string& path, const cv::Mat& image) {
   std::vector<unsigned char> bytes;
-  if (!cv::imencode(".png", image, bytes)) throw Error(path + ": PNG encoding failed");
+  std::string error;
+  if (!EncodePng(image, &bytes, &error)) throw Error(path + ": " + error);
   WriteFileAtomically(path, std::string(bytes.begin(), bytes.end()));
 }
 
@@ -144,7 +145,7 @@ PlaybackReport PlayStream(const std::string& stream_path, const PlaybackOptions&
       throw Error(options.sequence + ": no ground truth (subject, texture) to compare with");
     subject = std::make_unique<Template>(ReadTemplateGlb(sequence->GroundTruthSubjectPath()));
     truth.subject = subject.get();
-    truth.texture = cv::imread(sequence->GroundTruthTexturePath(), cv::IMREAD_COLOR);
+    truth.texture = ReadImageFile(sequence->GroundTruthTexturePath(), ImageRead::kColor);
     truth.camera = sequence->calibration().color;
   }
   if (!options.out_dir.empty()) {

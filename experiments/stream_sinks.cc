@@ -3,11 +3,11 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
-#include <opencv2/imgcodecs.hpp>
 
 #include "experiments/pipeline_stages.h"  // WritePngFile
 #include "models/error.h"
 #include "models/mesh_export.h"
+#include "sensors/image_codec.h"
 
 namespace artex {
 namespace {
@@ -84,11 +84,10 @@ bool ReadExportedAtlas(const std::string& run_dir, int frame, cv::Mat* atlas,
   const std::string dir = run_dir + "/atlases";
   const std::string path = AtlasName(dir, frame, "");
   if (!std::filesystem::exists(path)) return false;
-  *atlas = cv::imread(path, cv::IMREAD_COLOR);
-  if (atlas->empty()) throw Error(path + ": unreadable atlas");
+  *atlas = ReadImageFile(path, ImageRead::kColor);
   const std::string mask_path = AtlasName(dir, frame, "_textured");
-  const cv::Mat row = cv::imread(mask_path, cv::IMREAD_GRAYSCALE);
-  if (row.empty() || row.rows != 1) throw Error(mask_path + ": expected a one-row textured mask");
+  const cv::Mat row = ReadImageFile(mask_path, ImageRead::kGrayscale);
+  if (row.rows != 1) throw Error(mask_path + ": expected a one-row textured mask");
   triangle_frames->resize(row.cols);
   for (int f = 0; f < row.cols; ++f) (*triangle_frames)[f] = row.at<uint8_t>(0, f) ? 0 : -1;
   return true;

@@ -4,7 +4,6 @@
 #include <pybind11/stl.h>
 
 #include <cstring>
-#include <opencv2/imgcodecs.hpp>
 
 #include "models/error.h"
 #include "models/normals.h"
@@ -16,6 +15,7 @@
 #include "models/template_io.h"
 #include "models/textured_mesh_export.h"
 #include "python/bind_common.h"
+#include "sensors/image_codec.h"
 
 namespace artex::python {
 namespace {
@@ -35,8 +35,11 @@ GlbTexture TextureFromNumpy(const py::array& rgb) {
 
 py::object TextureToNumpy(const GlbTexture& texture) {
   if (texture.png.empty()) return py::none();
-  cv::Mat bgr = cv::imdecode(texture.png, cv::IMREAD_COLOR);
-  if (bgr.empty()) throw Error("glb texture: the embedded PNG does not decode");
+  cv::Mat bgr;
+  std::string error;
+  if (!DecodeImage(texture.png.data(), texture.png.size(), ImageRead::kColor, &bgr, &error)) {
+    throw Error("glb texture: the embedded PNG does not decode (" + error + ")");
+  }
   return ImageToNumpy(bgr);
 }
 

@@ -1,15 +1,16 @@
 #include "sensors/image_io.h"
 
+#include <cctype>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <system_error>
 #include <vector>
 
 #include "models/error.h"
+#include "sensors/image_codec.h"
 #include "sensors/png_decode.h"
 #include "sensors/sequence.h"
 
@@ -31,32 +32,22 @@ bool ReadBytes(const std::string& path, std::vector<unsigned char>* bytes) {
   return static_cast<bool>(in.read(reinterpret_cast<char*>(bytes->data()), size));
 }
 
-bool ReadImage(const std::string& path, int flags, cv::Mat* image, std::string* warning) {
+// Read as stored (ImageRead::kUnchanged), as both callers do.
+bool ReadImage(const std::string& path, cv::Mat* image, std::string* warning) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) {
     if (warning) *warning = path + ": missing frame file";
     return false;
   }
   // 8-bit RGB and 16-bit greyscale PNGs (what recorders write) by the fast decoder; it gives
-  // OpenCV's image for them (read unchanged, as both callers do) and declines everything
-  // else, which OpenCV then decodes from the same bytes.
+  // the general decoder's image for them and declines everything else, which the general
+  // decoder (sensors/image_codec.h: PNG and JPEG only) then decodes from the same bytes.
   std::vector<unsigned char> bytes;
   if (!ReadBytes(path, &bytes)) bytes.clear();
   if (DecodeFramePng(bytes.data(), bytes.size(), image)) return true;
-  // Frames are PNG or JPEG: other bytes never reach OpenCV's other decoders (its DICOM reader
-  // aborts the process on some damaged files, found by the image fuzzer).
-  static const unsigned char kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
-  static const unsigned char kJpeg[3] = {0xff, 0xd8, 0xff};
-  const bool png = bytes.size() >= 8 && std::memcmp(bytes.data(), kPng, 8) == 0;
-  const bool jpeg = bytes.size() >= 3 && std::memcmp(bytes.data(), kJpeg, 3) == 0;
-  if (!png && !jpeg) bytes.clear();
-  try {
-    *image = cv::imdecode(bytes, flags);
-  } catch (const cv::Exception& e) {
-    image->release();
-  }
-  if (image->empty()) {
-    if (warning) *warning = path + ": unreadable image (not a valid PNG/JPEG)";
+  std::string error;
+  if (!DecodeImage(bytes.data(), bytes.size(), ImageRead::kUnchanged, image, &error)) {
+    if (warning) *warning = path + ": unreadable image (" + error + ")";
     return false;
   }
   return true;
@@ -74,7 +65,7 @@ std::string MatTypeName(int type) {
 
 bool ReadDepthImage(const std::string& path, int width, int height, cv::Mat* depth,
                     std::string* warning) {
-  if (!ReadImage(path, cv::IMREAD_UNCHANGED | cv::IMREAD_ANYDEPTH, depth, warning)) return false;
+  if (!ReadImage(path, depth, warning)) return false;
   if (depth->type() != CV_16UC1) {
     if (warning) {
       *warning = path +
@@ -96,7 +87,7 @@ bool ReadDepthImage(const std::string& path, int width, int height, cv::Mat* dep
 
 bool ReadColorImage(const std::string& path, int width, int height, cv::Mat* color,
                     std::string* warning) {
-  if (!ReadImage(path, cv::IMREAD_UNCHANGED, color, warning)) return false;
+  if (!ReadImage(path, color, warning)) return false;
   if (color->type() == CV_8UC4) {
     cv::Mat bgr;
     cv::cvtColor(*color, bgr, cv::COLOR_BGRA2BGR);
@@ -140,18 +131,21 @@ void WriteFileAtomic(const std::string& path, const std::string& contents) {
 }
 
 void WriteImageAtomic(const std::string& path, const cv::Mat& image) {
-  const std::string ext = std::filesystem::path(path).extension().string();
-  std::vector<uchar> buffer;
+  std::string ext = std::filesystem::path(path).extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  std::vector<unsigned char> buffer;
+  std::string error;
   bool ok = false;
-  try {
-    ok = !image.empty() && cv::imencode(ext, image, buffer);
-  } catch (const cv::Exception& e) {
-    throw Error(path + ": cannot encode a " + MatTypeName(image.type()) + " image as '" + ext +
-                "': " + e.what());
+  if (ext == ".png") {
+    ok = EncodePng(image, &buffer, &error);
+  } else if (ext == ".jpg" || ext == ".jpeg") {
+    ok = EncodeJpeg(image, kJpegQuality, &buffer, &error);
+  } else {
+    error = "expected a .png, .jpg or .jpeg file name";
   }
   if (!ok) {
     throw Error(path + ": cannot encode a " + MatTypeName(image.type()) + " image as '" + ext +
-                "'");
+                "': " + error);
   }
   WriteFileAtomic(path, std::string(buffer.begin(), buffer.end()));
 }

@@ -3,8 +3,9 @@
 // libdeflate (about twice as fast as zlib's inflate, which took most of the frame reading's
 // CPU) and the rows are unfiltered here. Anything else (other colour types and bit depths,
 // interlacing, palettes, transparency chunks, a CRC or checksum mismatch, truncated data)
-// is declined, and the caller decodes the file with OpenCV as before: the result is then the
-// same image OpenCV's decoder gives, byte for byte (tests/sensors/png_decode_test.cc).
+// is declined, and the caller decodes the file with libpng (sensors/image_codec.h). For the
+// layouts it takes the result is the image OpenCV's and libpng's decoders give, byte for byte
+// (tests/sensors/png_decode_test.cc).
 #pragma once
 
 #include <cstddef>

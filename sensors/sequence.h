@@ -96,7 +96,9 @@ class SequenceWriter {
 
 // Writes `contents` to `path` through a temporary file in the same folder and a rename.
 void WriteFileAtomic(const std::string& path, const std::string& contents);
-// Writes an image (PNG/JPEG by extension) atomically; throws artex::Error on failure.
+// Writes an image atomically as PNG (.png) or JPEG (.jpg, .jpeg; quality kJpegQuality) by its
+// extension (sensors/image_codec.h); throws artex::Error naming the file on failure.
+constexpr int kJpegQuality = 95;
 void WriteImageAtomic(const std::string& path, const cv::Mat& image);
 
 }  // namespace artex

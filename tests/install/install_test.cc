@@ -113,6 +113,19 @@ TEST(InstallTest, AutoArchKeepsPlainX86WithStaticCeres) {
 }
 
 // An ARTEX_ARCH the compiler does not know stops the configure step, naming the value.
+// A fresh configure with ARTEX_ARCH=auto and the shared Ceres compiles for x86-64-v3 exactly
+// when this machine's CPU runs it (the probe once compiled half a program and never did).
+TEST(InstallTest, AutoArchPicksX86V3WhereTheCpuRunsIt) {
+  if (!fs::exists("/usr/lib/x86_64-linux-gnu/libceres.so"))
+    GTEST_SKIP() << "no shared libceres.so on this machine";
+  std::string out;
+  ASSERT_EQ(ConfigureWith("arch-auto", "", &out), 0) << out;
+  __builtin_cpu_init();
+  const bool v3 = __builtin_cpu_supports("x86-64-v3");
+  EXPECT_EQ(out.find("artex: compiling for -march=x86-64-v3") != std::string::npos, v3) << out;
+  EXPECT_EQ(out.find("Unknown argument"), std::string::npos) << out;
+}
+
 TEST(InstallTest, ConfigureRejectsAnUnknownArch) {
   std::string out;
   EXPECT_NE(ConfigureWith("arch-unknown", "-DARTEX_ARCH=no-such-cpu", &out), 0) << out;
