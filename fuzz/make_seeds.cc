@@ -13,6 +13,7 @@
 #include "models/template_cache.h"
 #include "models/template_io.h"
 #include "sensors/calibration.h"
+#include "sensors/image_codec.h"
 #include "sensors/sequence.h"
 #include "stream/stream_sender.h"
 #include "tests/models/small_makehuman.h"
@@ -215,6 +216,17 @@ int main(int argc, char** argv) {
     }
     for (const auto& e : fs::directory_iterator(seq / "color")) {
       Put(out, "image", "color_" + e.path().filename().string(), Read(e.path()));
+    }
+    {  // layouts the fast frame decoder declines: libpng's and libjpeg's paths
+      std::vector<unsigned char> bytes;
+      std::string error;
+      artex::EncodeJpeg(cv::Mat(6, 8, CV_8UC3, cv::Scalar(20, 90, 160)), 90, &bytes, &error);
+      Put(out, "image", "color.jpg", std::string(bytes.begin(), bytes.end()));
+      artex::EncodePng(cv::Mat(6, 8, CV_16UC4, cv::Scalar(100, 2000, 30000, 65535)), &bytes,
+                       &error);
+      Put(out, "image", "bgra16.png", std::string(bytes.begin(), bytes.end()));
+      artex::EncodePng(cv::Mat(6, 8, CV_8UC1, cv::Scalar(77)), &bytes, &error);
+      Put(out, "image", "grey.png", std::string(bytes.begin(), bytes.end()));
     }
     Put(out, "tum", "tum",
         "# color images\n1305031102.175304 rgb/1305031102.175304.png\n"

@@ -281,6 +281,16 @@ bool DecodeJpeg(const unsigned char* data, std::size_t size, ImageRead mode, cv:
                   "image of %ux%u pixels above 1 GiB", info.output_width, info.output_height);
     ok = false;
   }
+  // libjpeg fills the rows a truncated file lacks with grey: without a bound a header on a few
+  // bytes would make it write gigabytes. Even a flat image needs two bits per 8x8 block and
+  // channel, about 1 byte per 256 decoded bytes; 1032 times the file is never a real image.
+  if (ok && static_cast<double>(info.output_width) * info.output_height * channels >
+                1032.0 * static_cast<double>(size)) {
+    std::snprintf(jpeg_error.message, sizeof(jpeg_error.message),
+                  "the header's size (%ux%u) needs more data than the file holds",
+                  info.output_width, info.output_height);
+    ok = false;
+  }
   if (ok) {
     try {
       image->create(static_cast<int>(info.output_height), static_cast<int>(info.output_width),

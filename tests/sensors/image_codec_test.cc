@@ -274,6 +274,24 @@ TEST(ImageCodecTest, HeaderClaimingMoreThanItsDataIsRefusedBeforeAllocation) {
   std::string error;
   EXPECT_FALSE(DecodeImage(png.data(), png.size(), ImageRead::kUnchanged, &image, &error));
   EXPECT_NE(error.find("needs more data than the file holds"), std::string::npos) << error;
+  // The same for a JPEG (libjpeg would fill the missing rows with grey): its frame header
+  // (SOF0: FF C0, length, precision, height, width) claiming 16000 x 16000.
+  std::vector<unsigned char> jpeg = CvEncode(".jpg", Noise(16, 16, CV_8UC3, 4));
+  std::size_t sof = 2;
+  while (sof + 9 < jpeg.size() && !(jpeg[sof] == 0xff && jpeg[sof + 1] == 0xc0)) ++sof;
+  ASSERT_LT(sof + 9, jpeg.size());
+  for (const std::size_t at : {sof + 5, sof + 7}) {
+    jpeg[at] = static_cast<unsigned char>(16000 >> 8);
+    jpeg[at + 1] = static_cast<unsigned char>(16000 & 255);
+  }
+  EXPECT_FALSE(DecodeImage(jpeg.data(), jpeg.size(), ImageRead::kColor, &image, &error));
+  EXPECT_NE(error.find("(16000x16000) needs more data than the file holds"), std::string::npos)
+      << error;
+  // A real JPEG of a flat image, the most compressible there is, stays well within the bound.
+  const std::vector<unsigned char> flat =
+      CvEncode(".jpg", cv::Mat(480, 640, CV_8UC3, cv::Scalar(90, 120, 150)));
+  ASSERT_TRUE(DecodeImage(flat.data(), flat.size(), ImageRead::kColor, &image, &error)) << error;
+  EXPECT_LT(640.0 * 480 * 3 / flat.size(), 1032.0 / 2);
 }
 
 }  // namespace
