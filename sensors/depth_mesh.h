@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "models/default_init_allocator.h"
 #include "render/camera.h"
 #include "sensors/calibration.h"
 #include "sensors/scan.h"
@@ -80,12 +81,15 @@ class DepthMesher {
   DepthMeshOptions options_;
   std::vector<int> grid_index_;  // per grid node: provisional vertex id or -1
   std::vector<int> row_range_;   // per grid row: first and one-past-last valid column
-  std::vector<int> grid_pixel_;  // per provisional vertex: pixel index
-  std::vector<int> triangles_;   // 3 provisional vertex ids per triangle
+  // Sized for the worst case (every node, 4 triangles a node) and not zero-filled: a frame
+  // writes and reads only its first entries (models/default_init_allocator.h).
+  std::vector<int, DefaultInitAllocator<int>> grid_pixel_;  // per provisional vertex: pixel
+  std::vector<int, DefaultInitAllocator<int>> triangles_;   // 3 provisional vertex ids each
   std::vector<int> remap_;       // provisional -> final vertex id (-1: dropped)
   std::vector<int> vertex_pixels_;
   // 4 floats (x, y, z, 0) per provisional vertex, camera frame, 16-byte aligned for SIMD.
-  std::vector<float, Eigen::aligned_allocator<float>> camera_points_;  // m
+  std::vector<float, DefaultInitAllocator<float, Eigen::aligned_allocator<float>>>
+      camera_points_;  // m
   std::vector<float, Eigen::aligned_allocator<float>> normal_sums_;
 };
 

@@ -233,6 +233,14 @@ void OnJpegError(j_common_ptr info) {
 
 void OnJpegMessage(j_common_ptr) {}
 
+// libjpeg's error manager, reporting through `error`'s jump instead of exiting the process.
+jpeg_error_mgr* JpegErrorManager(JpegError* error) {
+  jpeg_std_error(&error->manager);
+  error->manager.error_exit = OnJpegError;
+  error->manager.output_message = OnJpegMessage;
+  return &error->manager;
+}
+
 // Reads the header and starts the decompression; sets *channels (1 or 3).
 bool BeginJpeg(jpeg_decompress_struct* info, JpegError* error, const unsigned char* data,
                std::size_t size, ImageRead mode, int* channels) {
@@ -270,9 +278,7 @@ bool DecodeJpeg(const unsigned char* data, std::size_t size, ImageRead mode, cv:
                 std::string* error) {
   jpeg_decompress_struct info;
   JpegError jpeg_error;
-  info.err = jpeg_std_error(&jpeg_error.manager);
-  jpeg_error.manager.error_exit = OnJpegError;
-  jpeg_error.manager.output_message = OnJpegMessage;
+  info.err = JpegErrorManager(&jpeg_error);
   jpeg_create_decompress(&info);
   int channels = 0;
   bool ok = BeginJpeg(&info, &jpeg_error, data, size, mode, &channels);
@@ -404,9 +410,7 @@ bool EncodeJpeg(const cv::Mat& image, int quality, std::vector<unsigned char>* b
   }
   jpeg_compress_struct info;
   JpegError jpeg_error;
-  info.err = jpeg_std_error(&jpeg_error.manager);
-  jpeg_error.manager.error_exit = OnJpegError;
-  jpeg_error.manager.output_message = OnJpegMessage;
+  info.err = JpegErrorManager(&jpeg_error);
   jpeg_create_compress(&info);
   JpegOutput out;
   const bool ok = WriteJpeg(&info, &jpeg_error, image, quality, &out);

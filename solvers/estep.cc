@@ -12,6 +12,7 @@
 #include <sstream>
 #include <utility>
 
+#include "models/default_init_allocator.h"
 #include "models/error.h"
 #include "models/numeric.h"
 #include "solvers/estep_pairs.h"
@@ -93,27 +94,8 @@ struct CacheLineAllocator {
   }
 };
 
-// std::allocator whose value-less construct() default-initialises, so that resize() of an int
-// buffer leaves the new entries unwritten (the gathers size their output, then fill it).
-template <typename T>
-struct DefaultInitAllocator : std::allocator<T> {
-  template <typename U>
-  struct rebind {
-    using other = DefaultInitAllocator<U>;
-  };
-  DefaultInitAllocator() = default;
-  template <typename U>
-  DefaultInitAllocator(const DefaultInitAllocator<U>&) {}  // NOLINT(runtime/explicit)
-  template <typename U>
-  void construct(U* p) {
-    ::new (static_cast<void*>(p)) U;
-  }
-  template <typename U, typename... Args>
-  void construct(U* p, Args&&... args) {
-    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
-  }
-};
-// Candidate indices (cloud rows).
+// Candidate indices (cloud rows); resize() leaves new entries unwritten (the gathers size
+// their output, then fill it).
 using IndexBuffer = std::vector<int, DefaultInitAllocator<int>>;
 
 // Integer grid coordinate of a scaled coordinate, offset to fit 21 bits (clamped).

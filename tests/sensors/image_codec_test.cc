@@ -50,21 +50,28 @@ void ExpectAsOpenCv(const std::vector<unsigned char>& bytes, const std::string& 
   }
 }
 
-// A PNG written by libpng itself, for the layouts OpenCV never writes: palettes, 1-4 bit
-// greys, transparency chunks, interlacing. `samples` holds one byte (or, at 16 bits, two
-// big-endian bytes) per sample, packed here for bit depths below 8.
-std::vector<unsigned char> LibpngFile(int width, int height, int color_type, int bit_depth,
-                                      bool interlaced, bool transparency, unsigned seed) {
+// A libpng writer appending to *out (the test's files are valid: no error handling).
+png_structp PngWriter(std::vector<unsigned char>* out, png_infop* info) {
   png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
-  png_infop info = png_create_info_struct(png);
-  std::vector<unsigned char> out;
+  *info = png_create_info_struct(png);
   png_set_write_fn(
-      png, &out,
+      png, out,
       [](png_structp p, png_bytep data, png_size_t n) {
         auto* v = static_cast<std::vector<unsigned char>*>(png_get_io_ptr(p));
         v->insert(v->end(), data, data + n);
       },
       [](png_structp) {});
+  return png;
+}
+
+// A PNG written by libpng itself, for the layouts OpenCV never writes: palettes, 1-4 bit
+// greys, transparency chunks, interlacing. `samples` holds one byte (or, at 16 bits, two
+// big-endian bytes) per sample, packed here for bit depths below 8.
+std::vector<unsigned char> LibpngFile(int width, int height, int color_type, int bit_depth,
+                                      bool interlaced, bool transparency, unsigned seed) {
+  std::vector<unsigned char> out;
+  png_infop info = nullptr;
+  png_structp png = PngWriter(&out, &info);
   png_set_IHDR(png, info, width, height, bit_depth, color_type,
                interlaced ? PNG_INTERLACE_ADAM7 : PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_BASE,
                PNG_FILTER_TYPE_BASE);
@@ -235,16 +242,9 @@ TEST(ImageCodecTest, DamagedAndForeignBytesGiveReasonsNotCrashes) {
 TEST(ImageCodecTest, ImagesAboveTheLimitAreRefusedBeforeAllocation) {
   // A true 1-bit palette image of 32768 x 16384 pixels (64 KB of deflated zeros) decodes to
   // 1.6 GB of BGR, above kMaxImageBytes.
-  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
-  png_infop info = png_create_info_struct(png);
   std::vector<unsigned char> file;
-  png_set_write_fn(
-      png, &file,
-      [](png_structp p, png_bytep data, png_size_t n) {
-        auto* v = static_cast<std::vector<unsigned char>*>(png_get_io_ptr(p));
-        v->insert(v->end(), data, data + n);
-      },
-      [](png_structp) {});
+  png_infop info = nullptr;
+  png_structp png = PngWriter(&file, &info);
   png_set_IHDR(png, info, 32768, 16384, 1, PNG_COLOR_TYPE_PALETTE, PNG_INTERLACE_NONE,
                PNG_COMPRESSION_TYPE_BASE, PNG_FILTER_TYPE_BASE);
   png_color palette[2] = {{0, 0, 0}, {255, 255, 255}};
