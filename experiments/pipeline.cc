@@ -35,7 +35,7 @@
 #include "sensors/bvh_export.h"
 #include "sensors/calibration.h"
 #include "sensors/frame_source.h"
-#include "sensors/image_codec.h"
+#include "sensors/image_io.h"
 #include "sensors/scene_segmentation.h"
 #include "sensors/sequence.h"
 #include "solvers/particle_predictor.h"

@@ -13,9 +13,9 @@
 
 #include "experiments/atomic_output.h"
 #include "experiments/commands.h"
+#include "experiments/pipeline_stages.h"  // WritePngFile
 #include "experiments/pose_csv.h"
 #include "models/error.h"
-#include "models/mesh_export.h"
 #include "models/skinning.h"
 #include "models/template_io.h"
 #include "sensors/image_codec.h"
@@ -44,13 +44,6 @@ PinholeCamera OrbitCamera(const Eigen::Vector3d& center, double radius, double a
       center + radius * Eigen::Vector3d(std::sin(angle), elevation, std::cos(angle));
   camera.world_to_camera = PinholeCamera::LookAt(eye, center, Eigen::Vector3d::UnitY());
   return camera;
-}
-
-void WriteImage(const std::string& path, const cv::Mat& image) {
-  std::vector<unsigned char> bytes;
-  std::string error;
-  if (!EncodePng(image, &bytes, &error)) throw Error(path + ": " + error);
-  WriteFileAtomically(path, std::string(bytes.begin(), bytes.end()));
 }
 
 }  // namespace
@@ -121,7 +114,7 @@ void RegisterRenderCommand(CLI::App* app) {
       image.setTo(cv::Scalar(60, 60, 60), mask == 0);
       char name[64];
       std::snprintf(name, sizeof(name), "/%s_%03d.png", args->motion.empty() ? "view" : "pose", i);
-      WriteImage(out.path() + name, image);
+      WritePngFile(out.path() + name, image);
     }
     out.Commit();
     std::printf("%d images in %s\n", args->frames, args->out.c_str());

@@ -14,7 +14,7 @@
 #include "experiments/runner.h"
 #include "experiments/runner_internal.h"
 #include "models/error.h"
-#include "sensors/image_codec.h"
+#include "sensors/image_io.h"
 #include "sensors/sequence.h"
 #include "sensors/synth_conditions.h"
 #include "sensors/virtual_kinect.h"

@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 #include <sstream>
 
+#include "experiments/pipeline_stages.h"  // WritePngFile
 #include "experiments/pose_csv.h"
 #include "experiments/stream_sinks.h"
 #include "experiments/texture_evaluation.h"
@@ -21,7 +22,7 @@
 #include "models/template_cache.h"
 #include "models/template_io.h"
 #include "sensors/calibration.h"
-#include "sensors/image_codec.h"
+#include "sensors/image_io.h"
 #include "sensors/sequence.h"
 #include "stream/stream_player.h"
 #include "texture/texturer.h"
@@ -34,13 +35,6 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 nlohmann::json Number(double v) {
   return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
-}
-
-void WritePng(const std::string& path, const cv::Mat& image) {
-  std::vector<unsigned char> bytes;
-  std::string error;
-  if (!EncodePng(image, &bytes, &error)) throw Error(path + ": " + error);
-  WriteFileAtomically(path, std::string(bytes.begin(), bytes.end()));
 }
 
 std::vector<int> FramesOf(const std::vector<int>& textured) {
@@ -203,7 +197,7 @@ PlaybackReport PlayStream(const std::string& stream_path, const PlaybackOptions&
         RenderTextured(model, posed, f.atlas, cameras[k], &image, &mask);
         char name[64];
         std::snprintf(name, sizeof(name), "/renders/%06d_v%zu.png", f.frame, k);
-        WritePng(options.out_dir + name, image);
+        WritePngFile(options.out_dir + name, image);
       }
     }
     if (!has_atlas || (report.frames - 1) % options.evaluate_every != 0) continue;
@@ -279,7 +273,7 @@ PlaybackReport PlayStream(const std::string& stream_path, const PlaybackOptions&
 
   if (!options.out_dir.empty()) {
     if (!poses.empty()) WritePoseCsv(options.out_dir + "/poses.csv", model, frames, poses);
-    if (!f.atlas.empty()) WritePng(options.out_dir + "/atlas.png", f.atlas);
+    if (!f.atlas.empty()) WritePngFile(options.out_dir + "/atlas.png", f.atlas);
     std::string frames_csv =
         "frame,keyframe,offset,pose_bytes,coverage_bytes,video_bytes,record_bytes,decode_ms,"
         "sender_ms,queue_ms,transmit_ms,latency_ms\n";

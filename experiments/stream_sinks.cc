@@ -7,7 +7,7 @@
 #include "experiments/pipeline_stages.h"  // WritePngFile
 #include "models/error.h"
 #include "models/mesh_export.h"
-#include "sensors/image_codec.h"
+#include "sensors/image_io.h"
 
 namespace artex {
 namespace {

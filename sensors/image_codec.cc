@@ -8,10 +8,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <fstream>
 #include <new>
 
-#include "models/error.h"
 
 // libpng and libjpeg report errors by longjmp. Every function below that calls setjmp keeps
 // only trivially destructible locals, so that the jump skips no destructor; the matrices and
@@ -23,6 +21,10 @@ namespace {
 constexpr unsigned char kPngSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
 constexpr unsigned char kJpegSignature[3] = {0xff, 0xd8, 0xff};
 constexpr bool kLittleEndian = __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__;
+// The most decoded bytes a file's byte may stand for (deflate's largest expansion; JPEG, whose
+// decoder fills a truncated file's missing rows with grey, is held to the same bound): a header
+// claiming more is refused before the image is allocated.
+constexpr double kMaxExpansion = 1032.0;
 
 void SetError(std::string* error, const std::string& text) {
   if (error) *error = text;
@@ -91,10 +93,8 @@ bool BeginPng(png_structp png, png_infop info, ImageRead mode, std::size_t max_s
   png_uint_32 width = 0, height = 0;
   int bit_depth = 0, color_type = 0;
   png_get_IHDR(png, info, &width, &height, &bit_depth, &color_type, nullptr, nullptr, nullptr);
-  // Deflate expands its data at most 1032 times: a header claiming more rows than the file can
-  // hold is refused before the image is allocated.
   const double stored = (static_cast<double>(png_get_rowbytes(png, info)) + 1.0) * height;
-  if (stored > 1032.0 * static_cast<double>(max_stored_source)) {
+  if (stored > kMaxExpansion * static_cast<double>(max_stored_source)) {
     png_error(png, "the header's size needs more data than the file holds");
   }
   const bool colour = (color_type & PNG_COLOR_MASK_COLOR) != 0;
@@ -164,15 +164,11 @@ bool DecodePng(const unsigned char* data, std::size_t size, ImageRead mode, cv::
   png_set_read_fn(png, &state, ReadPngBytes);
   PngLayout layout;
   bool ok = BeginPng(png, info, mode, size, &layout);
-  std::size_t bytes = 0;
-  if (ok) {
-    bytes = ImageBytes(layout.width, layout.height,
-                       layout.channels * (layout.depth == CV_16U ? 2 : 1));
-    if (bytes == 0) {
-      std::snprintf(state.message, sizeof(state.message), "image of %dx%d pixels above 1 GiB",
-                    layout.width, layout.height);
-      ok = false;
-    }
+  if (ok && ImageBytes(layout.width, layout.height,
+                        layout.channels * (layout.depth == CV_16U ? 2 : 1)) == 0) {
+    std::snprintf(state.message, sizeof(state.message), "image of %dx%d pixels above 1 GiB",
+                  layout.width, layout.height);
+    ok = false;
   }
   std::vector<png_bytep> rows;
   if (ok) {
@@ -287,11 +283,10 @@ bool DecodeJpeg(const unsigned char* data, std::size_t size, ImageRead mode, cv:
                   "image of %ux%u pixels above 1 GiB", info.output_width, info.output_height);
     ok = false;
   }
-  // libjpeg fills the rows a truncated file lacks with grey: without a bound a header on a few
-  // bytes would make it write gigabytes. Even a flat image needs two bits per 8x8 block and
-  // channel, about 1 byte per 256 decoded bytes; 1032 times the file is never a real image.
+  // Without the bound a header on a few bytes would make libjpeg write gigabytes of grey. Even
+  // a flat image needs two bits per 8x8 block and channel, about 1 byte per 256 decoded bytes.
   if (ok && static_cast<double>(info.output_width) * info.output_height * channels >
-                1032.0 * static_cast<double>(size)) {
+                kMaxExpansion * static_cast<double>(size)) {
     std::snprintf(jpeg_error.message, sizeof(jpeg_error.message),
                   "the header's size (%ux%u) needs more data than the file holds",
                   info.output_width, info.output_height);
@@ -352,23 +347,6 @@ bool DecodeImage(const unsigned char* data, std::size_t size, ImageRead mode, cv
   image->release();
   SetError(error, size == 0 ? "empty file" : "not a PNG or JPEG image");
   return false;
-}
-
-cv::Mat ReadImageFile(const std::string& path, ImageRead mode) {
-  std::ifstream in(path, std::ios::binary | std::ios::ate);
-  if (!in) throw Error(path + ": cannot open the image");
-  const std::streamoff size = in.tellg();
-  std::vector<unsigned char> bytes(size > 0 ? static_cast<std::size_t>(size) : 0);
-  in.seekg(0);
-  if (size < 0 || !in.read(reinterpret_cast<char*>(bytes.data()), size)) {
-    throw Error(path + ": cannot read the image");
-  }
-  cv::Mat image;
-  std::string error;
-  if (!DecodeImage(bytes.data(), bytes.size(), mode, &image, &error)) {
-    throw Error(path + ": unreadable image (" + error + ")");
-  }
-  return image;
 }
 
 bool EncodePng(const cv::Mat& image, std::vector<unsigned char>* bytes, std::string* error) {

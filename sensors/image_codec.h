@@ -28,8 +28,6 @@ enum class ImageRead {
 // missing rows grey, as libjpeg (and OpenCV) give it.
 bool DecodeImage(const unsigned char* data, std::size_t size, ImageRead mode, cv::Mat* image,
                  std::string* error);
-// The file's image; throws artex::Error naming the file and the reason.
-cv::Mat ReadImageFile(const std::string& path, ImageRead mode);
 
 // PNG of an 8- or 16-bit image with 1, 3 (BGR) or 4 (BGRA) channels, zlib level 1 with run-
 // length matching after the Sub filter (OpenCV's default, fast). False and *error otherwise.

@@ -55,6 +55,17 @@ bool ReadImage(const std::string& path, cv::Mat* image, std::string* warning) {
 
 }  // namespace
 
+cv::Mat ReadImageFile(const std::string& path, ImageRead mode) {
+  std::vector<unsigned char> bytes;
+  if (!ReadBytes(path, &bytes)) throw Error(path + ": cannot read the image");
+  cv::Mat image;
+  std::string error;
+  if (!DecodeImage(bytes.data(), bytes.size(), mode, &image, &error)) {
+    throw Error(path + ": unreadable image (" + error + ")");
+  }
+  return image;
+}
+
 std::string MatTypeName(int type) {
   const int depth = CV_MAT_DEPTH(type);
   const char* names[] = {"CV_8U",  "CV_8S",  "CV_16U", "CV_16S",

@@ -6,6 +6,8 @@
 #include <opencv2/core.hpp>
 #include <string>
 
+#include "sensors/image_codec.h"
+
 namespace artex {
 
 // A 16-bit single-channel depth PNG of exactly width x height pixels -> CV_16UC1.
@@ -15,6 +17,10 @@ bool ReadDepthImage(const std::string& path, int width, int height, cv::Mat* dep
 // A single-channel 8-bit image is rejected (a depth or mask image in the wrong place).
 bool ReadColorImage(const std::string& path, int width, int height, cv::Mat* color,
                     std::string* warning);
+
+// A PNG or JPEG file's image, read as `mode` asks (sensors/image_codec.h); throws
+// artex::Error naming the file and the reason.
+cv::Mat ReadImageFile(const std::string& path, ImageRead mode);
 
 // "CV_16UC1"-style name of an OpenCV matrix type, for messages.
 std::string MatTypeName(int type);
