@@ -20,7 +20,8 @@ many first frames are wrong (mean joint error above --wrong-mm, 100 mm by defaul
 turned round or a limb reversed, which the depth alone often explains as well) and how many of
 those the fit quality still labels good; on real frames the labels and mean inlier / support
 fractions; and how many initialisations gave the first arm's poses.csv byte for byte (a change
-meant to be bit-identical shows all). Writes WORK/init_eval.json.
+meant to be bit-identical shows all). --verbose prints every initialisation with its worst
+joint (from the run's joint_errors.csv). Writes WORK/init_eval.json.
 """
 import argparse
 import csv
@@ -72,13 +73,22 @@ def run_one(binary, config, folder, start, sets, out):
     with open(os.path.join(out, "poses.csv"), "rb") as f:
         poses = f.read()
 
+    worst = ("", float("nan"))  # the joint farthest from its true centre
+    errors = os.path.join(out, "joint_errors.csv")
+    if os.path.exists(errors):
+        with open(errors) as f:
+            joints = next(csv.DictReader(f), {})
+        named = [(k, float(v)) for k, v in joints.items() if k != "frame" and v != "nan"]
+        if named:
+            worst = max(named, key=lambda kv: kv[1])
+
     def number(key):
         return float(row[key]) if row[key] not in ("", "nan") else float("nan")
 
     return {"init_ms": number("init_ms"), "label": row["quality"],
             "inliers": number("inlier_fraction"), "support": number("support_fraction"),
             "vertex_mm": number("mean_vertex_error_mm"), "joint_mm": number("mean_joint_error_mm"),
-            "poses": poses}
+            "worst_joint": worst[0], "worst_joint_mm": worst[1], "poses": poses}
 
 
 def main():
@@ -135,8 +145,10 @@ def main():
             results[label].append(r)
             if args.verbose:
                 print("%-10s %-18s %3d %6.0f ms %-9s inliers %.3f support %.3f vertex %6.2f "
-                      "joint %7.2f" % (label, name, start, r["init_ms"], r["label"], r["inliers"],
-                                       r["support"], r["vertex_mm"], r["joint_mm"]), flush=True)
+                      "joint %7.2f (worst %s %.0f)"
+                      % (label, name, start, r["init_ms"], r["label"], r["inliers"], r["support"],
+                         r["vertex_mm"], r["joint_mm"], r["worst_joint"] or "-",
+                         r["worst_joint_mm"]), flush=True)
     print("load before: " + uptime)
     print("load after:  " + subprocess.run(["uptime"], capture_output=True,
                                            text=True).stdout.strip())

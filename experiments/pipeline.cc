@@ -398,6 +398,9 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
   info.texture = texturer != nullptr;
   info.world = world.estimate ? &*world.estimate : nullptr;
   WriteFramesCsv(out_dir + "/frames.csv", result);
+  if (result.has_ground_truth) {
+    WriteJointErrorsCsv(out_dir + "/joint_errors.csv", result, tmpl.JointNames());
+  }
   if (result.has_stream) WriteStreamFramesCsv(out_dir + "/stream_frames.csv", result);
   WriteSummaryJson(out_dir + "/summary.json", result, info);
   if (shape.enabled() || result.has_ground_truth) {

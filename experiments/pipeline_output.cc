@@ -98,6 +98,21 @@ void WriteFramesCsv(const std::string& path, const PipelineResult& result) {
   WriteFileAtomically(path, frames_csv.str());
 }
 
+void WriteJointErrorsCsv(const std::string& path, const PipelineResult& result,
+                         const std::vector<std::string>& joint_names) {
+  std::ostringstream csv;
+  csv << "frame";
+  for (const std::string& name : joint_names) csv << "," << name;
+  csv << "\n";
+  for (const FrameRecord& r : result.frames) {
+    if (r.joint_errors_mm.size() != joint_names.size()) continue;  // not evaluated
+    csv << r.frame;
+    for (double e : r.joint_errors_mm) csv << "," << Fixed(e);
+    csv << "\n";
+  }
+  WriteFileAtomically(path, csv.str());
+}
+
 void WriteStreamFramesCsv(const std::string& path, const PipelineResult& result) {
   std::ostringstream csv;
   csv << "frame,keyframe,pose_bytes,coverage_bytes,video_bytes,record_bytes,compose_ms,"

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 #include "experiments/pipeline.h"
 #include "sensors/scene_segmentation.h"
@@ -19,6 +20,11 @@ struct PipelineOutputInfo {
 };
 
 void WriteFramesCsv(const std::string& path, const PipelineResult& result);
+// With ground truth: one row per evaluated frame, each joint's distance from the subject's true
+// joint centre (mm, named by `joint_names`, the tracking template's; nan for a joint the
+// subject lacks). frames.csv's mean_joint_error_mm is the mean of a row's numbers.
+void WriteJointErrorsCsv(const std::string& path, const PipelineResult& result,
+                         const std::vector<std::string>& joint_names);
 // The stream's per-frame record sizes and times (result.stream; docs/streaming.md).
 void WriteStreamFramesCsv(const std::string& path, const PipelineResult& result);
 void WriteSummaryJson(const std::string& path, const PipelineResult& result,

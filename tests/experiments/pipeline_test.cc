@@ -141,6 +141,34 @@ TEST(PipelineTest, PosesAndFramesCsvHaveOneRowPerFrame) {
   }
 }
 
+TEST(PipelineTest, JointErrorsCsvNamesEveryJointAndAveragesToTheFramesMean) {
+  FirstRun();
+  const fs::path out = OutDir("run_a");
+  const std::vector<std::string> lines = Lines(ReadFileBytes(out / "joint_errors.csv"));
+  ASSERT_EQ(static_cast<int>(lines.size()), kFrames + 1);
+  const std::vector<std::string> header = Fields(lines[0]);
+  const Template& tmpl = testing_util::CoarseTemplate();
+  ASSERT_EQ(static_cast<int>(header.size()), 1 + tmpl.num_joints());
+  EXPECT_EQ(header[0], "frame");
+  for (int j = 0; j < tmpl.num_joints(); ++j) EXPECT_EQ(header[1 + j], tmpl.joints[j].name);
+  for (int i = 1; i <= kFrames; ++i) {
+    const std::vector<std::string> row = Fields(lines[i]);
+    ASSERT_EQ(row.size(), header.size()) << lines[i];
+    EXPECT_EQ(std::stoi(row[0]), i - 1);
+    double sum = 0.0, largest = 0.0;
+    for (size_t k = 1; k < row.size(); ++k) {
+      const double e = std::stod(row[k]);
+      ASSERT_TRUE(std::isfinite(e) && e >= 0.0) << header[k] << " " << lines[i];
+      sum += e;
+      largest = std::max(largest, e);
+    }
+    const FrameRecord& f = FirstRun().frames[i - 1];
+    // Six significant digits per joint: the mean agrees to well under a micrometre.
+    EXPECT_NEAR(sum / tmpl.num_joints(), f.mean_joint_error_mm, 1e-3);
+    EXPECT_GT(largest, f.mean_joint_error_mm);  // the joints differ: not one number repeated
+  }
+}
+
 TEST(PipelineTest, MetricsAndSummaryJsonParse) {
   const PipelineResult& r = FirstRun();
   const fs::path out = OutDir("run_a");
