@@ -72,8 +72,9 @@ def _read_json(path):
 def read_run(run_dir, num_joints=17):
     """The results of one `artex track` / pipeline run folder as plain structures:
     'summary' and 'metrics' (dicts from summary.json / metrics.json, None when absent),
-    'poses' (read_poses_csv), 'frames' (frames.csv as columns), 'results' (results.json of
-    experiment runs), 'trace' (trace.csv columns), 'config' (config.yaml text) and 'files'."""
+    'poses' (read_poses_csv), 'frames' (frames.csv as columns), 'joint_errors' (joint_errors.csv
+    as columns: frame and each joint's error in mm, with ground truth), 'results' (results.json
+    of experiment runs), 'trace' (trace.csv columns), 'config' (config.yaml text) and 'files'."""
     def path(name):
         return os.path.join(run_dir, name)
 
@@ -83,6 +84,8 @@ def read_run(run_dir, num_joints=17):
         "results": _read_json(path("results.json")),
         "poses": read_poses_csv(path("poses.csv"), num_joints) if os.path.exists(path("poses.csv")) else None,
         "frames": read_csv_columns(path("frames.csv")) if os.path.exists(path("frames.csv")) else None,
+        "joint_errors": read_csv_columns(path("joint_errors.csv"))
+        if os.path.exists(path("joint_errors.csv")) else None,
         "trace": read_csv_columns(path("trace.csv")) if os.path.exists(path("trace.csv")) else None,
         "config": open(path("config.yaml")).read() if os.path.exists(path("config.yaml")) else None,
         "files": sorted(os.listdir(run_dir)),

@@ -90,6 +90,10 @@ def test_pipeline_and_run_folder(small_sequence, tmp_path):
     assert "tracked.glb" in run["files"] and run["summary"] is not None
     assert run["poses"]["vectors"].shape == (3, 58)
     assert run["metrics"] is not None
+    joints = run["joint_errors"]  # each joint's error; a frame's mean is frames.csv's
+    assert len(joints) == 1 + 17 and list(joints["frame"]) == [0, 1, 2]
+    per_joint = np.stack([joints[k] for k in joints if k != "frame"])
+    assert np.allclose(per_joint.mean(axis=0), run["frames"]["mean_joint_error_mm"], atol=1e-3)
 
 
 def test_experiment_results(tmp_path):
