@@ -212,7 +212,8 @@ void BindQuality(const Config& c, FitQualityOptions* o) {
 
 void BindInitializer(const Config& c, InitializerOptions* o) {
   c.CheckKeys({"yaws_deg", "world_up", "arm_angles_deg", "coarse_iterations", "em_candidates",
-               "em_one_per_yaw", "ranking_iterations", "refine_arms", "refine_side_angles_deg",
+               "em_one_per_yaw", "max_knee_hyperextension_deg", "ranking_iterations",
+               "refine_arms", "refine_side_angles_deg",
                "refine_front_angles_deg", "refine_forearm_bends", "icp"});
   c.Get("yaws_deg", &o->yaws_deg);
   if (c.Has("world_up")) {
@@ -229,6 +230,7 @@ void BindInitializer(const Config& c, InitializerOptions* o) {
   c.Get("coarse_iterations", &o->coarse_iterations);
   c.Get("em_candidates", &o->em_candidates);
   c.Get("em_one_per_yaw", &o->em_one_per_yaw);
+  c.Get("max_knee_hyperextension_deg", &o->max_knee_hyperextension_deg);
   c.Get("ranking_iterations", &o->ranking_iterations);
   c.Get("refine_arms", &o->refine_arms);
   c.Get("refine_side_angles_deg", &o->refine_side_angles_deg);

@@ -103,6 +103,9 @@ bool InitializerOptions::IsValid(std::string* error) const {
     msg << "icp." << inner;
   } else if (em_candidates < 1) {
     msg << "em_candidates: expected >= 1, found " << em_candidates;
+  } else if (!std::isfinite(max_knee_hyperextension_deg)) {
+    msg << "max_knee_hyperextension_deg: expected a finite angle (degrees; 0: off), found "
+        << max_knee_hyperextension_deg;
   } else if (ranking_iterations < 0) {
     msg << "ranking_iterations: expected >= 0 (0: the whole schedule), found "
         << ranking_iterations;
@@ -117,6 +120,33 @@ bool InitializerOptions::IsValid(std::string* error) const {
   return false;
 }
 
+double KneeHyperextensionDeg(const Template& model, const Eigen::MatrixX3d& joint_centers) {
+  const int pelvis = model.FindJoint("pelvis"), neck = model.FindJoint("neck");
+  const int legs[2][3] = {{model.FindJoint("l_hip"), model.FindJoint("l_knee"),
+                           model.FindJoint("l_ankle")},
+                          {model.FindJoint("r_hip"), model.FindJoint("r_knee"),
+                           model.FindJoint("r_ankle")}};
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  if (pelvis < 0 || neck < 0 || joint_centers.rows() != model.num_joints()) return nan;
+  for (const auto& leg : legs) {
+    for (int j : leg) {
+      if (j < 0) return nan;
+    }
+  }
+  const auto at = [&](int j) { return Eigen::Vector3d(joint_centers.row(j).transpose()); };
+  const Eigen::Vector3d left = at(legs[0][0]) - at(legs[1][0]);
+  const Eigen::Vector3d front = left.cross(at(neck) - at(pelvis));
+  double largest = -std::numeric_limits<double>::infinity();
+  for (const auto& leg : legs) {
+    const Eigen::Vector3d thigh = (at(leg[1]) - at(leg[0])).normalized();
+    const Eigen::Vector3d shank = at(leg[2]) - at(leg[1]);
+    const Eigen::Vector3d bend = shank - shank.dot(thigh) * thigh;
+    const double angle = std::atan2(bend.norm(), shank.dot(thigh)) / kDegToRad;
+    largest = std::max(largest, bend.dot(front) > 0.0 ? angle : -angle);
+  }
+  return std::isfinite(largest) ? largest : nan;
+}
+
 std::string InitResult::BriefReport() const {
   std::ostringstream out;
   out << (ok ? "initialised" : "initialisation failed") << " from " << hypotheses.size()
@@ -126,6 +156,9 @@ std::string InitResult::BriefReport() const {
     out << ", chosen yaw " << h.yaw_deg << " deg, arms "
         << (arms_refined ? std::string("refined") : std::to_string(h.arm_angle_deg) + " deg")
         << ", " << quality.BriefReport();
+  }
+  if (knees_bent_forwards > 0) {
+    out << ", " << knees_bent_forwards << " fits ranked last for a knee bent forwards";
   }
   out << "; " << total_seconds * 1e3 << " ms (ICP " << icp_seconds * 1e3 << ", EM "
       << em_seconds * 1e3 << ", quality " << quality_seconds * 1e3 << ")";
@@ -207,6 +240,21 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
     const FitQuality q = quality_of(pose);
     result.quality_seconds += SecondsSince(t0);
     return q;
+  };
+  // A fit bending a knee forwards beyond the bound (max_knee_hyperextension_deg) ranks below
+  // every fit that does not; among fits of one kind the quality score decides.
+  const auto knee_of = [&](const Pose& pose) {
+    Eigen::MatrixX3d centers;
+    skinning.PosedJointCenters(pose, &centers);
+    return KneeHyperextensionDeg(model, centers);
+  };
+  const auto implausible = [&](const InitHypothesis& h) {
+    return options.max_knee_hyperextension_deg > 0.0 &&
+           h.knee_hyperextension_deg > options.max_knee_hyperextension_deg;
+  };
+  const auto better = [&](const InitHypothesis& a, const InitHypothesis& b) {
+    if (implausible(a) != implausible(b)) return !implausible(a);
+    return a.quality.score > b.quality.score;
   };
   const auto finish = [&](InitResult* r) {
     r->pose = fitter->pose();
@@ -333,13 +381,13 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
     h.fit = copy->DiscardFrame(&h.pose);
     h.fitted = true;
     h.quality = quality_of(h.pose);
+    h.knee_hyperextension_deg = knee_of(h.pose);
   });
   int best = -1;
   for (int c = 0; c < candidates; ++c) {
     const InitHypothesis& h = result.hypotheses[order[c]];
-    if (h.fit.ok() && (best < 0 || h.quality.score > result.hypotheses[best].quality.score)) {
-      best = order[c];
-    }
+    result.knees_bent_forwards += implausible(h);
+    if (h.fit.ok() && (best < 0 || better(h, result.hypotheses[best]))) best = order[c];
   }
 
   // 2b. Arm refinement of the best fit: each arm's best straight direction by score.
@@ -392,8 +440,10 @@ InitResult InitializeFit(EMFitter* fitter, const Scan& scan, const PinholeCamera
       h.fit = fitter->DiscardFrame(&h.pose);
       h.fitted = true;
       h.quality = evaluate(h.pose);
+      h.knee_hyperextension_deg = knee_of(h.pose);
+      result.knees_bent_forwards += implausible(h);
       result.hypotheses.push_back(h);
-      if (h.fit.ok() && h.quality.score > from.quality.score) {
+      if (h.fit.ok() && better(h, from)) {
         best = static_cast<int>(result.hypotheses.size()) - 1;
         result.arms_refined = true;
       }

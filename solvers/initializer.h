@@ -9,6 +9,7 @@
 // schedule (the best of each yaw by default) and the best fit by quality score is accepted.
 #pragma once
 
+#include <limits>
 #include <map>
 #include <string>
 #include <vector>
@@ -60,6 +61,12 @@ struct InitializerOptions {
   // Candidates are the best arm variant of each yaw first (in score order), then the rest;
   // false: plain score order (several arm variants of one facing may take the places).
   bool em_one_per_yaw = true;
+  // A candidate whose fit bends a knee forwards by more than this (degrees; KneeHyperextensionDeg)
+  // ranks below every candidate that does not: a body turned round explains the depth nearly as
+  // well as the right one, and its knees then bend the wrong way (docs/fitting.md "How often
+  // the first frame is wrong"). The fits of 360 tracked virtual-Kinect frames bend forwards by at
+  // most 4.8 degrees; the turned-round first frames by 13-26. 0: off.
+  double max_knee_hyperextension_deg = 10.0;
   // EM iterations of a candidate's ranking fit (0: the whole first-frame schedule, and the
   // best candidate is accepted as fitted). > 0: a short fit for ranking, then the best
   // candidate is fitted again from its result with the whole first-frame schedule.
@@ -91,11 +98,15 @@ struct InitHypothesis {
   bool fitted = false;  // ranked by an EM fit
   FitSummary fit;       // of that fit
   Pose pose;            // after EM when fitted, else after ICP
+  // KneeHyperextensionDeg of `pose` (NaN: not measured, or the template lacks the joints).
+  double knee_hyperextension_deg = std::numeric_limits<double>::quiet_NaN();
   FitQuality quality;   // of `pose`
 };
 
 struct InitResult {
   bool ok = false;
+  // EM fits ranked last for a knee bent forwards (max_knee_hyperextension_deg).
+  int knees_bent_forwards = 0;
   bool arms_refined = false;  // the accepted fit started from a refined arm pose  // a hypothesis
                               // was fitted and accepted as the fitter's frame
   int chosen = -1;            // index into hypotheses
@@ -109,6 +120,14 @@ struct InitResult {
 
   std::string BriefReport() const;
 };
+
+// How far the knees bend forwards, from posed joint centres (J x 3, the template's joints): for
+// each leg, the angle between the thigh (hip to knee) and the shank (knee to ankle), positive
+// when the shank bends towards the body's front (hyperextended), negative when it bends back as
+// a knee does; the larger of the two legs (degrees). The front is the hips' left-right axis
+// (l_hip - r_hip) crossed with the trunk's (pelvis to neck). NaN when the template lacks a joint
+// named pelvis, neck, l_hip, l_knee, l_ankle, r_hip, r_knee or r_ankle.
+double KneeHyperextensionDeg(const Template& model, const Eigen::MatrixX3d& joint_centers);
 
 // Fits `scan` as the next frame of `fitter` (normally its first, or the first after
 // fitter->Reset(); the scale then starts at fitter->PredictNextPose().scale, the nominal 1 or a
