@@ -6,7 +6,8 @@
 // the depth image to the scan centroid, so a person cut by the image border is placed by the
 // part that is seen), pre-aligned by similarity ICP (solvers/icp_init.h) and ranked by the fit
 // quality (solvers/fit_quality.h); the best few are fitted by the EMFitter's first-frame
-// schedule (the best of each yaw by default) and the best fit by quality score is accepted.
+// schedule (the best of each yaw by default) and the best fit by quality score is accepted,
+// fits that bend a knee forwards (a body turned round) ranking last.
 #pragma once
 
 #include <limits>
