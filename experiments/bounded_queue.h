@@ -3,7 +3,8 @@
 // empty (PushDroppingOldest makes room instead; it and WaitUntilBelow can keep the queue under
 // a lower limit than its capacity). Close() wakes every waiter: Push/TryPush then refuse and
 // Pop drains what is left before it returns false. Thread-safe for any number of producers and
-// consumers. InFlightLimit (below) bounds the items between a pipeline's first and last stage.
+// consumers. InFlightLimit (below) bounds the items between a pipeline's first and last stage;
+// LiveBacklog gives a live source's queue its room while the first frame's backlog lasts.
 #pragma once
 
 #include <algorithm>
@@ -133,6 +134,43 @@ class InFlightLimit {
   std::condition_variable room_;
   std::size_t out_ = 0, peak_ = 0;
   bool closed_ = false;
+};
+
+// The room of a live track stage's queue (pipeline.live_queue_depth = live_depth) while the
+// first frame's backlog lasts (pipeline.live_init_queue_depth = init_depth,
+// live_init_drain_every = drain_every): init_depth frames until the first frame is tracked;
+// from then on at most the frames waiting plus the one being read, and falling by one every
+// `drain_every` frames read, so that it only shrinks and is back to live_depth (the backlog
+// over) within init_depth * drain_every frames, or as soon as the tracker has caught up.
+// Not thread-safe: the reader's.
+class LiveBacklog {
+ public:
+  LiveBacklog(std::size_t live_depth, std::size_t init_depth, int drain_every)
+      : live_depth_(std::max<std::size_t>(1, live_depth)),
+        limit_(std::max(live_depth_, init_depth)),
+        drain_every_(std::max(1, drain_every)),
+        active_(limit_ > live_depth_) {}
+  // The room for the frame about to be read, `waiting` frames already in the queue.
+  std::size_t Room(bool first_tracked, std::size_t waiting) {
+    if (!active_) return live_depth_;
+    if (first_tracked) {
+      if (started_ && ++reads_ % drain_every_ == 0) --limit_;
+      limit_ = std::min(limit_, waiting + 1);
+      started_ = true;
+      if (limit_ <= live_depth_) active_ = false;
+    }
+    return std::max(live_depth_, limit_);
+  }
+  // The backlog lasts (the room may exceed live_depth).
+  bool active() const { return active_; }
+
+ private:
+  const std::size_t live_depth_;
+  std::size_t limit_;
+  const int drain_every_;
+  bool active_;
+  bool started_ = false;
+  long reads_ = 0;
 };
 
 }  // namespace artex

@@ -474,7 +474,8 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
                "texture_quality_every", "texture_quality_yaws_deg", "texture_quality_height",
                "export_atlases", "stream", "stream_estimate", "concurrency", "queue_depth",
                "max_frames_in_flight", "live",
-               "live_queue_depth", "live_init_queue_depth", "live_rate_hz", "colour_delay_frames", "live_texture_skip",
+               "live_queue_depth", "live_init_queue_depth", "live_init_drain_every", "live_rate_hz",
+               "colour_delay_frames", "live_texture_skip",
                "threads", "blas_threads", "heap_retain_mb", "huge_pages", "template_cache", "template_cache_dir",
                "template_cache_keep"});
   c.Get("texture", &o->texture);
@@ -513,6 +514,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("live", &o->realtime.live);
   c.Get("live_queue_depth", &o->realtime.live_queue_depth);
   c.Get("live_init_queue_depth", &o->realtime.live_init_queue_depth);
+  c.Get("live_init_drain_every", &o->realtime.live_init_drain_every);
   c.Get("live_texture_skip", &o->realtime.live_texture_skip);
   c.Get("live_rate_hz", &o->realtime.live_rate_hz);
   c.Get("colour_delay_frames", &o->realtime.colour_delay_frames);

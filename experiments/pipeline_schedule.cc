@@ -210,9 +210,8 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
         std::max(live_depth, static_cast<std::size_t>(options.live_init_queue_depth));
     BoundedQueue<FrameWork> to_track(options.live ? init_depth : depth);
     std::atomic<bool> first_tracked{false};
-    std::atomic<bool> backlog{options.live && init_depth > live_depth};
-    std::size_t backlog_limit = init_depth;  // the reader's
-    bool backlog_started = false;            // the reader's: the first frame was tracked
+    LiveBacklog backlog_room(live_depth, init_depth, options.live_init_drain_every);
+    std::atomic<bool> backlog{options.live && backlog_room.active()};
     BoundedQueue<FrameWork> to_pool(depth), to_texture(depth), to_output(depth);
     // Not live: the frames read and not yet textured (live: the track stage's queue bounds them).
     InFlightLimit in_flight(options.live ? 0 : options.max_frames_in_flight);
@@ -240,19 +239,12 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
           // Live: a frame is read (decoded) only once the track stage has room for it; the
           // frames that arrive meanwhile are dropped undecoded, as a sensor's would be.
           // While the first frame is initialised the backlog keeps the newest init_depth
-          // frames, read as they arrive. Once the first frame is tracked its limit starts at
-          // the frames waiting (plus this one) and falls by one per frame, so the catching up
-          // ends within init_depth frame periods whether or not the tracker keeps up (frames
-          // beyond the limit are dropped, the oldest first).
+          // frames, read as they arrive; then it shrinks until the tracker has caught up
+          // (LiveBacklog, pipeline.live_init_drain_every).
           std::size_t limit = live_depth;
           if (backlog) {
-            if (first_tracked) {
-              backlog_limit = backlog_started ? backlog_limit - 1
-                                              : std::min(backlog_limit, to_track.size() + 1);
-              backlog_started = true;
-              if (backlog_limit <= live_depth) backlog = false;
-            }
-            limit = std::max(live_depth, backlog_limit);
+            limit = backlog_room.Room(first_tracked, to_track.size());
+            backlog = backlog_room.active();
           }
           if (options.live && !backlog && !to_track.WaitUntilBelow(limit)) break;
           if (!in_flight.Acquire()) break;  // a stage failed

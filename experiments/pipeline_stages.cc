@@ -75,6 +75,9 @@ bool RealtimeOptions::IsValid(std::string* error) const {
   } else if (live_init_queue_depth < 0) {
     msg = "pipeline.live_init_queue_depth: expected >= 0 (0: live_queue_depth), found " +
           std::to_string(live_init_queue_depth);
+  } else if (live_init_drain_every < 1) {
+    msg = "pipeline.live_init_drain_every: expected >= 1, found " +
+          std::to_string(live_init_drain_every);
   } else if (colour_delay_frames < 0) {
     msg = "pipeline.colour_delay_frames: expected >= 0, found " +
           std::to_string(colour_delay_frames);

@@ -44,6 +44,13 @@ struct RealtimeOptions {
   // several frame periods; without this the frames that arrive during it are dropped and the
   // next tracked frame comes after a gap (a refit, docs/realtime.md).
   int live_init_queue_depth = 12;
+  // pipeline.live_init_drain_every (>= 1): live, pipelined, once the first frame is tracked the
+  // backlog's room (above) starts at the frames waiting and shrinks by one frame every this many
+  // arriving frames, so the catching up ends within live_init_queue_depth * this frame periods
+  // whether or not the tracker keeps up (frames beyond the room are dropped, the oldest first).
+  // 1: by one per arriving frame (the room is gone before a tracker 1.5x the sensor's rate has
+  // caught up with a full backlog).
+  int live_init_drain_every = 3;
   // pipeline.colour_delay_frames: the E-step's colour term of frame t uses the texture as it
   // was after frame t - 1 - this (0: after frame t-1, which makes fitting wait for texturing;
   // 1: fitting of t overlaps texturing of t-1). The same in both concurrency modes.

@@ -329,6 +329,9 @@ TEST(PipelinedTrackingTest, LiveBacklogTracksTheFramesThatArriveDuringTheInitial
 
   config.Set("pipeline.live_init_queue_depth", "-1");
   EXPECT_THROW(LoadPipelineOptions(config), Error);
+  config.Set("pipeline.live_init_queue_depth", "12");
+  config.Set("pipeline.live_init_drain_every", "0");
+  EXPECT_THROW(LoadPipelineOptions(config), Error);
 }
 
 // The fixture's sequence without frames 1-3 (as if a live reader had dropped them): frame 4
@@ -473,6 +476,50 @@ TEST(ConcurrentQueueTest, CloseWakesABlockedProducer) {
   queue.Close();
   producer.join();
   EXPECT_TRUE(refused.load());
+}
+
+// The live backlog's room: init_depth until the first frame is tracked, then never more than
+// the frames waiting plus one, falling by one every drain_every frames read, over once it is
+// down to live_depth.
+TEST(ConcurrentQueueTest, LiveBacklogShrinksUntilTheTrackerCatchesUp) {
+  // A tracker that does not catch up (9 frames always waiting): the room falls by one every
+  // third frame read and the backlog ends within init_depth * drain_every reads.
+  LiveBacklog slow(1, 12, 3);
+  ASSERT_TRUE(slow.active());
+  for (int i = 0; i < 5; ++i) EXPECT_EQ(slow.Room(false, 12), 12u);  // initialising
+  std::vector<std::size_t> rooms;
+  while (slow.active() && rooms.size() < 100) rooms.push_back(slow.Room(true, 9));
+  ASSERT_FALSE(slow.active());
+  EXPECT_LE(rooms.size(), 36u);
+  ASSERT_GE(rooms.size(), 4u);
+  EXPECT_EQ(rooms[0], 10u);  // the frames waiting plus the one read
+  EXPECT_EQ(rooms[1], 10u);
+  EXPECT_EQ(rooms[2], 10u);
+  EXPECT_EQ(rooms[3], 9u);  // the third read after the first
+  for (std::size_t k = 1; k < rooms.size(); ++k) EXPECT_LE(rooms[k], rooms[k - 1]);
+  EXPECT_EQ(rooms.back(), 1u);
+  EXPECT_EQ(slow.Room(true, 9), 1u);  // over: live_depth from now on
+
+  // drain_every 1: by one per frame read.
+  LiveBacklog fast_drain(1, 12, 1);
+  EXPECT_EQ(fast_drain.Room(true, 9), 10u);
+  EXPECT_EQ(fast_drain.Room(true, 9), 9u);
+  EXPECT_EQ(fast_drain.Room(true, 9), 8u);
+
+  // A tracker that catches up: the room follows the frames waiting down and the backlog ends
+  // as soon as none waits; it does not grow again when frames pile up later.
+  LiveBacklog quick(1, 12, 3);
+  EXPECT_EQ(quick.Room(true, 8), 9u);
+  EXPECT_EQ(quick.Room(true, 4), 5u);
+  EXPECT_EQ(quick.Room(true, 7), 5u);
+  EXPECT_TRUE(quick.active());
+  EXPECT_EQ(quick.Room(true, 0), 1u);
+  EXPECT_FALSE(quick.active());
+
+  // No backlog asked for (init_depth at most live_depth): never active.
+  LiveBacklog none(2, 0, 3);
+  EXPECT_FALSE(none.active());
+  EXPECT_EQ(none.Room(false, 5), 2u);
 }
 
 // A producer acquires before each item and the consumer releases after it: never more than
