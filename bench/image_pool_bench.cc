@@ -54,7 +54,7 @@ void HashEntry(const PoolEntry& e, uint64_t* hash) {
     }
   };
   hash_colors(e.vertex_colors);
-  hash_colors(e.edge_colors);
+  Hash(e.edge_colors.data(), e.edge_colors.size() * sizeof(std::uint16_t), hash);
 }
 
 void BM_PoolAddPrune(benchmark::State& state) {

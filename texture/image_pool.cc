@@ -98,8 +98,7 @@ void SampleVertexColors(const PoolEntry& entry, const Eigen::Matrix3Xd& cam,
 // PoolEntry::edge_colors: `samples` colours along every edge with a visible side, at the points
 // (1 - t) a + t b, t = (k + 0.5) / samples, seen at the lower quality of its visible sides.
 void SampleEdgeColors(const PoolEntry& entry, const TextureMesh& mesh, const Eigen::Matrix3Xd& cam,
-                      int samples, ColorRows* colors) {
-  const float nan = std::numeric_limits<float>::quiet_NaN();
+                      int samples, EdgeColorRows* colors) {
   const SurfaceSampler sample(entry);
   const TriangleVisibility& vis = entry.visibility;
   const int e_count = static_cast<int>(mesh.edges.rows());
@@ -109,7 +108,7 @@ void SampleEdgeColors(const PoolEntry& entry, const TextureMesh& mesh, const Eig
       const Eigen::Index first_row = static_cast<Eigen::Index>(e) * samples;
       const int f0 = mesh.edge_faces(e, 0), f1 = mesh.edge_faces(e, 1);
       if (!vis.visible[f0] && !vis.visible[f1]) {
-        colors->middleRows(first_row, samples).setConstant(nan);
+        colors->middleRows(first_row, samples).setConstant(kEdgeColorUnseen);
         continue;
       }
       const float quality = std::min(vis.visible[f0] ? vis.quality[f0] : 1.0f,
@@ -124,10 +123,14 @@ void SampleEdgeColors(const PoolEntry& entry, const TextureMesh& mesh, const Eig
         const double y = (1 - t) * a[1] + t * b[1];
         const double z = (1 - t) * a[2] + t * b[2];
         Eigen::Vector3f color;
-        if (sample(x, y, z, tolerance_offset + tolerance_slope * z, &color))
-          colors->row(first_row + k) = color.transpose();
-        else
-          colors->row(first_row + k).setConstant(nan);
+        std::uint16_t* row = colors->row(first_row + k).data();
+        if (sample(x, y, z, tolerance_offset + tolerance_slope * z, &color)) {
+          for (int c = 0; c < 3; ++c)
+            row[c] = static_cast<std::uint16_t>(
+                std::lround(std::clamp(color[c], 0.0f, 1.0f) * kEdgeColorScale));
+        } else {
+          row[0] = row[1] = row[2] = kEdgeColorUnseen;
+        }
       }
     }
   };
@@ -219,7 +222,8 @@ bool ImagePoolOptions::IsValid(std::string* error) const {
 
 std::size_t PoolEntry::MemoryBytes() const {
   return image.total() * image.elemSize() + vertices.size() * sizeof(double) +
-         visibility.visible.size() * 5 + vertex_colors.size() * 4 + edge_colors.size() * 4 +
+         visibility.visible.size() * 5 + vertex_colors.size() * 4 +
+         edge_colors.size() * sizeof(std::uint16_t) +
          surface.MemoryBytes();
 }
 

@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 #include <algorithm>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <opencv2/core.hpp>
 #include <string>
@@ -60,6 +61,19 @@ struct ImagePoolOptions {
 
 // Colours, one row per point (3 channels contiguous).
 using ColorRows = Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>;
+// Edge colours, one row per sample (3 channels contiguous), in 16-bit fixed point: a channel c
+// in [0, 1] is stored as round(c * kEdgeColorScale), and all three channels of a sample not seen
+// as kEdgeColorUnseen. Half the memory of floats: with 24 images pooled the edge colours are
+// most of the pool's memory (docs/realtime-measurements.md, "Edge colours in 16 bits").
+using EdgeColorRows = Eigen::Matrix<std::uint16_t, Eigen::Dynamic, 3, Eigen::RowMajor>;
+constexpr std::uint16_t kEdgeColorUnseen = 65535;
+constexpr float kEdgeColorScale = 65534.0f;
+// The colour of an edge sample (row of EdgeColorRows); NaN where not seen.
+inline Eigen::Vector3f EdgeColor(const EdgeColorRows& colors, Eigen::Index row) {
+  if (colors(row, 0) == kEdgeColorUnseen)
+    return Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN());
+  return colors.row(row).transpose().cast<float>() / kEdgeColorScale;
+}
 
 struct PoolEntry {
   int frame_index = 0;
@@ -73,9 +87,9 @@ struct PoolEntry {
   // V x 3 colours (channel order of `image`, [0, 1]) at the projected vertices; NaN where not
   // measured (ImagePoolOptions::vertex_colors_need_full_ring, surface_aware_sampling).
   ColorRows vertex_colors;
-  // (E * edge_samples) x 3 colours along every edge (rows e * samples + k); NaN where the edge
-  // is not seen (neither side visible).
-  ColorRows edge_colors;
+  // (E * edge_samples) x 3 colours along every edge (rows e * samples + k); kEdgeColorUnseen
+  // where the edge is not seen (neither side visible) or the sample has no surface pixel.
+  EdgeColorRows edge_colors;
 
   // Bilinear colour at a full-image pixel position; false outside the crop.
   inline bool Sample(const Eigen::Vector2d& pixel, Eigen::Vector3f* color) const;

@@ -244,9 +244,9 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
   // The tables over the candidates of both sides (in parallel).
   const int samples =
       slots > 0 ? static_cast<int>(pool.entry(0).edge_colors.rows() / std::max(1, e_count)) : 0;
-  std::vector<const float*> slot_colors(slots);
+  std::vector<const std::uint16_t*> slot_colors(slots);
   for (int s = 0; s < slots; ++s) slot_colors[s] = pool.entry(s).edge_colors.data();
-  const std::size_t edge_floats = static_cast<std::size_t>(samples) * 3;
+  const std::size_t edge_values = static_cast<std::size_t>(samples) * 3;
   const auto compute_tables = [&](const tbb::blocked_range<int>& range) {
     std::vector<int> pos_in_j(stride), pos_in_i(stride);
     for (int t = range.begin(); t < range.end(); ++t) {
@@ -254,13 +254,13 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
       // image): those of a later table's candidates are requested ahead of their use.
       if (samples > 0 && t + kPrefetchTables < range.end()) {
         const int ahead = t + kPrefetchTables;
-        const std::size_t first = static_cast<std::size_t>(table_edge[ahead]) * edge_floats;
+        const std::size_t first = static_cast<std::size_t>(table_edge[ahead]) * edge_values;
         for (const int g : {row_face[ahead], column_face[ahead]}) {
           const int* labels = &cand_labels[static_cast<std::size_t>(g) * stride];
           for (int k = 0; k + 1 < count[g]; ++k) {  // the last label is "untextured"
             const char* at = reinterpret_cast<const char*>(slot_colors[labels[k]] + first);
             __builtin_prefetch(at);
-            __builtin_prefetch(at + edge_floats * sizeof(float) - 1);
+            __builtin_prefetch(at + edge_values * sizeof(std::uint16_t) - 1);
           }
         }
       }
@@ -296,19 +296,22 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
           } else if (a != b) {
             double pi = options.unseen_colour_cost;
             if (a != untextured && b != untextured && samples > 0) {
-              const float* ca = slot_colors[a] + static_cast<std::size_t>(e) * edge_floats;
-              const float* cb = slot_colors[b] + static_cast<std::size_t>(e) * edge_floats;
+              const std::uint16_t* ca =
+                  slot_colors[a] + static_cast<std::size_t>(e) * edge_values;
+              const std::uint16_t* cb =
+                  slot_colors[b] + static_cast<std::size_t>(e) * edge_values;
               double sum = 0.0;
               int n = 0;
               for (int k = 0; k < 3 * samples; k += 3) {
-                const float d0 = ca[k] - cb[k], d1 = ca[k + 1] - cb[k + 1],
-                            d2 = ca[k + 2] - cb[k + 2];
-                const float squared = d0 * d0 + d1 * d1 + d2 * d2;
-                if (std::isnan(squared)) continue;  // a colour not seen in a or b
-                sum += std::sqrt(squared);
+                // A colour not seen in a or b (its three channels unseen together).
+                if (ca[k] == kEdgeColorUnseen || cb[k] == kEdgeColorUnseen) continue;
+                const float d0 = float(ca[k]) - float(cb[k]),
+                            d1 = float(ca[k + 1]) - float(cb[k + 1]),
+                            d2 = float(ca[k + 2]) - float(cb[k + 2]);
+                sum += std::sqrt(d0 * d0 + d1 * d1 + d2 * d2);
                 ++n;
               }
-              if (n > 0) pi = sum / n;
+              if (n > 0) pi = sum / (n * static_cast<double>(kEdgeColorScale));
             }
             cost = static_cast<float>(SeamPairCost(pi, psi, options.terms));
           }
