@@ -5,6 +5,7 @@
 
 #include <functional>
 #include <map>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -201,6 +202,9 @@ struct PipelineProgress {
   int total = 0;
   double frames_per_second = 0.0;
   const FrameRecord* last = nullptr;
+  // Ground truth evaluated in the background (pipeline.evaluate_in_background): `last` has no
+  // errors yet; the mean vertex error of the latest frame evaluated (NaN: none yet).
+  double latest_evaluated_error_mm = std::numeric_limits<double>::quiet_NaN();
 };
 
 // Runs the pipeline on a recording (artex sequence or TUM RGB-D folder: OpenFrameSource with

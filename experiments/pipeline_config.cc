@@ -475,6 +475,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
                "export_atlases", "stream", "stream_estimate", "concurrency", "queue_depth",
                "max_frames_in_flight", "live",
                "live_queue_depth", "live_init_queue_depth", "live_init_drain_every", "live_rate_hz",
+               "evaluate_in_background", "evaluation_queue_depth",
                "colour_delay_frames", "live_texture_skip",
                "threads", "blas_threads", "heap_retain_mb", "huge_pages", "template_cache", "template_cache_dir",
                "template_cache_keep"});
@@ -515,6 +516,8 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("live_queue_depth", &o->realtime.live_queue_depth);
   c.Get("live_init_queue_depth", &o->realtime.live_init_queue_depth);
   c.Get("live_init_drain_every", &o->realtime.live_init_drain_every);
+  c.Get("evaluate_in_background", &o->realtime.evaluate_in_background);
+  c.Get("evaluation_queue_depth", &o->realtime.evaluation_queue_depth);
   c.Get("live_texture_skip", &o->realtime.live_texture_skip);
   c.Get("live_rate_hz", &o->realtime.live_rate_hz);
   c.Get("colour_delay_frames", &o->realtime.colour_delay_frames);

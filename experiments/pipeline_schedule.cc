@@ -378,6 +378,9 @@ void WriteRealtimeJson(const std::string& path, const RealtimeStats& s) {
   j["latency_max_ms"] = finite(s.latency_max_ms);
   j["cpu_utilisation"] = s.cpu_utilisation;
   j["huge_page_heap"] = s.huge_page_heap;
+  j["evaluated_in_background"] = s.evaluated_in_background;
+  j["evaluated_during_loop"] = s.evaluated_during_loop;
+  j["evaluation_after_loop_seconds"] = s.evaluation_after_loop_seconds;
   nlohmann::json stages = nlohmann::json::array();
   for (const StageTiming& t : s.stages) {
     stages.push_back({{"name", t.name},

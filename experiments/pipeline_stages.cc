@@ -30,12 +30,6 @@ std::size_t TextureUpdateBytes(const Texturer& texturer) {
   return bytes.size();
 }
 
-// Rows of `points` mapped by `t`.
-Eigen::MatrixX3d TransformRows(const Eigen::Isometry3d& t, const Eigen::MatrixX3d& points) {
-  Eigen::MatrixX3d out = (points * t.linear().transpose()).rowwise() + t.translation().transpose();
-  return out;
-}
-
 // Why frame `frame`'s fit failed: what was expected and what was found.
 std::string FailedFitReason(int frame, const FitSummary& fit, int min_scan_points) {
   std::string why = "frame " + std::to_string(frame) + ": fit failed: ";
@@ -78,6 +72,9 @@ bool RealtimeOptions::IsValid(std::string* error) const {
   } else if (live_init_drain_every < 1) {
     msg = "pipeline.live_init_drain_every: expected >= 1, found " +
           std::to_string(live_init_drain_every);
+  } else if (evaluation_queue_depth < 1) {
+    msg = "pipeline.evaluation_queue_depth: expected >= 1, found " +
+          std::to_string(evaluation_queue_depth);
   } else if (colour_delay_frames < 0) {
     msg = "pipeline.colour_delay_frames: expected >= 0, found " +
           std::to_string(colour_delay_frames);
@@ -392,6 +389,7 @@ OutputStage::OutputStage(const PipelineOptions& options, const Template& tmpl,
       tmpl_(tmpl),
       skinning_(tmpl),
       truth_(truth),
+      evaluator_(tmpl, truth, options.held_out),
       out_dir_(out_dir),
       begin_(begin),
       end_(end),
@@ -458,54 +456,25 @@ void OutputStage::Process(FrameWork* work) {
     WritePosedMesh(out_dir_ + name, ToUpAxis(posed, options_.mesh_up_axis), tmpl_.triangles);
   }
   if (truth_.subject) {
-    const GroundTruthFrame truth = truth_.sequence->ReadGroundTruth(i);
-    Eigen::MatrixX3d truth_normals;
-    ComputeVertexNormals(truth.vertices, truth_.subject->triangles, &truth_normals);
-    double mean = 0.0, max = 0.0;
-    const Eigen::MatrixX3d tracked_in_truth = TransformRows(truth_.to_truth_world, posed);
-    SurfaceErrors(tracked_in_truth, truth.vertices, truth_normals, &mean, &max);
-    record.mean_vertex_error_mm = 1000.0 * mean;
-    record.max_vertex_error_mm = 1000.0 * max;
-    Eigen::MatrixX3d ours, theirs;
+    FrameEvaluation frame;
+    frame.frame = i;
+    frame.posed = posed;
     // Shape estimation swaps the subject's rest geometry into tmpl_ (TrackStage): the joint
     // centres must be the subject's from then on, not the template's this stage started with.
     SyncRestGeometry();
-    skinning_.PosedJointCenters(frame_pose, &ours);
-    ours = TransformRows(truth_.to_truth_world, ours);
-    truth_.subject_skinning->PosedJointCenters(truth.pose, &theirs);
-    double joint = 0.0;
-    record.joint_errors_mm.assign(ours.rows(), std::numeric_limits<double>::quiet_NaN());
-    for (const auto& [a, b] : truth_.joint_pairs) {
-      const double d = (ours.row(a) - theirs.row(b)).norm();
-      joint += d;
-      record.joint_errors_mm[a] = 1000.0 * d;
+    skinning_.PosedJointCenters(frame_pose, &frame.joints);
+    frame.evaluate_texture = truth_.truth_scene && work->evaluate_texture;
+    if (frame.evaluate_texture) {
+      frame.atlas = work->atlas;
+      frame.triangle_frames = work->triangle_frames;
     }
-    record.mean_joint_error_mm =
-        truth_.joint_pairs.empty() ? 0.0 : 1000.0 * joint / truth_.joint_pairs.size();
-    // A failed fit's kept pose is no measurement: it counts as lost and stays out of the
-    // error averages (issue 20: all-failed runs reported a small error).
-    if (record.fit.ok()) {
-      error_sum += record.mean_vertex_error_mm;
-      joint_sum += record.mean_joint_error_mm;
-      result.max_vertex_error_mm = std::max(result.max_vertex_error_mm, record.max_vertex_error_mm);
-      ++evaluated;
-    }
-    lost += record.mean_vertex_error_mm > options_.lost_threshold_mm || !record.fit.ok();
-    ++scored;
-    if (truth_.truth_scene && work->evaluate_texture) {
-      truth_.truth_scene->vertices = truth.vertices;
-      record.texture_quality = EvaluateNovelViews(tmpl_, tracked_in_truth, work->atlas,
-                                                  work->triangle_frames, *truth_.truth_scene,
-                                                  options_.held_out);
-      const NovelViewQuality& q = record.texture_quality;
-      if (std::isfinite(q.psnr_db) && std::isfinite(q.ssim)) {
-        result.novel_view_psnr_db = q.psnr_db;
-        result.novel_view_ssim = q.ssim;
-        result.texture_coverage = q.coverage;
-        psnr_sum += q.psnr_db;
-        ssim_sum += q.ssim;
-        ++quality_evaluations;
-      }
+    record.mean_vertex_error_mm = record.max_vertex_error_mm = record.mean_joint_error_mm =
+        std::numeric_limits<double>::quiet_NaN();
+    if (background_) {
+      evaluation_slots_.push_back(static_cast<int>(result.frames.size()));
+      background_->Push(std::move(frame));
+    } else {
+      MergeEvaluation(evaluator_.Evaluate(frame), &record);
     }
   } else {
     record.mean_vertex_error_mm = record.max_vertex_error_mm = record.mean_joint_error_mm =
@@ -518,8 +487,56 @@ void OutputStage::Process(FrameWork* work) {
     p.total = end_ - begin_;
     p.frames_per_second = static_cast<double>(result.frames.size()) / std::max(1e-9, SecondsSince(start_));
     p.last = &result.frames.back();
+    if (background_) p.latest_evaluated_error_mm = background_->latest_mean_vertex_error_mm();
     progress_(p);
   }
+}
+
+void OutputStage::MergeEvaluation(const FrameErrors& e, FrameRecord* record) {
+  PipelineResult& result = *result_;
+  record->mean_vertex_error_mm = e.mean_vertex_error_mm;
+  record->max_vertex_error_mm = e.max_vertex_error_mm;
+  record->mean_joint_error_mm = e.mean_joint_error_mm;
+  record->joint_errors_mm = e.joint_errors_mm;
+  // A failed fit's kept pose is no measurement: it counts as lost and stays out of the
+  // error averages (issue 20: all-failed runs reported a small error).
+  if (record->fit.ok()) {
+    error_sum += record->mean_vertex_error_mm;
+    joint_sum += record->mean_joint_error_mm;
+    result.max_vertex_error_mm = std::max(result.max_vertex_error_mm, record->max_vertex_error_mm);
+    ++evaluated;
+  }
+  lost += record->mean_vertex_error_mm > options_.lost_threshold_mm || !record->fit.ok();
+  ++scored;
+  if (e.has_texture_quality) {
+    record->texture_quality = e.texture_quality;
+    const NovelViewQuality& q = record->texture_quality;
+    if (std::isfinite(q.psnr_db) && std::isfinite(q.ssim)) {
+      result.novel_view_psnr_db = q.psnr_db;
+      result.novel_view_ssim = q.ssim;
+      result.texture_coverage = q.coverage;
+      psnr_sum += q.psnr_db;
+      ssim_sum += q.ssim;
+      ++quality_evaluations;
+    }
+  }
+}
+
+void OutputStage::StartBackgroundEvaluation(std::size_t queue_depth) {
+  if (truth_.subject && !background_)
+    background_ = std::make_unique<BackgroundEvaluation>(&evaluator_, queue_depth);
+}
+
+void OutputStage::FinishEvaluation() {
+  if (!background_) return;
+  const std::vector<FrameErrors> errors = background_->Finish();
+  evaluation_cpu_seconds = background_->cpu_seconds();
+  evaluation_busy_seconds = background_->busy_seconds();
+  evaluation_frames = background_->frames_done();
+  for (std::size_t k = 0; k < errors.size() && k < evaluation_slots_.size(); ++k)
+    MergeEvaluation(errors[k], &result_->frames[evaluation_slots_[k]]);
+  background_.reset();
+  evaluation_slots_.clear();
 }
 
 }  // namespace artex

@@ -23,6 +23,7 @@
 #include <utility>
 #include <vector>
 
+#include "experiments/ground_truth_evaluation.h"
 #include "experiments/pipeline.h"
 #include "experiments/realtime_options.h"
 #include "experiments/stream_sinks.h"
@@ -165,24 +166,27 @@ class TextureStage {
   int begin_, end_;
 };
 
-// What the output stage needs of the ground truth (absent: subject == nullptr).
-struct GroundTruthContext {
-  const SequenceReader* sequence = nullptr;
-  const Template* subject = nullptr;
-  const Skinning* subject_skinning = nullptr;
-  std::vector<std::pair<int, int>> joint_pairs;  // (tracked joint, subject joint)
-  TruthScene* truth_scene = nullptr;             // novel-view quality (may be null)
-  Eigen::Isometry3d to_truth_world = Eigen::Isometry3d::Identity();
-};
-
 // Ground-truth metrics, per-frame files (meshes, foreground, atlases) and the run's record:
-// fills result (frames, labels, failures, error sums) in frame order, calls progress.
+// fills result (frames, labels, failures, error sums) in frame order, calls progress. The
+// ground-truth metrics are computed in Process, or after StartBackgroundEvaluation on a thread
+// of their own (experiments/ground_truth_evaluation.h) and merged into the records in frame
+// order by FinishEvaluation: the same numbers either way.
 class OutputStage {
  public:
   OutputStage(const PipelineOptions& options, const Template& tmpl,
               const GroundTruthContext& truth, const std::string& out_dir, int begin, int end,
               PipelineResult* result, const std::function<void(const PipelineProgress&)>& progress);
   void Process(FrameWork* work);
+  // With ground truth: evaluate on a background thread, at most queue_depth frames waiting.
+  // Only where nothing changes the template's triangles and UVs while frames are evaluated.
+  void StartBackgroundEvaluation(std::size_t queue_depth);
+  // Waits for the background evaluation and merges its metrics (no-op without one).
+  void FinishEvaluation();
+  // Frames the background evaluation has finished so far (0 without one).
+  int evaluation_frames_done() const { return background_ ? background_->frames_done() : 0; }
+  // The background evaluation's CPU and busy time (s) and frames (after FinishEvaluation).
+  double evaluation_cpu_seconds = 0.0, evaluation_busy_seconds = 0.0;
+  int evaluation_frames = 0;
 
   std::vector<Pose> poses;
   std::vector<int> pose_frames;
@@ -200,8 +204,14 @@ class OutputStage {
   // shape swapped in).
   void SyncRestGeometry();
 
+  // A frame's metrics into its record and the run's sums (in frame order).
+  void MergeEvaluation(const FrameErrors& errors, FrameRecord* record);
+
   Skinning skinning_;  // its own: the track stage's is busy
   GroundTruthContext truth_;
+  GroundTruthEvaluator evaluator_;
+  std::unique_ptr<BackgroundEvaluation> background_;
+  std::vector<int> evaluation_slots_;  // background: each pushed frame's index in result.frames
   std::string out_dir_;
   int begin_, end_;
   PipelineResult* result_;

@@ -51,6 +51,16 @@ struct RealtimeOptions {
   // 1: by one per arriving frame (the room is gone before a tracker 1.5x the sensor's rate has
   // caught up with a full backlog).
   int live_init_drain_every = 3;
+  // pipeline.evaluate_in_background: with ground truth, the vertex, joint and novel-view
+  // errors are computed on a thread of their own at the lowest CPU priority instead of in the
+  // output stage, and merged into the records after the frame loop (the same numbers): the
+  // frame loop's rate is the tracking's and texturing's, as with a sensor, which has no ground
+  // truth. Shape estimation evaluates in the output stage regardless (its template changes).
+  bool evaluate_in_background = true;
+  // pipeline.evaluation_queue_depth (>= 1): frames waiting for the background evaluation (the
+  // output stage waits beyond; each holds its tracked mesh, ~0.3 MB, and, on a frame of
+  // texture_quality_every, its atlas).
+  int evaluation_queue_depth = 16;
   // pipeline.colour_delay_frames: the E-step's colour term of frame t uses the texture as it
   // was after frame t - 1 - this (0: after frame t-1, which makes fitting wait for texturing;
   // 1: fitting of t overlaps texturing of t-1). The same in both concurrency modes.
@@ -112,6 +122,12 @@ struct RealtimeStats {
   double latency_median_ms = 0.0, latency_p95_ms = 0.0, latency_max_ms = 0.0;
   double cpu_utilisation = 0.0;  // process CPU time / wall over the frame loop (1.0 = one core)
   bool huge_page_heap = false;   // the heap on transparent huge pages (pipeline.huge_pages)
+  // Ground truth evaluated in the background (pipeline.evaluate_in_background): the frames it
+  // evaluated during the frame loop, and the wait after the loop for the rest (s); its CPU time
+  // is the "evaluate" stage's (during the loop, also in cpu_utilisation).
+  bool evaluated_in_background = false;
+  int evaluated_during_loop = 0;
+  double evaluation_after_loop_seconds = 0.0;
   std::vector<StageTiming> stages;
 };
 

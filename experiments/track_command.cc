@@ -179,6 +179,8 @@ void RegisterTrackCommand(CLI::App* app) {
           }
           if (p.last && p.last->mean_vertex_error_mm == p.last->mean_vertex_error_mm)
             std::fprintf(stderr, "  error %.1f mm", p.last->mean_vertex_error_mm);
+          else if (std::isfinite(p.latest_evaluated_error_mm))  // evaluated in the background
+            std::fprintf(stderr, "  error %.1f mm (evaluated behind)", p.latest_evaluated_error_mm);
           std::fprintf(stderr, "   ");
           std::fflush(stderr);
         });

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -98,7 +99,10 @@ void ExpectSameRuns(const Config& config, const std::string& name, int* reinitia
   EXPECT_EQ(pip.realtime.concurrency, PipelineConcurrency::kPipelined);
   EXPECT_EQ(pip.realtime.frames_processed, kFrames);
   EXPECT_EQ(pip.realtime.frames_dropped, 0);
-  ASSERT_EQ(pip.realtime.stages.size(), 5u);
+  // The five stages, and the background evaluation of the ground truth (the fixture has it).
+  EXPECT_EQ(pip.realtime.evaluated_in_background,
+            LoadPipelineOptions(config).realtime.evaluate_in_background);
+  ASSERT_EQ(pip.realtime.stages.size(), pip.realtime.evaluated_in_background ? 6u : 5u);
   for (const StageTiming& s : pip.realtime.stages) EXPECT_EQ(s.frames, kFrames) << s.name;
   // The reader kept at most max_frames_in_flight frames read and not yet textured.
   const int in_flight = LoadPipelineOptions(config).realtime.max_frames_in_flight;
@@ -242,6 +246,84 @@ TEST(PipelinedTrackingTest, OneThreadPerStageGivesTheSameResults) {
             ReadFileBytes(root / "threads0" / "poses.csv"));
   EXPECT_EQ(ReadFileBytes(root / "threads1" / "texture.png"),
             ReadFileBytes(root / "threads0" / "texture.png"));
+}
+
+// The ground truth evaluated on its own thread off the frame loop (the default) or in the output
+// stage: the same metrics in every record and in the run's figures, and the same files.
+TEST(PipelinedTrackingTest, GroundTruthEvaluatedInTheBackgroundGivesTheSameMetrics) {
+  Config config = BaseConfig();
+  config.Set("pipeline.evaluation_queue_depth", "1");  // the output stage waits for it
+  const PipelineResult behind = RunWith(config, "pipelined", "evaluate_behind");
+  config.Set("pipeline.evaluate_in_background", "false");
+  const PipelineResult inline_ = RunWith(config, "pipelined", "evaluate_inline");
+  EXPECT_TRUE(behind.realtime.evaluated_in_background);
+  EXPECT_FALSE(inline_.realtime.evaluated_in_background);
+  ASSERT_EQ(behind.realtime.stages.size(), 6u);
+  EXPECT_EQ(behind.realtime.stages.back().name, "evaluate");
+  EXPECT_EQ(behind.realtime.stages.back().frames, kFrames);
+  EXPECT_GT(behind.realtime.stages.back().cpu_seconds, 0.0);
+  EXPECT_LE(behind.realtime.evaluated_during_loop, kFrames);
+  EXPECT_GE(behind.realtime.evaluation_after_loop_seconds, 0.0);
+  ASSERT_EQ(behind.frames.size(), inline_.frames.size());
+  int textures = 0;
+  for (size_t i = 0; i < behind.frames.size(); ++i) {
+    const FrameRecord& a = behind.frames[i];
+    const FrameRecord& b = inline_.frames[i];
+    const std::string at = "frame " + std::to_string(i);
+    ASSERT_TRUE(std::isfinite(a.mean_vertex_error_mm)) << at;  // merged after the loop
+    EXPECT_EQ(a.mean_vertex_error_mm, b.mean_vertex_error_mm) << at;
+    EXPECT_EQ(a.max_vertex_error_mm, b.max_vertex_error_mm) << at;
+    EXPECT_EQ(a.mean_joint_error_mm, b.mean_joint_error_mm) << at;
+    ASSERT_EQ(a.joint_errors_mm.size(), b.joint_errors_mm.size()) << at;
+    for (size_t j = 0; j < a.joint_errors_mm.size(); ++j)
+      ExpectNear(a.joint_errors_mm[j], b.joint_errors_mm[j], at + " joint " + std::to_string(j));
+    ExpectNear(a.texture_quality.psnr_db, b.texture_quality.psnr_db, at + " PSNR");
+    textures += std::isfinite(a.texture_quality.psnr_db);
+  }
+  EXPECT_GE(textures, 2);  // texture_quality_every 2 and the last frame
+  EXPECT_EQ(behind.mean_vertex_error_mm, inline_.mean_vertex_error_mm);
+  EXPECT_EQ(behind.mean_joint_error_mm, inline_.mean_joint_error_mm);
+  EXPECT_EQ(behind.max_vertex_error_mm, inline_.max_vertex_error_mm);
+  EXPECT_EQ(behind.mean_novel_view_psnr_db, inline_.mean_novel_view_psnr_db);
+  EXPECT_EQ(behind.novel_view_psnr_db, inline_.novel_view_psnr_db);
+  EXPECT_EQ(behind.lost_frames, inline_.lost_frames);
+  EXPECT_EQ(behind.lost_fraction, inline_.lost_fraction);
+  const fs::path root = TestData().root;
+  // (frames.csv differs in its timing columns.)
+  for (const char* file : {"joint_errors.csv", "poses.csv", "texture.png"}) {
+    EXPECT_EQ(ReadFileBytes(root / "evaluate_behind" / file),
+              ReadFileBytes(root / "evaluate_inline" / file))
+        << file;
+  }
+
+  config.Set("pipeline.evaluation_queue_depth", "0");
+  EXPECT_THROW(LoadPipelineOptions(config), Error);
+}
+
+// A frame whose ground truth cannot be read fails the run with the file named, as in the output
+// stage, although it is found on the evaluation's thread.
+TEST(PipelinedTrackingTest, BackgroundEvaluationReportsAMissingGroundTruthFile) {
+  const fs::path copy = TestData().root / "missing_truth_sequence";
+  if (!fs::exists(copy / "frames.csv")) {
+    fs::copy(TestData().sequence, copy, fs::copy_options::recursive);
+  }
+  const fs::path vertices = copy / "groundtruth" / "vertices";
+  ASSERT_TRUE(fs::is_directory(vertices));
+  std::vector<fs::path> files;
+  for (const auto& e : fs::directory_iterator(vertices)) files.push_back(e.path());
+  ASSERT_GE(files.size(), 3u);
+  std::sort(files.begin(), files.end());
+  fs::remove(files[2]);
+  const PipelineOptions options = LoadPipelineOptions(BaseConfig());
+  ASSERT_TRUE(options.realtime.evaluate_in_background);
+  try {
+    RunPipeline(copy.string(), TestData().template_path, options, BaseConfig(),
+                (TestData().root / "missing_truth").string());
+    FAIL() << "expected an error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find(files[2].filename().string()), std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(PipelinedTrackingTest, LiveModeAccountsForEveryFrame) {

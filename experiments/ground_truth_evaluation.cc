@@ -1,0 +1,131 @@
+#include "experiments/ground_truth_evaluation.h"
+
+#include <pthread.h>
+#include <sched.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <tbb/task_arena.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+
+#include "experiments/surface_error.h"
+#include "models/normals.h"
+
+namespace artex {
+namespace {
+
+// Rows of `points` mapped by `t`.
+Eigen::MatrixX3d TransformRows(const Eigen::Isometry3d& t, const Eigen::MatrixX3d& points) {
+  Eigen::MatrixX3d out = (points * t.linear().transpose()).rowwise() + t.translation().transpose();
+  return out;
+}
+
+double ThreadCpuSeconds() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return t.tv_sec + 1e-9 * t.tv_nsec;
+}
+
+// This thread at the lowest priority: SCHED_IDLE (runs when nothing else wants the core), else
+// nice 19. Lowering a thread's priority needs no privilege; a failure leaves it as it was.
+void LowestPriorityForThisThread() {
+  sched_param param{};
+  param.sched_priority = 0;
+  if (pthread_setschedparam(pthread_self(), SCHED_IDLE, &param) == 0) return;
+  setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 19);
+}
+
+}  // namespace
+
+FrameErrors GroundTruthEvaluator::Evaluate(const FrameEvaluation& frame) const {
+  FrameErrors e;
+  const GroundTruthFrame truth = truth_.sequence->ReadGroundTruth(frame.frame);
+  Eigen::MatrixX3d truth_normals;
+  ComputeVertexNormals(truth.vertices, truth_.subject->triangles, &truth_normals);
+  double mean = 0.0, max = 0.0;
+  const Eigen::MatrixX3d tracked_in_truth = TransformRows(truth_.to_truth_world, frame.posed);
+  SurfaceErrors(tracked_in_truth, truth.vertices, truth_normals, &mean, &max);
+  e.mean_vertex_error_mm = 1000.0 * mean;
+  e.max_vertex_error_mm = 1000.0 * max;
+  const Eigen::MatrixX3d ours = TransformRows(truth_.to_truth_world, frame.joints);
+  Eigen::MatrixX3d theirs;
+  truth_.subject_skinning->PosedJointCenters(truth.pose, &theirs);
+  double joint = 0.0;
+  e.joint_errors_mm.assign(ours.rows(), std::numeric_limits<double>::quiet_NaN());
+  for (const auto& [a, b] : truth_.joint_pairs) {
+    const double d = (ours.row(a) - theirs.row(b)).norm();
+    joint += d;
+    e.joint_errors_mm[a] = 1000.0 * d;
+  }
+  e.mean_joint_error_mm =
+      truth_.joint_pairs.empty() ? 0.0 : 1000.0 * joint / truth_.joint_pairs.size();
+  if (truth_.truth_scene && frame.evaluate_texture) {
+    truth_.truth_scene->vertices = truth.vertices;
+    e.texture_quality = EvaluateNovelViews(model_, tracked_in_truth, frame.atlas,
+                                           frame.triangle_frames, *truth_.truth_scene, held_out_);
+    e.has_texture_quality = true;
+  }
+  return e;
+}
+
+BackgroundEvaluation::BackgroundEvaluation(const GroundTruthEvaluator* evaluator,
+                                           std::size_t queue_depth)
+    : evaluator_(evaluator),
+      queue_(queue_depth),
+      latest_error_mm_(std::numeric_limits<double>::quiet_NaN()),
+      thread_([this] { Run(); }) {}
+
+BackgroundEvaluation::~BackgroundEvaluation() {
+  queue_.Close();
+  if (thread_.joinable()) thread_.join();
+}
+
+void BackgroundEvaluation::Run() {
+  pthread_setname_np(pthread_self(), "artex-evaluate");
+  LowestPriorityForThisThread();
+  // Its parallel loops on this thread alone: oneTBB's workers run at the stages' priority.
+  tbb::task_arena arena(1, 1);
+  const double cpu_start = ThreadCpuSeconds();
+  FrameEvaluation frame;
+  while (queue_.Pop(&frame)) {
+    if (failed_) continue;  // drain what is queued; the error is reported
+    try {
+      const auto start = std::chrono::steady_clock::now();
+      arena.execute([&] { results_.push_back(evaluator_->Evaluate(frame)); });
+      busy_seconds_ = busy_seconds_ +
+                      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      latest_error_mm_ = results_.back().mean_vertex_error_mm;
+      ++done_;
+    } catch (...) {
+      error_ = std::current_exception();
+      failed_ = true;
+    }
+    frame = FrameEvaluation();  // its memory back before waiting
+    cpu_seconds_ = ThreadCpuSeconds() - cpu_start;
+  }
+  cpu_seconds_ = ThreadCpuSeconds() - cpu_start;
+}
+
+void BackgroundEvaluation::Push(FrameEvaluation&& frame) {
+  if (failed_) {
+    Finish();  // rethrows
+    return;
+  }
+  queue_.Push(std::move(frame));
+}
+
+std::vector<FrameErrors> BackgroundEvaluation::Finish() {
+  if (!finished_) {
+    finished_ = true;
+    queue_.Close();
+    thread_.join();
+  }
+  if (error_) std::rethrow_exception(error_);
+  return std::move(results_);
+}
+
+}  // namespace artex

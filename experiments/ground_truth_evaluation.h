@@ -1,0 +1,108 @@
+// The ground-truth metrics of tracked frames (vertex, joint and novel-view texture errors of a
+// synthetic recording), computed for the output stage (experiments/pipeline_stages.h) either in
+// the stage itself or on a thread of their own off the frame loop (pipeline.evaluation,
+// docs/realtime.md "Ground truth off the frame loop"): a sensor has no ground truth, and with it
+// evaluated in the loop a benchmark's frame rate measured the evaluation along with the
+// tracking. The numbers are the same either way; only when they are computed differs.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <atomic>
+#include <cstddef>
+#include <exception>
+#include <thread>
+#include <utility>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "experiments/bounded_queue.h"
+#include "experiments/texture_evaluation.h"
+#include "models/skinning.h"
+#include "models/template.h"
+#include "sensors/sequence.h"
+
+namespace artex {
+
+// What the output stage needs of the ground truth (absent: subject == nullptr).
+struct GroundTruthContext {
+  const SequenceReader* sequence = nullptr;
+  const Template* subject = nullptr;
+  const Skinning* subject_skinning = nullptr;
+  std::vector<std::pair<int, int>> joint_pairs;  // (tracked joint, subject joint)
+  TruthScene* truth_scene = nullptr;             // novel-view quality (may be null)
+  Eigen::Isometry3d to_truth_world = Eigen::Isometry3d::Identity();
+};
+
+// One tracked frame to evaluate.
+struct FrameEvaluation {
+  int frame = 0;                // the recording's frame index
+  Eigen::MatrixX3d posed;       // V x 3 tracked template (tracking world, m)
+  Eigen::MatrixX3d joints;      // J x 3 tracked joint centres (tracking world, m)
+  bool evaluate_texture = false;
+  cv::Mat atlas;                         // evaluate_texture: Texturer::Atlas of the frame
+  std::vector<int> triangle_frames;      // ... and its triangle_frames
+};
+
+// Its metrics.
+struct FrameErrors {
+  double mean_vertex_error_mm = 0.0, max_vertex_error_mm = 0.0, mean_joint_error_mm = 0.0;
+  std::vector<double> joint_errors_mm;  // per tracked joint (NaN: no true counterpart)
+  bool has_texture_quality = false;
+  NovelViewQuality texture_quality;
+};
+
+// Computes FrameErrors against the recording's ground truth. `model` gives the triangles and UVs
+// of the novel views (its geometry is not read). One thread at a time (it poses the truth scene).
+class GroundTruthEvaluator {
+ public:
+  GroundTruthEvaluator(const Template& model, const GroundTruthContext& truth,
+                       const HeldOutViewOptions& held_out)
+      : model_(model), truth_(truth), held_out_(held_out) {}
+  FrameErrors Evaluate(const FrameEvaluation& frame) const;
+
+ private:
+  const Template& model_;
+  GroundTruthContext truth_;
+  HeldOutViewOptions held_out_;
+};
+
+// A GroundTruthEvaluator on its own thread at the lowest CPU priority (SCHED_IDLE, its parallel
+// loops on that thread alone): it uses what the frame loop leaves of the cores. At most
+// `queue_depth` frames wait for it; Push blocks beyond (the memory stays bounded), and Finish
+// evaluates what is left. The results come back in the order the frames were pushed.
+class BackgroundEvaluation {
+ public:
+  BackgroundEvaluation(const GroundTruthEvaluator* evaluator, std::size_t queue_depth);
+  ~BackgroundEvaluation();
+  BackgroundEvaluation(const BackgroundEvaluation&) = delete;
+  BackgroundEvaluation& operator=(const BackgroundEvaluation&) = delete;
+
+  // Queues a frame (waits while queue_depth frames wait). Rethrows the thread's error.
+  void Push(FrameEvaluation&& frame);
+  // Waits for every pushed frame and returns their metrics in push order; rethrows the
+  // thread's error. Call once, after the last Push.
+  std::vector<FrameErrors> Finish();
+  // Frames evaluated so far, and the thread's CPU time (s) and time busy evaluating (s).
+  int frames_done() const { return done_.load(); }
+  double cpu_seconds() const { return cpu_seconds_.load(); }
+  double busy_seconds() const { return busy_seconds_.load(); }
+  // The mean vertex error of the latest frame evaluated (NaN before the first).
+  double latest_mean_vertex_error_mm() const { return latest_error_mm_.load(); }
+
+ private:
+  void Run();
+
+  const GroundTruthEvaluator* evaluator_;
+  BoundedQueue<FrameEvaluation> queue_;
+  std::vector<FrameErrors> results_;  // the thread's until joined
+  std::exception_ptr error_;          // the thread's until joined
+  std::atomic<bool> failed_{false};
+  std::atomic<int> done_{0};
+  std::atomic<double> cpu_seconds_{0.0}, busy_seconds_{0.0}, latest_error_mm_;
+  std::thread thread_;
+  bool finished_ = false;
+};
+
+}  // namespace artex
