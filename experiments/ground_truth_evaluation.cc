@@ -64,9 +64,10 @@ FrameErrors GroundTruthEvaluator::Evaluate(const FrameEvaluation& frame) const {
   e.mean_joint_error_mm =
       truth_.joint_pairs.empty() ? 0.0 : 1000.0 * joint / truth_.joint_pairs.size();
   if (truth_.truth_scene && frame.evaluate_texture) {
-    truth_.truth_scene->vertices = truth.vertices;
+    TruthScene scene = *truth_.truth_scene;  // its texture shared, read only
+    scene.vertices = truth.vertices;
     e.texture_quality = EvaluateNovelViews(model_, tracked_in_truth, frame.atlas,
-                                           frame.triangle_frames, *truth_.truth_scene, held_out_);
+                                           frame.triangle_frames, scene, held_out_);
     e.has_texture_quality = true;
   }
   return e;
@@ -110,12 +111,9 @@ void BackgroundEvaluation::Run() {
   cpu_seconds_ = ThreadCpuSeconds() - cpu_start;
 }
 
-void BackgroundEvaluation::Push(FrameEvaluation&& frame) {
-  if (failed_) {
-    Finish();  // rethrows
-    return;
-  }
-  queue_.Push(std::move(frame));
+bool BackgroundEvaluation::TryPush(FrameEvaluation&& frame) {
+  if (failed_) Finish();  // rethrows
+  return queue_.TryPush(std::move(frame));
 }
 
 std::vector<FrameErrors> BackgroundEvaluation::Finish() {

@@ -31,7 +31,7 @@ struct GroundTruthContext {
   const Template* subject = nullptr;
   const Skinning* subject_skinning = nullptr;
   std::vector<std::pair<int, int>> joint_pairs;  // (tracked joint, subject joint)
-  TruthScene* truth_scene = nullptr;             // novel-view quality (may be null)
+  const TruthScene* truth_scene = nullptr;       // novel-view quality (may be null)
   Eigen::Isometry3d to_truth_world = Eigen::Isometry3d::Identity();
 };
 
@@ -54,7 +54,7 @@ struct FrameErrors {
 };
 
 // Computes FrameErrors against the recording's ground truth. `model` gives the triangles and UVs
-// of the novel views (its geometry is not read). One thread at a time (it poses the truth scene).
+// of the novel views (its geometry is not read). Evaluate may run on several threads at once.
 class GroundTruthEvaluator {
  public:
   GroundTruthEvaluator(const Template& model, const GroundTruthContext& truth,
@@ -70,8 +70,9 @@ class GroundTruthEvaluator {
 
 // A GroundTruthEvaluator on its own thread at the lowest CPU priority (SCHED_IDLE, its parallel
 // loops on that thread alone): it uses what the frame loop leaves of the cores. At most
-// `queue_depth` frames wait for it; Push blocks beyond (the memory stays bounded), and Finish
-// evaluates what is left. The results come back in the order the frames were pushed.
+// `queue_depth` frames wait for it: TryPush refuses beyond (the caller evaluates that frame
+// itself, so memory stays bounded and a machine busy with other work cannot starve the run),
+// and Finish waits for what is left. The results come back in the order the frames were pushed.
 class BackgroundEvaluation {
  public:
   BackgroundEvaluation(const GroundTruthEvaluator* evaluator, std::size_t queue_depth);
@@ -79,8 +80,9 @@ class BackgroundEvaluation {
   BackgroundEvaluation(const BackgroundEvaluation&) = delete;
   BackgroundEvaluation& operator=(const BackgroundEvaluation&) = delete;
 
-  // Queues a frame (waits while queue_depth frames wait). Rethrows the thread's error.
-  void Push(FrameEvaluation&& frame);
+  // Queues a frame; false (frame untouched) while queue_depth frames wait. Rethrows the
+  // thread's error.
+  bool TryPush(FrameEvaluation&& frame);
   // Waits for every pushed frame and returns their metrics in push order; rethrows the
   // thread's error. Call once, after the last Push.
   std::vector<FrameErrors> Finish();

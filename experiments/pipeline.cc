@@ -289,7 +289,8 @@ PipelineResult RunOnePass(const std::string& sequence_dir, const std::string& te
         std::chrono::duration<double>(std::chrono::steady_clock::now() - waited).count();
     StageTiming evaluate;
     evaluate.name = "evaluate";
-    evaluate.frames = output.evaluation_frames;
+    evaluate.frames = output.evaluation_frames + output.evaluation_frames_here;
+    result.realtime.evaluated_in_output_stage = output.evaluation_frames_here;
     evaluate.busy_seconds = output.evaluation_busy_seconds;
     evaluate.cpu_seconds = output.evaluation_cpu_seconds;
     result.realtime.stages.push_back(evaluate);

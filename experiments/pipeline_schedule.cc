@@ -380,6 +380,7 @@ void WriteRealtimeJson(const std::string& path, const RealtimeStats& s) {
   j["huge_page_heap"] = s.huge_page_heap;
   j["evaluated_in_background"] = s.evaluated_in_background;
   j["evaluated_during_loop"] = s.evaluated_during_loop;
+  j["evaluated_in_output_stage"] = s.evaluated_in_output_stage;
   j["evaluation_after_loop_seconds"] = s.evaluation_after_loop_seconds;
   nlohmann::json stages = nlohmann::json::array();
   for (const StageTiming& t : s.stages) {

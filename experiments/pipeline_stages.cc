@@ -471,8 +471,10 @@ void OutputStage::Process(FrameWork* work) {
     record.mean_vertex_error_mm = record.max_vertex_error_mm = record.mean_joint_error_mm =
         std::numeric_limits<double>::quiet_NaN();
     if (background_) {
-      evaluation_slots_.push_back(static_cast<int>(result.frames.size()));
-      background_->Push(std::move(frame));
+      const int slot = static_cast<int>(result.frames.size());
+      evaluation_slots_.push_back(slot);
+      // The queue full (the machine busy): this frame here, at the stage's priority.
+      if (!background_->TryPush(std::move(frame))) evaluated_here_[slot] = evaluator_.Evaluate(frame);
     } else {
       MergeEvaluation(evaluator_.Evaluate(frame), &record);
     }
@@ -533,10 +535,19 @@ void OutputStage::FinishEvaluation() {
   evaluation_cpu_seconds = background_->cpu_seconds();
   evaluation_busy_seconds = background_->busy_seconds();
   evaluation_frames = background_->frames_done();
-  for (std::size_t k = 0; k < errors.size() && k < evaluation_slots_.size(); ++k)
-    MergeEvaluation(errors[k], &result_->frames[evaluation_slots_[k]]);
+  std::size_t next = 0;  // the background's results, in the order of the frames pushed
+  for (const int slot : evaluation_slots_) {
+    const auto here = evaluated_here_.find(slot);
+    if (here != evaluated_here_.end()) {
+      MergeEvaluation(here->second, &result_->frames[slot]);
+    } else if (next < errors.size()) {
+      MergeEvaluation(errors[next++], &result_->frames[slot]);
+    }
+  }
+  evaluation_frames_here = static_cast<int>(evaluated_here_.size());
   background_.reset();
   evaluation_slots_.clear();
+  evaluated_here_.clear();
 }
 
 }  // namespace artex

@@ -17,6 +17,7 @@
 #include <cstddef>
 #include <deque>
 #include <functional>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -187,6 +188,7 @@ class OutputStage {
   // The background evaluation's CPU and busy time (s) and frames (after FinishEvaluation).
   double evaluation_cpu_seconds = 0.0, evaluation_busy_seconds = 0.0;
   int evaluation_frames = 0;
+  int evaluation_frames_here = 0;  // of the background evaluation's: done in Process (queue full)
 
   std::vector<Pose> poses;
   std::vector<int> pose_frames;
@@ -211,7 +213,10 @@ class OutputStage {
   GroundTruthContext truth_;
   GroundTruthEvaluator evaluator_;
   std::unique_ptr<BackgroundEvaluation> background_;
-  std::vector<int> evaluation_slots_;  // background: each pushed frame's index in result.frames
+  // Background: each evaluated frame's index in result.frames, in frame order, and the metrics
+  // of those the output stage evaluated itself (the queue full), by that index.
+  std::vector<int> evaluation_slots_;
+  std::map<int, FrameErrors> evaluated_here_;
   std::string out_dir_;
   int begin_, end_;
   PipelineResult* result_;

@@ -58,8 +58,8 @@ struct RealtimeOptions {
   // truth. Shape estimation evaluates in the output stage regardless (its template changes).
   bool evaluate_in_background = true;
   // pipeline.evaluation_queue_depth (>= 1): frames waiting for the background evaluation (the
-  // output stage waits beyond; each holds its tracked mesh, ~0.3 MB, and, on a frame of
-  // texture_quality_every, its atlas).
+  // output stage evaluates a frame itself beyond; each holds its tracked mesh, ~0.3 MB, and,
+  // on a frame of texture_quality_every, its atlas).
   int evaluation_queue_depth = 16;
   // pipeline.colour_delay_frames: the E-step's colour term of frame t uses the texture as it
   // was after frame t - 1 - this (0: after frame t-1, which makes fitting wait for texturing;
@@ -127,6 +127,7 @@ struct RealtimeStats {
   // is the "evaluate" stage's (during the loop, also in cpu_utilisation).
   bool evaluated_in_background = false;
   int evaluated_during_loop = 0;
+  int evaluated_in_output_stage = 0;  // its queue full: evaluated in the output stage instead
   double evaluation_after_loop_seconds = 0.0;
   std::vector<StageTiming> stages;
 };

@@ -252,7 +252,8 @@ TEST(PipelinedTrackingTest, OneThreadPerStageGivesTheSameResults) {
 // stage: the same metrics in every record and in the run's figures, and the same files.
 TEST(PipelinedTrackingTest, GroundTruthEvaluatedInTheBackgroundGivesTheSameMetrics) {
   Config config = BaseConfig();
-  config.Set("pipeline.evaluation_queue_depth", "1");  // the output stage waits for it
+  // One frame queued: the output stage evaluates frames itself while one waits.
+  config.Set("pipeline.evaluation_queue_depth", "1");
   const PipelineResult behind = RunWith(config, "pipelined", "evaluate_behind");
   config.Set("pipeline.evaluate_in_background", "false");
   const PipelineResult inline_ = RunWith(config, "pipelined", "evaluate_inline");
@@ -263,6 +264,7 @@ TEST(PipelinedTrackingTest, GroundTruthEvaluatedInTheBackgroundGivesTheSameMetri
   EXPECT_EQ(behind.realtime.stages.back().frames, kFrames);
   EXPECT_GT(behind.realtime.stages.back().cpu_seconds, 0.0);
   EXPECT_LE(behind.realtime.evaluated_during_loop, kFrames);
+  EXPECT_LE(behind.realtime.evaluated_in_output_stage, kFrames);
   EXPECT_GE(behind.realtime.evaluation_after_loop_seconds, 0.0);
   ASSERT_EQ(behind.frames.size(), inline_.frames.size());
   int textures = 0;
