@@ -473,8 +473,10 @@ void OutputStage::Process(FrameWork* work) {
     if (background_) {
       const int slot = static_cast<int>(result.frames.size());
       evaluation_slots_.push_back(slot);
-      // The queue full (the machine busy): this frame here, at the stage's priority.
-      if (!background_->TryPush(std::move(frame))) evaluated_here_[slot] = evaluator_.Evaluate(frame);
+      // The queue full (the machine busy): this frame here, at the stage's priority (TryPush
+      // leaves the frame untouched when it refuses).
+      if (!background_->TryPush(std::move(frame)))
+        evaluated_here_[slot] = evaluator_.Evaluate(frame);
     } else {
       MergeEvaluation(evaluator_.Evaluate(frame), &record);
     }
