@@ -85,6 +85,11 @@ BackgroundEvaluation::~BackgroundEvaluation() {
   if (thread_.joinable()) thread_.join();
 }
 
+void BackgroundEvaluation::Store(int order, FrameErrors&& errors) {
+  std::lock_guard<std::mutex> lock(results_mutex_);
+  results_.emplace(order, std::move(errors));
+}
+
 void BackgroundEvaluation::Run() {
   pthread_setname_np(pthread_self(), "artex-evaluate");
   LowestPriorityForThisThread();
@@ -96,10 +101,12 @@ void BackgroundEvaluation::Run() {
     if (failed_) continue;  // drain what is queued; the error is reported
     try {
       const auto start = std::chrono::steady_clock::now();
-      arena.execute([&] { results_.push_back(evaluator_->Evaluate(frame)); });
+      FrameErrors errors;
+      arena.execute([&] { errors = evaluator_->Evaluate(frame); });
       busy_seconds_ = busy_seconds_ +
                       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-      latest_error_mm_ = results_.back().mean_vertex_error_mm;
+      latest_error_mm_ = errors.mean_vertex_error_mm;
+      Store(frame.order, std::move(errors));
       ++done_;
     } catch (...) {
       error_ = std::current_exception();
@@ -113,17 +120,38 @@ void BackgroundEvaluation::Run() {
 
 bool BackgroundEvaluation::TryPush(FrameEvaluation&& frame) {
   if (failed_) Finish();  // rethrows
-  return queue_.TryPush(std::move(frame));
+  frame.order = pushed_;
+  if (!queue_.TryPush(std::move(frame))) return false;
+  ++pushed_;
+  return true;
 }
 
 std::vector<FrameErrors> BackgroundEvaluation::Finish() {
+  std::exception_ptr caller_error;
   if (!finished_) {
     finished_ = true;
     queue_.Close();
+    // What is still queued, on this thread at its priority (the background thread takes
+    // frames too; Pop hands each frame to one of them).
+    FrameEvaluation frame;
+    while (queue_.Pop(&frame)) {
+      if (caller_error || failed_) continue;
+      try {
+        Store(frame.order, evaluator_->Evaluate(frame));
+        ++done_by_finish_;
+      } catch (...) {
+        caller_error = std::current_exception();
+      }
+    }
     thread_.join();
   }
   if (error_) std::rethrow_exception(error_);
-  return std::move(results_);
+  if (caller_error) std::rethrow_exception(caller_error);
+  std::vector<FrameErrors> ordered;
+  ordered.reserve(results_.size());
+  for (auto& [order, errors] : results_) ordered.push_back(std::move(errors));
+  results_.clear();
+  return ordered;
 }
 
 }  // namespace artex

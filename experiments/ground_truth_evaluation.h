@@ -11,6 +11,8 @@
 #include <atomic>
 #include <cstddef>
 #include <exception>
+#include <map>
+#include <mutex>
 #include <thread>
 #include <utility>
 #include <vector>
@@ -38,6 +40,7 @@ struct GroundTruthContext {
 // One tracked frame to evaluate.
 struct FrameEvaluation {
   int frame = 0;                // the recording's frame index
+  int order = 0;                // BackgroundEvaluation: its place among the frames pushed
   Eigen::MatrixX3d posed;       // V x 3 tracked template (tracking world, m)
   Eigen::MatrixX3d joints;      // J x 3 tracked joint centres (tracking world, m)
   bool evaluate_texture = false;
@@ -72,7 +75,9 @@ class GroundTruthEvaluator {
 // loops on that thread alone): it uses what the frame loop leaves of the cores. At most
 // `queue_depth` frames wait for it: TryPush refuses beyond (the caller evaluates that frame
 // itself, so memory stays bounded and a machine busy with other work cannot starve the run),
-// and Finish waits for what is left. The results come back in the order the frames were pushed.
+// and Finish evaluates what is left on the calling thread, at its priority, alongside the
+// background thread (on a busy machine the idle-priority thread gets almost nothing). The
+// results come back in the order the frames were pushed.
 class BackgroundEvaluation {
  public:
   BackgroundEvaluation(const GroundTruthEvaluator* evaluator, std::size_t queue_depth);
@@ -83,11 +88,14 @@ class BackgroundEvaluation {
   // Queues a frame; false (frame untouched) while queue_depth frames wait. Rethrows the
   // thread's error.
   bool TryPush(FrameEvaluation&& frame);
-  // Waits for every pushed frame and returns their metrics in push order; rethrows the
-  // thread's error. Call once, after the last Push.
+  // Evaluates the frames still queued (on this thread and the background one), waits for the
+  // background thread and returns every pushed frame's metrics in push order; rethrows the first
+  // error. Call once, after the last TryPush.
   std::vector<FrameErrors> Finish();
-  // Frames evaluated so far, and the thread's CPU time (s) and time busy evaluating (s).
+  // Frames the background thread evaluated so far, and its CPU time (s) and time busy
+  // evaluating (s); frames Finish evaluated on the calling thread.
   int frames_done() const { return done_.load(); }
+  int frames_done_by_finish() const { return done_by_finish_; }
   double cpu_seconds() const { return cpu_seconds_.load(); }
   double busy_seconds() const { return busy_seconds_.load(); }
   // The mean vertex error of the latest frame evaluated (NaN before the first).
@@ -96,10 +104,15 @@ class BackgroundEvaluation {
  private:
   void Run();
 
+  // The metrics of a frame into results_ (either thread).
+  void Store(int order, FrameErrors&& errors);
+
   const GroundTruthEvaluator* evaluator_;
   BoundedQueue<FrameEvaluation> queue_;
-  std::vector<FrameErrors> results_;  // the thread's until joined
-  std::exception_ptr error_;          // the thread's until joined
+  int pushed_ = 0, done_by_finish_ = 0;  // the caller's
+  std::mutex results_mutex_;
+  std::map<int, FrameErrors> results_;  // by order
+  std::exception_ptr error_;            // the thread's until joined
   std::atomic<bool> failed_{false};
   std::atomic<int> done_{0};
   std::atomic<double> cpu_seconds_{0.0}, busy_seconds_{0.0}, latest_error_mm_;

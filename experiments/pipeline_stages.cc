@@ -536,7 +536,7 @@ void OutputStage::FinishEvaluation() {
   const std::vector<FrameErrors> errors = background_->Finish();
   evaluation_cpu_seconds = background_->cpu_seconds();
   evaluation_busy_seconds = background_->busy_seconds();
-  evaluation_frames = background_->frames_done();
+  evaluation_frames = background_->frames_done() + background_->frames_done_by_finish();
   std::size_t next = 0;  // the background's results, in the order of the frames pushed
   for (const int slot : evaluation_slots_) {
     const auto here = evaluated_here_.find(slot);

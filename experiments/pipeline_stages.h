@@ -185,7 +185,8 @@ class OutputStage {
   void FinishEvaluation();
   // Frames the background evaluation has finished so far (0 without one).
   int evaluation_frames_done() const { return background_ ? background_->frames_done() : 0; }
-  // The background evaluation's CPU and busy time (s) and frames (after FinishEvaluation).
+  // The background evaluation's CPU and busy time (s, its thread's) and frames (those
+  // FinishEvaluation evaluated on the calling thread included; after FinishEvaluation).
   double evaluation_cpu_seconds = 0.0, evaluation_busy_seconds = 0.0;
   int evaluation_frames = 0;
   int evaluation_frames_here = 0;  // of the background evaluation's: done in Process (queue full)
