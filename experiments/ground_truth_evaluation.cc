@@ -24,7 +24,7 @@ Eigen::MatrixX3d TransformRows(const Eigen::Isometry3d& t, const Eigen::MatrixX3
   return out;
 }
 
-double ThreadCpuSeconds() {
+double EvaluationThreadCpuSeconds() {
   timespec t{};
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
   return t.tv_sec + 1e-9 * t.tv_nsec;
@@ -95,7 +95,7 @@ void BackgroundEvaluation::Run() {
   LowestPriorityForThisThread();
   // Its parallel loops on this thread alone: oneTBB's workers run at the stages' priority.
   tbb::task_arena arena(1, 1);
-  const double cpu_start = ThreadCpuSeconds();
+  const double cpu_start = EvaluationThreadCpuSeconds();
   FrameEvaluation frame;
   while (queue_.Pop(&frame)) {
     if (failed_) continue;  // drain what is queued; the error is reported
@@ -113,9 +113,9 @@ void BackgroundEvaluation::Run() {
       failed_ = true;
     }
     frame = FrameEvaluation();  // its memory back before waiting
-    cpu_seconds_ = ThreadCpuSeconds() - cpu_start;
+    cpu_seconds_ = EvaluationThreadCpuSeconds() - cpu_start;
   }
-  cpu_seconds_ = ThreadCpuSeconds() - cpu_start;
+  cpu_seconds_ = EvaluationThreadCpuSeconds() - cpu_start;
 }
 
 bool BackgroundEvaluation::TryPush(FrameEvaluation&& frame) {
