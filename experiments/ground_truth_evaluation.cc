@@ -64,7 +64,14 @@ FrameErrors GroundTruthEvaluator::Evaluate(const FrameEvaluation& frame) const {
   e.mean_joint_error_mm =
       truth_.joint_pairs.empty() ? 0.0 : 1000.0 * joint / truth_.joint_pairs.size();
   if (truth_.truth_scene && frame.evaluate_texture) {
-    TruthScene scene = *truth_.truth_scene;  // its texture shared, read only
+    // The truth scene posed for this frame; its texture a view (no reference count shared
+    // between threads), read only.
+    const TruthScene& shared = *truth_.truth_scene;
+    TruthScene scene;
+    scene.subject = shared.subject;
+    scene.texture = cv::Mat(shared.texture.rows, shared.texture.cols, shared.texture.type(),
+                            shared.texture.data, shared.texture.step);
+    scene.camera = shared.camera;
     scene.vertices = truth.vertices;
     e.texture_quality = EvaluateNovelViews(model_, tracked_in_truth, frame.atlas,
                                            frame.triangle_frames, scene, held_out_);

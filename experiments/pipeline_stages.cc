@@ -465,8 +465,10 @@ void OutputStage::Process(FrameWork* work) {
     skinning_.PosedJointCenters(frame_pose, &frame.joints);
     frame.evaluate_texture = truth_.truth_scene && work->evaluate_texture;
     if (frame.evaluate_texture) {
-      frame.atlas = work->atlas;
-      frame.triangle_frames = work->triangle_frames;
+      // Moved, not shared: the evaluation's thread then owns the image alone (its reference
+      // count lives in OpenCV, which ThreadSanitizer cannot see). Nothing after this reads it.
+      frame.atlas = std::move(work->atlas);
+      frame.triangle_frames = std::move(work->triangle_frames);
     }
     record.mean_vertex_error_mm = record.max_vertex_error_mm = record.mean_joint_error_mm =
         std::numeric_limits<double>::quiet_NaN();
