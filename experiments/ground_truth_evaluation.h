@@ -1,6 +1,6 @@
 // The ground-truth metrics of tracked frames (vertex, joint and novel-view texture errors of a
 // synthetic recording), computed for the output stage (experiments/pipeline_stages.h) either in
-// the stage itself or on a thread of their own off the frame loop (pipeline.evaluation,
+// the stage itself or on a thread of their own off the frame loop (pipeline.evaluate_in_background,
 // docs/realtime.md "Ground truth off the frame loop"): a sensor has no ground truth, and with it
 // evaluated in the loop a benchmark's frame rate measured the evaluation along with the
 // tracking. The numbers are the same either way; only when they are computed differs.
