@@ -5,13 +5,13 @@
 #include <sys/resource.h>
 #include <sys/syscall.h>
 #include <tbb/task_arena.h>
-#include <time.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <cmath>
 #include <limits>
 
+#include "experiments/cpu_clock.h"
 #include "experiments/surface_error.h"
 #include "models/normals.h"
 
@@ -22,12 +22,6 @@ namespace {
 Eigen::MatrixX3d TransformRows(const Eigen::Isometry3d& t, const Eigen::MatrixX3d& points) {
   Eigen::MatrixX3d out = (points * t.linear().transpose()).rowwise() + t.translation().transpose();
   return out;
-}
-
-double EvaluationThreadCpuSeconds() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return t.tv_sec + 1e-9 * t.tv_nsec;
 }
 
 // This thread at the lowest priority: SCHED_IDLE (runs when nothing else wants the core), else
@@ -102,7 +96,7 @@ void BackgroundEvaluation::Run() {
   LowestPriorityForThisThread();
   // Its parallel loops on this thread alone: oneTBB's workers run at the stages' priority.
   tbb::task_arena arena(1, 1);
-  const double cpu_start = EvaluationThreadCpuSeconds();
+  const double cpu_start = ThreadCpuSeconds();
   FrameEvaluation frame;
   while (queue_.Pop(&frame)) {
     if (failed_) continue;  // drain what is queued; the error is reported
@@ -120,9 +114,9 @@ void BackgroundEvaluation::Run() {
       failed_ = true;
     }
     frame = FrameEvaluation();  // its memory back before waiting
-    cpu_seconds_ = EvaluationThreadCpuSeconds() - cpu_start;
+    cpu_seconds_ = ThreadCpuSeconds() - cpu_start;
   }
-  cpu_seconds_ = EvaluationThreadCpuSeconds() - cpu_start;
+  cpu_seconds_ = ThreadCpuSeconds() - cpu_start;
 }
 
 bool BackgroundEvaluation::TryPush(FrameEvaluation&& frame) {

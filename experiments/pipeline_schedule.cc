@@ -1,8 +1,6 @@
 // The schedules of the pipeline's stages (experiments/pipeline_stages.h): sequential or one
 // thread per stage with bounded queues, the live frame clock, and the realtime record.
 #include <pthread.h>
-#include <sys/resource.h>
-#include <time.h>
 
 #include <algorithm>
 #include <atomic>
@@ -17,6 +15,7 @@
 
 #include "experiments/atomic_output.h"
 #include "experiments/bounded_queue.h"
+#include "experiments/cpu_clock.h"
 #include "experiments/heap_retention.h"
 #include "experiments/pipeline_stages.h"
 #include "models/error.h"
@@ -25,19 +24,6 @@
 
 namespace artex {
 namespace {
-
-double CpuSeconds() {
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
-  return usage.ru_utime.tv_sec + 1e-6 * usage.ru_utime.tv_usec + usage.ru_stime.tv_sec +
-         1e-6 * usage.ru_stime.tv_usec;
-}
-
-double ThreadCpuSeconds() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return t.tv_sec + 1e-9 * t.tv_nsec;
-}
 
 // The stage's name on its thread (at most 15 characters: top -H, perf --sort comm, gdb).
 void NameThisThread(const char* name) { pthread_setname_np(pthread_self(), name); }
@@ -106,7 +92,7 @@ struct StageClock {
   double busy = 0.0, cpu = 0.0;
   int frames = 0;
   bool whole_process = false;
-  double Cpu() const { return whole_process ? CpuSeconds() : ThreadCpuSeconds(); }
+  double Cpu() const { return whole_process ? ProcessCpuSeconds() : ThreadCpuSeconds(); }
   template <class F>
   auto Time(F&& f) {
     const auto t = PipelineClock::now();
@@ -153,7 +139,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
   ColourMailbox mailbox;
   const int delay = options.colour_delay_frames;
   const auto start = PipelineClock::now();
-  const double cpu_start = CpuSeconds();
+  const double cpu_start = ProcessCpuSeconds();
 
   // The colours for item n: texture's state after item n - 1 - delay.
   const auto take_colours = [&](int n) {
@@ -328,7 +314,7 @@ RealtimeStats RunStages(const RealtimeOptions& options, FrameSource* source, int
   }
   stats.frames_texture_not_due = pool->frames_not_due;
   stats.wall_seconds = SecondsSince(start);
-  const double cpu = CpuSeconds() - cpu_start;
+  const double cpu = ProcessCpuSeconds() - cpu_start;
   stats.frames_dropped_after_first = dropped_after_first;
   stats.frames_offered = stats.frames_processed + stats.frames_dropped + skipped;
   stats.frames_per_second = stats.frames_processed / std::max(1e-9, stats.wall_seconds);

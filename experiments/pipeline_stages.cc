@@ -458,7 +458,7 @@ void OutputStage::Process(FrameWork* work) {
   if (truth_.subject) {
     FrameEvaluation frame;
     frame.frame = i;
-    frame.posed = posed;
+    frame.posed = std::move(work->posed);  // nothing after this reads it
     // Shape estimation swaps the subject's rest geometry into tmpl_ (TrackStage): the joint
     // centres must be the subject's from then on, not the template's this stage started with.
     SyncRestGeometry();
