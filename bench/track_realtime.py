@@ -21,11 +21,14 @@ real recording delivers it (no errors evaluated, no PSNR: those columns show nan
 Columns: fps over the frame loop (first read to last output) and after the first frame, latency,
 CPU, drops, peak RSS, errors, and "wall s": the whole process from start to exit as a user waits
 for it (/usr/bin/time: start-up, the default template, writing the outputs included).
+Checks that the pipelined runs' poses.csv, labels.png and texture.png are the sequential run's
+byte for byte (with and without ground truth: the evaluation does not touch the results).
 Prints one table and writes WORK/results.json (results_WxH.json with --color-size). The machine
 is shared: `uptime` is printed
 before and after, and every figure of one table comes from the same invocation.
 """
 import argparse
+import hashlib
 import json
 import os
 import re
@@ -64,6 +67,11 @@ def parse_size(text):
     return int(m.group(1)), int(m.group(2))
 
 
+# The results compared byte for byte between runs (SHA-256): with the same frames tracked and
+# textured, the pipelined runs must give the sequential run's, with or without ground truth.
+OUTPUTS = ("poses.csv", "labels.png", "texture.png")
+
+
 def track(artex, seq, out, config, sets):
     cmd = ["/usr/bin/time", "-v", artex, "track", seq, "-c", config, "-o", out, "-q"]
     for s in sets:
@@ -80,8 +88,12 @@ def track(artex, seq, out, config, sets):
         rt = json.load(f)
     with open(os.path.join(out, "metrics.json")) as f:
         metrics = json.load(f)
+    outputs = {}
+    for name in OUTPUTS:
+        with open(os.path.join(out, name), "rb") as f:
+            outputs[name] = hashlib.sha256(f.read()).hexdigest()
     return {"rss_mb": rss / 1024.0, "process_cpu_percent": int(cpu), "process_wall_s": wall_s,
-            "realtime": rt, "metrics": metrics}
+            "realtime": rt, "metrics": metrics, "outputs": outputs}
 
 
 def median_result(reps):
@@ -208,6 +220,18 @@ def main():
                      span(reps, "steady_frames_per_second", "%.1f"),
                      span(reps, "latency_median_ms", "%.0f"),
                      span(reps, "frames_dropped", "%d"), walls[0], walls[-1]))
+    # Byte for byte against the same build's sequential run (live runs drop frames: left out).
+    print("outputs (%s) the same as the sequential run's, in every repetition:" % ", ".join(OUTPUTS))
+    for label, _, _ in binaries:
+        reference = repetitions.get(label + "sequential", [])
+        expected = {tuple(sorted(r["outputs"].items())) for r in reference}
+        for name, _, _ in runs:
+            if name == "sequential" or "live" in name or "%d frames" % args.long in name:
+                continue
+            reps = repetitions[label + name]
+            same = len(expected) == 1 and all(
+                tuple(sorted(r["outputs"].items())) in expected for r in reps)
+            print("  %-32s %s" % (label + name, "yes" if same else "NO"))
     # Stages by name (the two builds may have different stages: the pool stage is newer).
     print("stage busy ms/frame:")
     for name, r in results.items():
