@@ -146,9 +146,18 @@ double AccumulateVertexResiduals(const FitEvaluation& eval, const Eigen::VectorX
     first_vertex[k] = first;
     const int n = static_cast<int>(eval.jacobian.Columns(first).size());
     const int m = end - begin;
-    Eigen::MatrixXd a(rows_per_vertex * m, n);
-    Eigen::VectorXd r(rows_per_vertex * m);
-    Eigen::Matrix<double, 3, Eigen::Dynamic> block;
+    // The stacked rows in buffers of this thread, grown as needed and kept: no allocation per
+    // joint and call (with one malloc arena for all threads, pipeline.heap_arenas, the
+    // workers' allocations would wait for each other). Nothing else runs on this thread while
+    // they are in use: the body does not wait for other tasks.
+    thread_local Eigen::MatrixXd a_buffer;
+    thread_local Eigen::VectorXd r_buffer;
+    thread_local Eigen::Matrix<double, 3, Eigen::Dynamic> block;
+    const Eigen::Index rows = static_cast<Eigen::Index>(rows_per_vertex) * m;
+    if (a_buffer.size() < rows * n) a_buffer.resize(rows * n, 1);
+    if (r_buffer.size() < rows) r_buffer.resize(rows);
+    Eigen::Map<Eigen::MatrixXd, Eigen::AlignedMax> a(a_buffer.data(), rows, n);
+    Eigen::Map<Eigen::VectorXd, Eigen::AlignedMax> r(r_buffer.data(), rows);
     for (int i = 0; i < m; ++i) {
       const int t = groups.vertex[begin + i];
       const double sw = std::sqrt(c * weights[t]);

@@ -33,6 +33,15 @@ bool RetainFreedHeap(int megabytes) {
 #endif
 }
 
+bool LimitHeapArenas(int arenas) {
+  if (arenas <= 0) return false;
+#if defined(__GLIBC__)
+  return mallopt(M_ARENA_MAX, arenas) == 1;
+#else
+  return false;
+#endif
+}
+
 namespace {
 
 char** program_arguments = nullptr;

@@ -19,6 +19,16 @@ namespace artex {
 // allocator that ignores mallopt (the sanitizers'), or a value glibc refused.
 bool RetainFreedHeap(int megabytes);
 
+// At most `arenas` glibc malloc arenas for the threads that allocate from now on
+// (pipeline.heap_arenas, docs/realtime-later-rounds.md, "One heap for all threads"): glibc gives
+// threads arenas of their own (up to 8 per core), and with the freed memory kept
+// (RetainFreedHeap) each arena keeps its own peak, while a frame's buffers are allocated by
+// one stage's thread and freed by another's. Takes effect only where no thread other than the
+// first has needed an arena yet (glibc fixes the limit then). Process-wide and not undone;
+// arenas 0 leaves glibc's default. Returns false when nothing was applied: arenas 0, not glibc,
+// or an allocator that ignores mallopt (the sanitizers').
+bool LimitHeapArenas(int arenas);
+
 // Transparent huge pages for glibc's heap (pipeline.huge_pages, docs/realtime-measurements.md,
 // "Huge pages for the heap"). The heap's first touch of the pool's images, colours and raster
 // buffers costs ~95,000 page faults over the first 60 frames of the default walk with 4 KB pages;

@@ -455,6 +455,8 @@ PipelineResult RunPipeline(const std::string& sequence_dir, const std::string& t
                            const std::function<void(const PipelineProgress&)>& progress) {
   // pipeline.heap_retain_mb: process-wide, kept after the run (heap_retention.h).
   RetainFreedHeap(options.realtime.heap_retain_mb);
+  // pipeline.heap_arenas: the same, for the threads the run starts (heap_retention.h).
+  LimitHeapArenas(options.realtime.heap_arenas);
   // pipeline.blas_threads: process-wide, kept after the run (blas_threads.h).
   LimitBlasThreads(options.realtime.blas_threads);
   // pipeline.threads: the parallel loops' threads for this run (restored after it).

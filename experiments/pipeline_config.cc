@@ -477,8 +477,8 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
                "live_queue_depth", "live_init_queue_depth", "live_init_drain_every", "live_rate_hz",
                "evaluate_in_background", "evaluation_queue_depth",
                "colour_delay_frames", "live_texture_skip",
-               "threads", "blas_threads", "heap_retain_mb", "huge_pages", "template_cache", "template_cache_dir",
-               "template_cache_keep"});
+               "threads", "blas_threads", "heap_retain_mb", "heap_arenas", "huge_pages",
+               "template_cache", "template_cache_dir", "template_cache_keep"});
   c.Get("texture", &o->texture);
   c.Get("colour_term", &o->colour_term);
   c.Get("first_frame", &o->first_frame);
@@ -523,6 +523,7 @@ void BindPipeline(const Config& c, PipelineOptions* o) {
   c.Get("colour_delay_frames", &o->realtime.colour_delay_frames);
   c.Get("threads", &o->realtime.threads);
   c.Get("heap_retain_mb", &o->realtime.heap_retain_mb);
+  c.Get("heap_arenas", &o->realtime.heap_arenas);
   c.Get("huge_pages", &o->realtime.huge_pages);
   c.Get("blas_threads", &o->realtime.blas_threads);
   c.Get("template_cache", &o->template_cache.enabled);

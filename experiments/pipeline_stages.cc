@@ -86,6 +86,9 @@ bool RealtimeOptions::IsValid(std::string* error) const {
   } else if (heap_retain_mb < 0 || heap_retain_mb > 65536) {
     msg = "pipeline.heap_retain_mb: expected 0 (the allocator's defaults) to 65536, found " +
           std::to_string(heap_retain_mb);
+  } else if (heap_arenas < 0 || heap_arenas > 1024) {
+    msg = "pipeline.heap_arenas: expected 0 (glibc's default) to 1024, found " +
+          std::to_string(heap_arenas);
   }
   if (msg.empty()) return true;
   if (error) *error = msg;

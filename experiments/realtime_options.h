@@ -78,12 +78,19 @@ struct RealtimeOptions {
   // next frame's buffers instead of going back to the kernel (experiments/heap_retention.h;
   // process-wide, applied when a run starts and kept after it); 0: the allocator's defaults.
   int heap_retain_mb = 512;
+  // pipeline.heap_arenas: glibc malloc arenas for the threads that allocate after the run
+  // starts (experiments/heap_retention.h, LimitHeapArenas; process-wide, kept after the run).
+  // 1: a frame's buffers, allocated by one stage's thread and freed by another's, are reused
+  // by any thread: peak RSS about 50 MB (18 %) lower on the 60-frame walk, but the threads'
+  // allocations then wait for each other, 1-2 % of the frame rate (docs/realtime-later-rounds.md,
+  // "One heap for all threads"). 0 (the default): glibc's default (8 arenas per core).
+  int heap_arenas = 0;
   // pipeline.huge_pages: `artex track` and each run of `artex experiment` restart themselves
   // once with glibc's heap on transparent huge pages (experiments/heap_retention.h: where
   // glibc >= 2.35 and the kernel's mode is `madvise`; the library's RunPipeline does not);
   // false: the ordinary 4 KB pages. Off by default: on a virtual machine that hands freed
   // memory back to its host, a 2 MB page's first touch costs 10-20 times a 4 KB page's per
-  // byte (docs/realtime-measurements.md, "Frames in flight and the heap's pages").
+  // byte (docs/realtime-later-rounds.md, "Frames in flight and the heap's pages").
   bool huge_pages = false;
   // pipeline.blas_threads (>= 0): OpenBLAS's threads (experiments/blas_threads.h), set when a
   // run starts and kept after it; 1 also ends the pool it starts when loaded, whose threads

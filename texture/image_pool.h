@@ -64,7 +64,7 @@ using ColorRows = Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>;
 // Edge colours, one row per sample (3 channels contiguous), in 16-bit fixed point: a channel c
 // in [0, 1] is stored as round(c * kEdgeColorScale), and all three channels of a sample not seen
 // as kEdgeColorUnseen. Half the memory of floats: with 24 images pooled the edge colours are
-// most of the pool's memory (docs/realtime-measurements.md, "Edge colours in 16 bits").
+// most of the pool's memory (docs/realtime-later-rounds.md, "Edge colours in 16 bits").
 using EdgeColorRows = Eigen::Matrix<std::uint16_t, Eigen::Dynamic, 3, Eigen::RowMajor>;
 constexpr std::uint16_t kEdgeColorUnseen = 65535;
 constexpr float kEdgeColorScale = 65534.0f;

@@ -3,8 +3,15 @@
 #include <gtest/gtest.h>
 #include <sys/resource.h>
 
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <string>
+#include <thread>
+
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 
 namespace artex {
 namespace {
@@ -47,6 +54,38 @@ TEST(HeapRetentionTest, AFreedBlockIsReusedWithoutPageFaults) {
   const long faults = FaultsOfRepeatedBlocks(8);
   ASSERT_GE(faults, 0) << "allocation failed";
   EXPECT_LT(faults, 1024) << "page faults of 8 rounds of three 10 MB blocks";
+}
+
+TEST(HeapArenasTest, ZeroLeavesTheAllocatorAlone) { EXPECT_FALSE(LimitHeapArenas(0)); }
+
+// With one arena, a thread started afterwards allocates from the first thread's heap: glibc's
+// malloc_info lists one heap. With its default a new thread that allocates gets an arena (a
+// heap) of its own. (No thread of this test program allocated before this test: glibc fixes
+// the limit when a second thread first needs an arena.)
+TEST(HeapArenasTest, ThreadsStartedAfterwardsShareOneHeap) {
+#if defined(__GLIBC__)
+  if (!LimitHeapArenas(1)) GTEST_SKIP() << "the allocator ignores mallopt (not glibc's)";
+  std::thread([] {
+    void* block = std::malloc(std::size_t{1} << 20);
+    std::memset(block, 1, std::size_t{1} << 20);
+    std::free(block);
+  }).join();
+  char* text = nullptr;
+  std::size_t size = 0;
+  FILE* out = open_memstream(&text, &size);
+  ASSERT_NE(out, nullptr);
+  ASSERT_EQ(malloc_info(0, out), 0);
+  std::fclose(out);
+  const std::string info(text, size);
+  std::free(text);
+  int heaps = 0;
+  for (std::size_t at = info.find("<heap nr="); at != std::string::npos;
+       at = info.find("<heap nr=", at + 1))
+    ++heaps;
+  EXPECT_EQ(heaps, 1) << info.substr(0, 2000);
+#else
+  GTEST_SKIP() << "not glibc";
+#endif
 }
 
 }  // namespace
