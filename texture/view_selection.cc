@@ -9,7 +9,6 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
-#include <memory>
 #include <numeric>
 #include <sstream>
 #include <utility>
@@ -92,7 +91,12 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
         const TextureTermOptions terms = options.terms;
         // D of the chunk's triangles slot by slot (each slot's arrays read in storage order).
         const int begin = range.begin(), size = range.end() - range.begin();
-        const std::unique_ptr<double[]> chunk_d(new double[static_cast<std::size_t>(slots) * size]);
+        // In a buffer this thread keeps (grown as needed): no allocation per chunk, which with
+        // one malloc arena for all threads (pipeline.heap_arenas) would wait for the others'.
+        thread_local std::vector<double> chunk_buffer;
+        const std::size_t chunk_values = static_cast<std::size_t>(slots) * size;
+        if (chunk_buffer.size() < chunk_values) chunk_buffer.resize(chunk_values);
+        double* const chunk_d = chunk_buffer.data();
         for (int s = 0; s < slots; ++s) {
           const uint8_t* visible = slot_visible[s] + begin;
           const float* quality = slot_quality[s] + begin;
