@@ -93,6 +93,8 @@ ViewSelectionResult SelectViews(const ViewSelectionInput& input,
         const int begin = range.begin(), size = range.end() - range.begin();
         // In a buffer this thread keeps (grown as needed): no allocation per chunk, which with
         // one malloc arena for all threads (pipeline.heap_arenas) would wait for the others'.
+        // Nothing else runs on this thread while it is in use: the body does not wait for
+        // other tasks.
         thread_local std::vector<double> chunk_buffer;
         const std::size_t chunk_values = static_cast<std::size_t>(slots) * size;
         if (chunk_buffer.size() < chunk_values) chunk_buffer.resize(chunk_values);
