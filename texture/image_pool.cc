@@ -125,9 +125,7 @@ void SampleEdgeColors(const PoolEntry& entry, const TextureMesh& mesh, const Eig
         Eigen::Vector3f color;
         std::uint16_t* row = colors->row(first_row + k).data();
         if (sample(x, y, z, tolerance_offset + tolerance_slope * z, &color)) {
-          for (int c = 0; c < 3; ++c)
-            row[c] = static_cast<std::uint16_t>(
-                std::lround(std::clamp(color[c], 0.0f, 1.0f) * kEdgeColorScale));
+          for (int c = 0; c < 3; ++c) row[c] = EdgeColorValue(color[c]);
         } else {
           row[0] = row[1] = row[2] = kEdgeColorUnseen;
         }

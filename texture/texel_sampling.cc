@@ -602,10 +602,17 @@ void ClearTriangle(const AtlasMap& map, int f, TexelBuffer* texels) {
 }
 
 cv::Mat ComposeAtlas(const AtlasMap& map, const TexelBuffer& base,
-                     const Eigen::MatrixX3f* corner_corrections, int padding) {
+                     const Eigen::MatrixX3f* corner_corrections, int padding,
+                     AtlasScratch* scratch) {
   const int size = map.size();
-  cv::Mat out(size, size, CV_32FC3, cv::Scalar(0, 0, 0));
-  cv::Mat mask(size, size, CV_8UC1, cv::Scalar(0));
+  AtlasScratch local;
+  AtlasScratch& work = scratch ? *scratch : local;
+  work.color.create(size, size, CV_32FC3);  // kept when of this size and type already
+  work.mask.create(size, size, CV_8UC1);
+  work.color.setTo(cv::Scalar(0, 0, 0));
+  work.mask.setTo(cv::Scalar(0));
+  cv::Mat& out = work.color;
+  cv::Mat& mask = work.mask;
   const bool correct = corner_corrections != nullptr && corner_corrections->rows() > 0;
   auto* color = reinterpret_cast<cv::Vec3f*>(out.data);
   tbb::parallel_for(tbb::blocked_range<int>(0, map.num_triangles(), 256),

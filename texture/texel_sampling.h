@@ -76,10 +76,20 @@ int SampleTriangle(const AtlasMap& map, int f, const Eigen::MatrixX3i& triangles
 // Clears the texels of triangle f (untextured).
 void ClearTriangle(const AtlasMap& map, int f, TexelBuffer* texels);
 
+// The working images of ComposeAtlas (the colours in floats and the filled mask: 13 bytes a
+// texel), kept by a caller that composes again and again, so that a composition writes into
+// memory touched before instead of fresh pages (which the kernel must fault in and zero).
+struct AtlasScratch {
+  cv::Mat color, mask;
+};
+
 // base + barycentric interpolation of per-corner corrections (rows 3 f + c), then `padding`
-// passes of dilation into empty texels. Returns an 8-bit image (CV_8UC3, size x size).
+// passes of dilation into empty texels. Returns an 8-bit image (CV_8UC3, size x size). With
+// `scratch`, its images are the working images (allocated on the first call, reused after); the
+// result is the same.
 cv::Mat ComposeAtlas(const AtlasMap& map, const TexelBuffer& base,
-                     const Eigen::MatrixX3f* corner_corrections, int padding);
+                     const Eigen::MatrixX3f* corner_corrections, int padding,
+                     AtlasScratch* scratch = nullptr);
 
 // The unlevelled colours of the texels in `rect` (uncovered and cleared texels black) as an
 // 8-bit image (CV_8UC3, rect size); rect must lie inside the atlas.

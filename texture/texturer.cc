@@ -228,7 +228,7 @@ int Texturer::ColouredVertexCount() const {
 cv::Mat Texturer::Atlas() const {
   LevelSeams();
   return ComposeAtlas(*map_, base_, options_.seam_levelling ? &corrections_ : nullptr,
-                      options_.padding_texels);
+                      options_.padding_texels, &atlas_scratch_);
 }
 
 void Texturer::VertexColors(Eigen::MatrixX3d* rgb, std::vector<uint8_t>* valid) const {

@@ -96,7 +96,8 @@ class Texturer {
   TextureFrameSummary AddPrepared(PreparedFrame prepared);
 
   // The current atlas (CV_8UC3, BGR, atlas_size^2): levelled (when on) and padded. Levels the
-  // seams first when they are not (LevelSeams).
+  // seams first when they are not (LevelSeams). Composed in working images the texturer keeps
+  // (13 bytes a texel): not to be called from two threads at once.
   cv::Mat Atlas() const;
   // Levels the seams of the current labelling unless that was done (by AddFrame with
   // levelling_every_frame, or by an earlier read); returns the wall seconds it took now (0:
@@ -173,6 +174,7 @@ class Texturer {
   std::vector<double> seam_distance_;
   std::vector<double> edge_weight_;
   mutable Eigen::MatrixX3f corrections_;  // 3F x 3
+  mutable AtlasScratch atlas_scratch_;    // Atlas()'s working images
   std::vector<int> changed_;
   int frames_seen_ = 0;  // PrepareFrame calls (only PrepareFrame reads and writes it)
 };

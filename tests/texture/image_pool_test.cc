@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <memory>
 #include <opencv2/core.hpp>
@@ -297,6 +298,35 @@ TEST(ImagePoolTest, ViewSelectionDoesNotDependOnTheEdgeOrder) {
   int textured = 0;
   for (int f : forward.frames) textured += f >= 0;
   EXPECT_GT(textured, 100);
+}
+
+// EdgeColorValue is std::lround(clamp(c, 0, 1) * kEdgeColorScale) cast to 16 bits: at and next
+// to every integer and halfway value of the scale, and at a million random channels.
+TEST(ImagePoolTest, EdgeColorValueRoundsAsLround) {
+  const auto reference = [](float c) {
+    return static_cast<std::uint16_t>(std::lround(std::clamp(c, 0.0f, 1.0f) * kEdgeColorScale));
+  };
+  int checked = 0;
+  for (int t = 0; t <= static_cast<int>(kEdgeColorScale); ++t) {
+    for (const float x : {static_cast<float>(t), t + 0.5f}) {
+      for (const float y : {std::nextafter(x, -1.0f), x, std::nextafter(x, 1e9f)}) {
+        // The channel whose scaled value is y, and its neighbours.
+        const float c = y / kEdgeColorScale;
+        for (const float z : {std::nextafter(c, -1.0f), c, std::nextafter(c, 2.0f)}) {
+          ASSERT_EQ(EdgeColorValue(z), reference(z)) << "channel " << z;
+          ++checked;
+        }
+      }
+    }
+  }
+  cv::RNG rng(3);
+  for (int k = 0; k < 1000000; ++k) {
+    const float c = rng.uniform(-0.1f, 1.1f);
+    ASSERT_EQ(EdgeColorValue(c), reference(c)) << "channel " << c;
+  }
+  EXPECT_EQ(EdgeColorValue(std::numeric_limits<float>::quiet_NaN()),
+            reference(std::numeric_limits<float>::quiet_NaN()));
+  EXPECT_GT(checked, 1000000);
 }
 
 TEST(ImagePoolTest, BadOptionsAreRejected) {

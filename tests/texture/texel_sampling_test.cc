@@ -324,11 +324,18 @@ TEST(TexelSamplingTest, ComposeAtlasMatchesTheWholeImageDilation) {
   Eigen::MatrixX3f corrections(3 * map.num_triangles(), 3);
   for (int r = 0; r < corrections.rows(); ++r)
     for (int c = 0; c < 3; ++c) corrections(r, c) = rng.uniform(-0.1f, 0.1f);
-  for (const int padding : {0, 1, 4, 40}) {
+  // Working images kept across the calls (as the texturer keeps them), each call after one
+  // that padded further: what an earlier call left in them must not show.
+  AtlasScratch scratch;
+  for (const int padding : {40, 0, 1, 4}) {
     const cv::Mat fast = ComposeAtlas(map, texels, &corrections, padding);
     const cv::Mat reference = ReferenceComposition(map, texels, corrections, padding);
     ASSERT_EQ(fast.type(), CV_8UC3);
     EXPECT_EQ(cv::norm(fast, reference, cv::NORM_INF), 0.0) << "padding " << padding;
+    const uchar* kept = scratch.color.data;
+    const cv::Mat reusing = ComposeAtlas(map, texels, &corrections, padding, &scratch);
+    EXPECT_EQ(cv::norm(reusing, reference, cv::NORM_INF), 0.0) << "padding " << padding;
+    if (kept != nullptr) EXPECT_EQ(scratch.color.data, kept) << "padding " << padding;
     // The padding grows into the empty texels (it is not a no-op the comparison would miss).
     if (padding > 0) {
       const cv::Mat unpadded = ReferenceComposition(map, texels, corrections, 0);
