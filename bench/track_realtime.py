@@ -153,20 +153,24 @@ def main():
     suffix = "_%dx%d" % args.color_size if args.color_size else ""
     seq = synth(args.artex, args.frames, os.path.join(args.work, "walk%d%s" % (args.frames, suffix)),
                 args.color_size)
+    # (name, sequence, --set values, checked byte for byte against the sequential run: the
+    # same frames of the same walk; live runs drop frames, the long run is another walk)
     runs = [
-        ("sequential", seq, ["pipeline.concurrency=sequential"]),
-        ("pipelined", seq, ["pipeline.concurrency=pipelined"]),
-        ("pipelined, no ground truth", without_ground_truth(seq), ["pipeline.concurrency=pipelined"]),
+        ("sequential", seq, ["pipeline.concurrency=sequential"], False),
+        ("pipelined", seq, ["pipeline.concurrency=pipelined"], True),
+        ("pipelined, no ground truth", without_ground_truth(seq),
+         ["pipeline.concurrency=pipelined"], True),
     ]
     if not args.no_live:
-        runs.append(("pipelined live 30 Hz", seq, ["pipeline.live=true"]))
+        runs.append(("pipelined live 30 Hz", seq, ["pipeline.live=true"], False))
     if args.long > 0:
         long_seq = synth(args.artex, args.long,
                          os.path.join(args.work, "walk%d%s" % (args.long, suffix)), args.color_size)
-        runs.append(("pipelined %d frames" % args.long, long_seq, ["pipeline.concurrency=pipelined"]))
+        runs.append(("pipelined %d frames" % args.long, long_seq,
+                     ["pipeline.concurrency=pipelined"], False))
         if not args.no_live:
             runs.append(("pipelined live 30 Hz, %d frames" % args.long, long_seq,
-                         ["pipeline.live=true"]))
+                         ["pipeline.live=true"], False))
     before = uptime()
     binaries = [("", args.artex, args.config)]
     if args.baseline:
@@ -175,7 +179,7 @@ def main():
         binaries.append(("baseline ", args.baseline, config))
     repetitions = {}
     for rep in range(args.repeat):
-        for name, s, sets in runs:
+        for name, s, sets, _ in runs:
             # Every other repetition the baseline goes first: a run that follows another on a
             # warm machine (caches, frequency) is not always the same build's.
             for label, binary, config in (binaries if rep % 2 == 0 else binaries[::-1]):
@@ -220,13 +224,13 @@ def main():
                      span(reps, "steady_frames_per_second", "%.1f"),
                      span(reps, "latency_median_ms", "%.0f"),
                      span(reps, "frames_dropped", "%d"), walls[0], walls[-1]))
-    # Byte for byte against the same build's sequential run (live runs drop frames: left out).
+    # Byte for byte against the same build's sequential run.
     print("outputs (%s) the same as the sequential run's, in every repetition:" % ", ".join(OUTPUTS))
     for label, _, _ in binaries:
         reference = repetitions.get(label + "sequential", [])
         expected = {tuple(sorted(r["outputs"].items())) for r in reference}
-        for name, _, _ in runs:
-            if name == "sequential" or "live" in name or "%d frames" % args.long in name:
+        for name, _, _, compared in runs:
+            if not compared:
                 continue
             reps = repetitions[label + name]
             same = len(expected) == 1 and all(
