@@ -15,8 +15,6 @@ the correlation of the reference's time with the frame rate and, with --baseline
 and by how much the first build was the faster of a round.
 """
 import argparse
-import json
-import math
 import os
 import statistics
 import subprocess
@@ -24,7 +22,7 @@ import sys
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from track_realtime import parse_size, synth  # noqa: E402
+from track_realtime import parse_size, synth, track  # noqa: E402
 
 REFERENCE = "s = 0\nfor i in range(6000000):\n    s += i * i\n"
 
@@ -40,13 +38,9 @@ def reference_seconds():
     return max(ends)
 
 
-def track(artex, seq, out, config):
-    cmd = [artex, "track", seq, "-c", config, "-o", out, "-q"]
-    r = subprocess.run(cmd, capture_output=True, text=True)
-    if r.returncode != 0:
-        sys.exit("artex track failed: " + " ".join(cmd) + "\n" + r.stderr[-2000:])
-    with open(os.path.join(out, "realtime.json")) as f:
-        rt = json.load(f)
+def walk_figures(artex, seq, out, config):
+    """frames/s, frames/s after the first frame and median latency of one pipelined run."""
+    rt = track(artex, seq, out, config, ["pipeline.concurrency=pipelined"])["realtime"]
     return rt["frames_per_second"], rt["steady_frames_per_second"], rt["latency_median_ms"]
 
 
@@ -96,7 +90,8 @@ def main():
         row = {"reference": reference_seconds()}
         order = builds if len(rows) % 2 == 0 else builds[::-1]
         for label, binary, config in order:
-            row[label] = track(binary, seq, os.path.join(args.work, "phase_" + label), config)
+            out = os.path.join(args.work, "phase_" + label)
+            row[label] = walk_figures(binary, seq, out, config)
         rows.append(row)
         print("round %d: reference %.2f s, %s" % (len(rows), row["reference"], ", ".join(
             "%s %.1f frames/s" % (l, row[l][0]) for l in labels)), file=sys.stderr)
@@ -104,10 +99,8 @@ def main():
     refs = [r["reference"] for r in rows]
     fps = [r["this"][0] for r in rows]
     if len(rows) > 2 and statistics.pstdev(refs) > 0 and statistics.pstdev(fps) > 0:
-        mr, mf = statistics.mean(refs), statistics.mean(fps)
-        c = sum((a - mr) * (b - mf) for a, b in zip(refs, fps)) / math.sqrt(
-            sum((a - mr) ** 2 for a in refs) * sum((b - mf) ** 2 for b in fps))
-        print("correlation of the reference's time with this build's frames/s: %.2f" % c)
+        print("correlation of the reference's time with this build's frames/s: %.2f"
+              % statistics.correlation(refs, fps))
     if args.baseline:
         diff = [r["this"][0] - r["baseline"][0] for r in rows]
         print("this build faster in %d of %d rounds, by a median of %+.2f frames/s"
