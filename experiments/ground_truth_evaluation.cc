@@ -42,7 +42,16 @@ FrameErrors GroundTruthEvaluator::Evaluate(const FrameEvaluation& frame) const {
   ComputeVertexNormals(truth.vertices, truth_.subject->triangles, &truth_normals);
   double mean = 0.0, max = 0.0;
   const Eigen::MatrixX3d tracked_in_truth = TransformRows(truth_.to_truth_world, frame.posed);
-  SurfaceErrors(tracked_in_truth, truth.vertices, truth_normals, &mean, &max);
+  std::vector<int> nearest;
+  {
+    const std::lock_guard<std::mutex> lock(nearest_mutex_);
+    nearest.swap(nearest_);
+  }
+  SurfaceErrors(tracked_in_truth, truth.vertices, truth_normals, &mean, &max, &nearest);
+  {
+    const std::lock_guard<std::mutex> lock(nearest_mutex_);
+    if (nearest_.empty()) nearest_.swap(nearest);
+  }
   e.mean_vertex_error_mm = 1000.0 * mean;
   e.max_vertex_error_mm = 1000.0 * max;
   const Eigen::MatrixX3d ours = TransformRows(truth_.to_truth_world, frame.joints);

@@ -69,6 +69,11 @@ class GroundTruthEvaluator {
   const Template& model_;
   GroundTruthContext truth_;
   HeldOutViewOptions held_out_;
+  // The last evaluation's nearest truth vertex per tracked vertex: the next one's guess
+  // (SurfaceErrors; it spares most of the search, and the errors are the same without it). One
+  // evaluation takes it at a time; another running meanwhile searches without a guess.
+  mutable std::mutex nearest_mutex_;
+  mutable std::vector<int> nearest_;
 };
 
 // A GroundTruthEvaluator on its own thread at the lowest CPU priority (SCHED_IDLE, its parallel

@@ -2,20 +2,41 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "solvers/nearest_grid.h"
 
 namespace artex {
 
 void SurfaceErrors(const Eigen::MatrixX3d& tracked, const Eigen::MatrixX3d& truth,
-                   const Eigen::MatrixX3d& truth_normals, double* mean, double* max) {
+                   const Eigen::MatrixX3d& truth_normals, double* mean, double* max,
+                   std::vector<int>* nearest) {
   const NearestGrid grid(truth, NearestGrid::AutoCell(truth));
+  const Eigen::Index count = tracked.rows();
+  const bool guessed = nearest != nullptr && nearest->size() == static_cast<std::size_t>(count);
+  if (nearest != nullptr && !guessed) nearest->assign(count, -1);
   double sum = 0.0, worst = 0.0;
-  for (Eigen::Index t = 0; t < tracked.rows(); ++t) {
+  for (Eigen::Index t = 0; t < count; ++t) {
     const Eigen::Vector3d p = tracked.row(t);
+    // The search's bound: the guess's squared distance, computed as the grid computes it, a
+    // hair more (the grid takes only points strictly below its bound).
+    double bound2 = std::numeric_limits<double>::infinity();
+    const int guess = guessed ? (*nearest)[t] : -1;
+    if (guess >= 0 && guess < truth.rows()) {
+      double g2 = 0.0;
+      for (int d = 0; d < 3; ++d) {
+        const double diff = p[d] - truth(guess, d);
+        g2 += diff * diff;
+      }
+      if (std::isfinite(g2)) bound2 = g2 * (1.0 + 1e-9) + 1e-300;
+    }
     double d2 = 0.0;
-    const int index = grid.Nearest(p, &d2);
-    if (index < 0) break;
+    const int index = grid.NearestWithin(p, bound2, &d2);
+    if (nearest != nullptr) (*nearest)[t] = index;
+    if (index < 0) {
+      if (nearest != nullptr) std::fill(nearest->begin() + t, nearest->end(), -1);
+      break;
+    }
     const Eigen::Vector3d q = truth.row(index);
     const Eigen::Vector3d n = truth_normals.row(index);
     const double plane = n.squaredNorm() > 0.5 ? std::abs(n.dot(p - q)) : std::sqrt(d2);
@@ -23,7 +44,7 @@ void SurfaceErrors(const Eigen::MatrixX3d& tracked, const Eigen::MatrixX3d& trut
     sum += d;
     worst = std::max(worst, d);
   }
-  *mean = tracked.rows() ? sum / tracked.rows() : 0.0;
+  *mean = count ? sum / count : 0.0;
   *max = worst;
 }
 

@@ -8,13 +8,20 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <vector>
 
 namespace artex {
 
 // Mean and maximum of the distances above over the rows of `tracked` (0 and 0 when empty).
 // truth_normals: unit vertex normals of `truth` (a row of norm <= sqrt(0.5) is no normal: the
 // vertex distance is used).
+// nearest (optional): in, a guess of each tracked vertex's nearest truth vertex (the previous
+// frame's answer); out, the nearest truth vertex of each (-1 past a non-finite vertex). A guess
+// only bounds the search, since the nearest vertex is no farther than any vertex: the results
+// are the same bit for bit whatever it holds (entries out of range and a vector of another
+// size are ignored), and a close guess spares most of the grid's cells.
 void SurfaceErrors(const Eigen::MatrixX3d& tracked, const Eigen::MatrixX3d& truth,
-                   const Eigen::MatrixX3d& truth_normals, double* mean, double* max);
+                   const Eigen::MatrixX3d& truth_normals, double* mean, double* max,
+                   std::vector<int>* nearest = nullptr);
 
 }  // namespace artex
