@@ -15,6 +15,7 @@ the correlation of the reference's time with the frame rate and, with --baseline
 and by how much the first build was the faster of a round.
 """
 import argparse
+import math
 import os
 import statistics
 import subprocess
@@ -45,13 +46,19 @@ def walk_figures(artex, seq, out, config):
 
 
 def band_table(rows, labels):
-    bands = [(0.0, 1.05), (1.05, 1.25), (1.25, float("inf"))]
+    """Rows by the reference's time in thirds of the rounds (the machine's speed differs from
+    day to day, so fixed bands would put every round of a fast day in one), then all."""
+    refs = sorted(r["reference"] for r in rows)
+    cuts = [refs[len(refs) // 3], refs[2 * len(refs) // 3]]
+    bands = [(0.0, cuts[0]), (cuts[0], cuts[1]), (cuts[1], float("inf"))]
     print("reference s    rounds  " + "  ".join("%-44s" % l for l in labels))
     for lo, hi in bands + [(0.0, float("inf"))]:
         sel = [r for r in rows if lo <= r["reference"] < hi]
         if not sel:
             continue
-        name = "all" if (lo, hi) == (0.0, float("inf")) else "%.2f-%.2f" % (lo, hi)
+        times = [r["reference"] for r in sel]
+        name = ("all" if (lo, hi) == (0.0, float("inf"))
+                else "%.2f-%.2f" % (min(times), max(times)))
         cells = []
         for label in labels:
             fps = [r[label][0] for r in sel]
@@ -61,6 +68,15 @@ def band_table(rows, labels):
                 statistics.median(fps), min(fps), max(fps), sum(f >= 30 for f in fps),
                 statistics.median(steady), statistics.median(latency)))
         print("%-14s %6d  %s" % (name, len(sel), "  ".join("%-44s" % c for c in cells)))
+
+
+def sign_test(wins, losses):
+    """Two-sided sign test: the probability of a split at least this uneven by chance."""
+    n = wins + losses
+    if n == 0:
+        return 1.0
+    tail = sum(math.comb(n, i) for i in range(max(wins, losses), n + 1)) / 2.0 ** n
+    return min(1.0, 2.0 * tail)
 
 
 def main():
@@ -103,8 +119,10 @@ def main():
               % statistics.correlation(refs, fps))
     if args.baseline:
         diff = [r["this"][0] - r["baseline"][0] for r in rows]
-        print("this build faster in %d of %d rounds, by a median of %+.2f frames/s"
-              % (sum(d > 0 for d in diff), len(diff), statistics.median(diff)))
+        faster, slower = sum(d > 0 for d in diff), sum(d < 0 for d in diff)
+        print("this build faster in %d of %d rounds (slower in %d), by a median of %+.2f "
+              "frames/s; two-sided sign test p = %.3g"
+              % (faster, len(diff), slower, statistics.median(diff), sign_test(faster, slower)))
 
 
 if __name__ == "__main__":
