@@ -10,7 +10,9 @@ The reference is the same pure-Python loop in two processes at once, one per cor
 2-core machine; its time (the slower process's seconds) tells how fast the machine runs at
 that moment, which a virtual machine that reports no steal time does not say otherwise. The
 walk is synthesised once into --work (as bench/track_realtime.py does). Prints a table by
-reference band (median frames/s, range, runs at 30 or more, after the first frame, latency),
+reference band, the thirds of the rounds by the reference's time (median frames/s, range, runs
+at 30 or more, after the first frame, latency; comparable within one invocation, since the
+machine's speed differs from day to day),
 the correlation of the reference's time with the frame rate and, with --baseline, how often
 and by how much the first build was the faster of a round.
 """
