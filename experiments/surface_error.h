@@ -19,7 +19,8 @@ namespace artex {
 // frame's answer); out, the nearest truth vertex of each (-1 past a non-finite vertex). A guess
 // only bounds the search, since the nearest vertex is no farther than any vertex: the results
 // are the same bit for bit whatever it holds (entries out of range and a vector of another
-// size are ignored), and a close guess spares most of the grid's cells.
+// size are ignored; of exactly coincident truth vertices another may be met first, at the same
+// distance), and a close guess spares most of the grid's cells.
 void SurfaceErrors(const Eigen::MatrixX3d& tracked, const Eigen::MatrixX3d& truth,
                    const Eigen::MatrixX3d& truth_normals, double* mean, double* max,
                    std::vector<int>* nearest = nullptr);
