@@ -18,18 +18,10 @@ void SurfaceErrors(const Eigen::MatrixX3d& tracked, const Eigen::MatrixX3d& trut
   double sum = 0.0, worst = 0.0;
   for (Eigen::Index t = 0; t < count; ++t) {
     const Eigen::Vector3d p = tracked.row(t);
-    // The search's bound: the guess's squared distance, computed as the grid computes it, a
-    // hair more (the grid takes only points strictly below its bound).
-    double bound2 = std::numeric_limits<double>::infinity();
     const int guess = guessed ? (*nearest)[t] : -1;
-    if (guess >= 0 && guess < truth.rows()) {
-      double g2 = 0.0;
-      for (int d = 0; d < 3; ++d) {
-        const double diff = p[d] - truth(guess, d);
-        g2 += diff * diff;
-      }
-      if (std::isfinite(g2)) bound2 = g2 * (1.0 + 1e-9) + 1e-300;
-    }
+    const double bound2 = guess >= 0 && guess < truth.rows()
+                              ? BoundKeeping(p, truth.row(guess).transpose())
+                              : std::numeric_limits<double>::infinity();
     double d2 = 0.0;
     const int index = grid.NearestWithin(p, bound2, &d2);
     if (nearest != nullptr) (*nearest)[t] = index;

@@ -180,8 +180,7 @@ IcpInitResult AlignByIcp(const IcpTemplate& target, const Pose& initial, const S
       // which has moved little: the same vertex as an unbounded search, found sooner.
       double bound2 = max_d2 / (scale * scale) * (1.0 + 1e-9);
       if (previous[k] >= 0) {
-        bound2 = std::min(
-            bound2, (x.row(previous[k]).transpose() - q).squaredNorm() * (1.0 + 1e-9) + 1e-300);
+        bound2 = std::min(bound2, BoundKeeping(q, x.row(previous[k]).transpose()));
       }
       double d2 = 0.0;
       const int t = target.NearestWithin(q, bound2, &d2);

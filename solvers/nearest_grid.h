@@ -9,11 +9,26 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <vector>
 
 namespace artex {
+
+// A search bound (squared distance) that keeps `known` in reach, for NearestWithin here and in
+// PointCloudIndex, which take only points strictly below their bound: the squared distance from
+// `query` to `known`, summed as both compute it, a hair more (+inf when not finite). The
+// nearest point is then the same as without a bound, found sooner when `known` is close (the
+// previous iteration's or frame's answer).
+inline double BoundKeeping(const Eigen::Vector3d& query, const Eigen::Vector3d& known) {
+  double d2 = 0.0;
+  for (int d = 0; d < 3; ++d) {
+    const double diff = query[d] - known[d];
+    d2 += diff * diff;
+  }
+  return std::isfinite(d2) ? d2 * (1.0 + 1e-9) + 1e-300 : std::numeric_limits<double>::infinity();
+}
 
 class NearestGrid {
  public:
