@@ -24,18 +24,30 @@ double ProcessCpuSeconds() {
          1e-6 * (usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
 }
 
+// Each of `pose`'s parameters moved by N(0, sigma): the tracked pose to `pose` as the truth.
+Eigen::VectorXd Perturbation(const Pose& pose, double sigma, std::mt19937_64* rng) {
+  Eigen::VectorXd d(pose.num_parameters());
+  std::normal_distribution<double> g(0.0, sigma);
+  for (int i = 0; i < d.size(); ++i) d[i] = g(*rng);
+  return d;
+}
+
+// The template posed by `pose` as a truth: its vertices and their normals.
+void TrueSurface(const Skinning& skinning, const Pose& pose, Eigen::MatrixX3d* vertices,
+                 Eigen::MatrixX3d* normals) {
+  skinning.Apply(pose, vertices);
+  ComputeVertexNormals(*vertices, skinning.model().triangles, normals);
+}
+
 void BM_SurfaceErrors(benchmark::State& state) {
   const Template model = GenerateTemplate(BodyShapeOptions());
   const Skinning skinning(model);
   std::mt19937_64 rng(2014);
   const Pose truth = testing_util::RandomPose(model.num_joints(), 0.25, 0.15, 0.05, &rng);
-  Eigen::VectorXd d = Eigen::VectorXd::Zero(truth.num_parameters());
-  std::normal_distribution<double> g(0.0, 0.02);
-  for (int i = 0; i < d.size(); ++i) d[i] = g(rng);
+  const Eigen::VectorXd d = Perturbation(truth, 0.02, &rng);
   Eigen::MatrixX3d tracked, true_vertices, true_normals;
   skinning.Apply(truth.Retracted(d), &tracked);
-  skinning.Apply(truth, &true_vertices);
-  ComputeVertexNormals(true_vertices, model.triangles, &true_normals);
+  TrueSurface(skinning, truth, &true_vertices, &true_normals);
   double mean = 0.0, max = 0.0;
   const double cpu_start = ProcessCpuSeconds();
   for (auto _ : state) {
@@ -62,17 +74,13 @@ void BM_SurfaceErrorsNextFrame(benchmark::State& state) {
   const Pose before = testing_util::RandomPose(model.num_joints(), 0.25, 0.15, 0.05, &rng);
   const Eigen::VectorXd step = Eigen::VectorXd::Constant(before.num_parameters(), 0.01);
   const Pose truth = before.Retracted(step);
-  Eigen::VectorXd d = Eigen::VectorXd::Zero(truth.num_parameters());
-  std::normal_distribution<double> g(0.0, 0.005);
-  for (int i = 0; i < d.size(); ++i) d[i] = g(rng);
+  const Eigen::VectorXd d = Perturbation(truth, 0.005, &rng);
   Eigen::MatrixX3d tracked_before, tracked, before_vertices, before_normals;
   Eigen::MatrixX3d true_vertices, true_normals;
   skinning.Apply(before.Retracted(d), &tracked_before);
   skinning.Apply(truth.Retracted(d), &tracked);
-  skinning.Apply(before, &before_vertices);
-  skinning.Apply(truth, &true_vertices);
-  ComputeVertexNormals(before_vertices, model.triangles, &before_normals);
-  ComputeVertexNormals(true_vertices, model.triangles, &true_normals);
+  TrueSurface(skinning, before, &before_vertices, &before_normals);
+  TrueSurface(skinning, truth, &true_vertices, &true_normals);
   std::vector<int> previous;
   double mean = 0.0, max = 0.0;
   SurfaceErrors(tracked_before, before_vertices, before_normals, &mean, &max, &previous);
