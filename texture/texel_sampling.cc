@@ -306,10 +306,43 @@ inline void SampleSurfaceFootprint(const Footprint& footprint, const FootprintCe
   PutTexel(rgbx, spill, out);
 }
 
+// The first front's texels in rows [y0, y1) (in raster order): the empty texels with a filled
+// texel among their 8 neighbours; mask 0 or 255, row_filled: whether a row holds a filled
+// texel. The pointers and size are parameters, not captures: the byte stores below could alias
+// anything reached through memory, which would then be reloaded at every texel.
+void FirstFrontOfRows(const uint8_t* mask, int size, const std::vector<uint8_t>& row_filled,
+                      int y0, int y1, std::vector<int>* out) {
+  // A row's texels with a filled texel in the column of the three rows around them, then
+  // those with one in the 3 x 3 neighbourhood (column padded by a zero on each side).
+  std::vector<uint8_t> column_buffer(size + 2, 0), near_buffer(size + 8, 0);
+  uint8_t* __restrict column = column_buffer.data();
+  uint8_t* __restrict near = near_buffer.data();
+  for (int y = y0; y < y1; ++y) {
+    if (!row_filled[y] && !(y > 0 && row_filled[y - 1]) && !(y + 1 < size && row_filled[y + 1]))
+      continue;
+    const uint8_t* row = mask + static_cast<std::size_t>(y) * size;
+    const uint8_t* above = y > 0 ? row - size : row;
+    const uint8_t* below = y + 1 < size ? row + size : row;
+    for (int x = 0; x < size; ++x) column[x + 1] = above[x] | row[x] | below[x];
+    for (int x = 0; x < size; ++x)
+      near[x] = (column[x] | column[x + 1] | column[x + 2]) & static_cast<uint8_t>(~row[x]);
+    // Eight texels at a time (near_buffer's zero tail completes the last word).
+    for (int x = 0; x < size; x += 8) {
+      uint64_t word;
+      std::memcpy(&word, near + x, sizeof(word));
+      if (word == 0) continue;
+      for (int k = x; k < std::min(size, x + 8); ++k) {
+        if (near[k]) out->push_back(y * size + k);
+      }
+    }
+  }
+}
+
 // Padding: each pass fills the empty texels next to filled ones with the mean of their filled
 // 8-neighbours (summed in the order dy, dx = -1 .. 1). Only the front is visited: the empty
 // texels next to the ones the last pass filled (the first pass: next to any filled texel), so a
-// pass costs the charts' perimeter, not the atlas. mask: 255 filled; 1 marks the next front.
+// pass costs the charts' perimeter, not the atlas. mask: 0 empty or 255 filled on entry (1 marks
+// the next front meanwhile).
 void PadAtlas(int padding, cv::Mat* out, cv::Mat* mask_image) {
   if (padding <= 0) return;
   const int size = out->rows;
@@ -329,25 +362,8 @@ void PadAtlas(int padding, cv::Mat* out, cv::Mat* mask_image) {
   const int bands = (size + kBandRows - 1) / kBandRows;
   std::vector<std::vector<int>> band_front(bands);
   tbb::parallel_for(0, bands, [&](int b) {
-    std::vector<int>& out = band_front[b];
-    for (int y = b * kBandRows; y < std::min(size, (b + 1) * kBandRows); ++y) {
-      if (!row_filled[y] && !(y > 0 && row_filled[y - 1]) && !(y + 1 < size && row_filled[y + 1]))
-        continue;
-      for (int x = 0; x < size; ++x) {
-        if (mask[y * size + x]) continue;
-        bool next_to_filled = false;
-        for (int dy = -1; dy <= 1 && !next_to_filled; ++dy) {
-          for (int dx = -1; dx <= 1; ++dx) {
-            const int yy = y + dy, xx = x + dx;
-            if (yy < 0 || xx < 0 || yy >= size || xx >= size || mask[yy * size + xx] != 255)
-              continue;
-            next_to_filled = true;
-            break;
-          }
-        }
-        if (next_to_filled) out.push_back(y * size + x);
-      }
-    }
+    FirstFrontOfRows(mask, size, row_filled, b * kBandRows, std::min(size, (b + 1) * kBandRows),
+                     &band_front[b]);
   });
   std::vector<int> front;
   for (const std::vector<int>& band : band_front)
@@ -393,6 +409,38 @@ void PadAtlas(int padding, cv::Mat* out, cv::Mat* mask_image) {
       }
     }
     front.swap(next);
+  }
+}
+
+// ComposeAtlas's texels of triangles [begin, end): base plus the corrections interpolated
+// (when given) into `color`, 255 into `mask` where valid. The pointers are locals: the byte
+// stores into the mask could alias anything reached through memory.
+void ScatterTexels(const AtlasMap& map, const TexelBuffer& base,
+                   const Eigen::MatrixX3f* corner_corrections, int begin, int end,
+                   cv::Vec3f* color, uint8_t* mask) {
+  if (begin >= end || map.num_covered() == 0) return;
+  const int* texels = map.texels_begin(0);  // triangle-major: position p's texel is texels[p]
+  const Eigen::Vector3f* base_color = base.color.data();
+  const uint8_t* valid = base.valid.data();
+  const float* b0 = map.barycentrics(0);
+  const float* b1 = map.barycentrics(1);
+  const float* b2 = map.barycentrics(2);
+  for (int f = begin; f < end; ++f) {
+    Eigen::Vector3f c0 = Eigen::Vector3f::Zero(), c1 = c0, c2 = c0;
+    if (corner_corrections) {
+      c0 = corner_corrections->row(3 * f).transpose();
+      c1 = corner_corrections->row(3 * f + 1).transpose();
+      c2 = corner_corrections->row(3 * f + 2).transpose();
+    }
+    for (int p = map.first(f), last = map.last(f); p < last; ++p) {
+      const int t = texels[p];
+      Eigen::Vector3f c = base_color[p];
+      if (valid[p]) {
+        mask[t] = 255;
+        if (corner_corrections) c += b0[p] * c0 + b1[p] * c1 + b2[p] * c2;
+      }
+      color[t] = cv::Vec3f(c.x(), c.y(), c.z());
+    }
   }
 }
 
@@ -611,32 +659,17 @@ cv::Mat ComposeAtlas(const AtlasMap& map, const TexelBuffer& base,
   work.mask.create(size, size, CV_8UC1);
   work.color.setTo(cv::Scalar(0, 0, 0));
   work.mask.setTo(cv::Scalar(0));
-  cv::Mat& out = work.color;
-  cv::Mat& mask = work.mask;
   const bool correct = corner_corrections != nullptr && corner_corrections->rows() > 0;
-  auto* color = reinterpret_cast<cv::Vec3f*>(out.data);
+  auto* color = reinterpret_cast<cv::Vec3f*>(work.color.data);
+  uint8_t* mask = work.mask.data;
   tbb::parallel_for(tbb::blocked_range<int>(0, map.num_triangles(), 256),
                     [&](const tbb::blocked_range<int>& range) {
-                      for (int f = range.begin(); f < range.end(); ++f) {
-                        for (int p = map.first(f); p < map.last(f); ++p) {
-                          const int t = *(map.texels_begin(f) + (p - map.first(f)));
-                          Eigen::Vector3f c = base.color[p];
-                          if (base.valid[p]) {
-                            mask.data[t] = 255;
-                            if (correct) {
-                              const Eigen::Vector3f w = map.barycentric_at(p);
-                              c += w.x() * corner_corrections->row(3 * f).transpose() +
-                                   w.y() * corner_corrections->row(3 * f + 1).transpose() +
-                                   w.z() * corner_corrections->row(3 * f + 2).transpose();
-                            }
-                          }
-                          color[t] = cv::Vec3f(c.x(), c.y(), c.z());
-                        }
-                      }
+                      ScatterTexels(map, base, correct ? corner_corrections : nullptr,
+                                    range.begin(), range.end(), color, mask);
                     });
-  PadAtlas(padding, &out, &mask);
+  PadAtlas(padding, &work.color, &work.mask);
   cv::Mat out8;
-  out.convertTo(out8, CV_8UC3, 255.0);
+  work.color.convertTo(out8, CV_8UC3, 255.0);
   return out8;
 }
 
