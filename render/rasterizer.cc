@@ -171,16 +171,16 @@ void RasterizeInto(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& tri
                       }
                     });
 
-  // Binning into bands (serial). With ids and barycentrics triangles keep their index order
-  // (the first of equal depths wins). The depth alone is the minimum over the triangles, whatever
-  // the order: triangles facing the camera (negative area for counter-clockwise meshes) go
-  // first, so that the occlusion test below skips most of the others.
+  // Binning into bands (serial). A pixel's depth is the minimum over the triangles, and its
+  // triangle the first in index order of those at that depth (the order of (depth, index)),
+  // whatever order they are drawn in: triangles facing the camera (negative area for
+  // counter-clockwise meshes) go first, so that the occlusion test below skips most of the others.
   const int num_bands = (height + kBandRows - 1) / kBandRows;
   std::vector<std::vector<int>> bins(num_bands), later_bins(num_bands);
   for (int f = 0; f < num_triangles; ++f) {
     const TriangleBox& box = boxes[f];
     if (!box.drawn) continue;
-    std::vector<std::vector<int>>& to = kSurface || box.flipped ? bins : later_bins;
+    std::vector<std::vector<int>>& to = box.flipped ? bins : later_bins;
     for (int band = box.y0 / kBandRows; band <= box.y1 / kBandRows; ++band) to[band].push_back(f);
   }
   for (int band = 0; band < num_bands; ++band)
@@ -197,14 +197,16 @@ void RasterizeInto(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& tri
             corners(f, p);
             const int y0 = std::max(box.y0, band_y0), y1 = std::min(box.y1, band_y1);
             // Occlusion test: every depth computed inside the triangle is at least its nearest
-            // corner's depth up to a few rounding errors, so where the buffer is already at most
-            // z_bound across the box, no pixel can change.
+            // corner's depth up to a few rounding errors (z_bound, rounded to float, is at most
+            // any of them), so where the buffer is already below z_bound across the box (at most
+            // z_bound for the depth alone, where a tie changes nothing), no pixel can change.
             const float z_bound =
                 static_cast<float>(std::min({p[0]->z, p[1]->z, p[2]->z}) * kDepthBoundFactor);
             bool occluded = true;
             for (int y = y0; y <= y1 && occluded; ++y) {
               const float* row = depth + static_cast<size_t>(y) * width;
-              for (int x = box.x0; x <= box.x1 && occluded; ++x) occluded = row[x] <= z_bound;
+              for (int x = box.x0; x <= box.x1 && occluded; ++x)
+                occluded = kSurface ? row[x] < z_bound : row[x] <= z_bound;
             }
             if (occluded) continue;
             TriangleSetup t;
@@ -236,7 +238,13 @@ void RasterizeInto(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& tri
                 const double z = (e0 + e1 + e2) / w;
                 const size_t index = static_cast<size_t>(y) * width + x;
                 const float zf = static_cast<float>(z);
-                if (!(zf < depth[index])) continue;
+                if constexpr (kSurface) {
+                  // An equal depth goes to the smaller index (+inf, where ids is -1, is never
+                  // equal: zf is finite or NaN).
+                  if (!(zf < depth[index] || (zf == depth[index] && f < ids[index]))) continue;
+                } else {
+                  if (!(zf < depth[index])) continue;
+                }
                 depth[index] = zf;
                 if constexpr (kSurface) {
                   ids[index] = f;

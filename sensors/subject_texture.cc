@@ -446,27 +446,6 @@ cv::Mat GenerateSubjectTexture(const Template& subject, const SubjectTextureOpti
   return image;
 }
 
-Eigen::Vector3d SampleTextureBilinear(const cv::Mat& texture_bgr, const Eigen::Vector2d& uv) {
-  const int w = texture_bgr.cols, h = texture_bgr.rows;
-  const double fx = std::clamp(uv.x() * w - 0.5, 0.0, w - 1.0);
-  const double fy = std::clamp(uv.y() * h - 0.5, 0.0, h - 1.0);
-  const int x0 = std::min(static_cast<int>(fx), w - 1), y0 = std::min(static_cast<int>(fy), h - 1);
-  const int x1 = std::min(x0 + 1, w - 1), y1 = std::min(y0 + 1, h - 1);
-  const double ax = fx - x0, ay = fy - y0;
-  const cv::Vec3b& c00 = texture_bgr.at<cv::Vec3b>(y0, x0);
-  const cv::Vec3b& c01 = texture_bgr.at<cv::Vec3b>(y0, x1);
-  const cv::Vec3b& c10 = texture_bgr.at<cv::Vec3b>(y1, x0);
-  const cv::Vec3b& c11 = texture_bgr.at<cv::Vec3b>(y1, x1);
-  Eigen::Vector3d rgb;
-  for (int ch = 0; ch < 3; ++ch) {
-    const int k = 2 - ch;
-    rgb[ch] =
-        ((1 - ay) * ((1 - ax) * c00[k] + ax * c01[k]) + ay * ((1 - ax) * c10[k] + ax * c11[k])) /
-        255.0;
-  }
-  return rgb;
-}
-
 Eigen::MatrixX3d VertexColorsFromTexture(const Template& tmpl, const cv::Mat& texture_bgr) {
   if (!tmpl.has_uvs()) throw Error("VertexColorsFromTexture: the template has no UV atlas");
   if (texture_bgr.type() != CV_8UC3 || texture_bgr.empty()) {

@@ -6,6 +6,8 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <algorithm>
+#include <cstddef>
 #include <cstdint>
 #include <opencv2/core.hpp>
 #include <string>
@@ -36,8 +38,34 @@ struct SubjectTextureOptions {
 cv::Mat GenerateSubjectTexture(const Template& subject, const SubjectTextureOptions& options);
 
 // Bilinear lookup (texel centres at ((x + 0.5) / W, (y + 0.5) / H), clamped at the border)
-// of a CV_8UC3 BGR image at glTF uv; returns linear RGB in [0, 1].
-Eigen::Vector3d SampleTextureBilinear(const cv::Mat& texture_bgr, const Eigen::Vector2d& uv);
+// of a W x H BGR image (8 bits a channel, rows `step` bytes apart) at glTF uv; returns linear RGB
+// in [0, 1]. Inline: renders call it per pixel.
+inline Eigen::Vector3d SampleTextureBilinear(const uint8_t* bgr, std::size_t step, int w, int h,
+                                             const Eigen::Vector2d& uv) {
+  const double fx = std::clamp(uv.x() * w - 0.5, 0.0, w - 1.0);
+  const double fy = std::clamp(uv.y() * h - 0.5, 0.0, h - 1.0);
+  const int x0 = std::min(static_cast<int>(fx), w - 1), y0 = std::min(static_cast<int>(fy), h - 1);
+  const int x1 = std::min(x0 + 1, w - 1), y1 = std::min(y0 + 1, h - 1);
+  const double ax = fx - x0, ay = fy - y0;
+  const uint8_t* c00 = bgr + y0 * step + 3 * x0;
+  const uint8_t* c01 = bgr + y0 * step + 3 * x1;
+  const uint8_t* c10 = bgr + y1 * step + 3 * x0;
+  const uint8_t* c11 = bgr + y1 * step + 3 * x1;
+  Eigen::Vector3d rgb;
+  for (int ch = 0; ch < 3; ++ch) {
+    const int k = 2 - ch;
+    rgb[ch] =
+        ((1 - ay) * ((1 - ax) * c00[k] + ax * c01[k]) + ay * ((1 - ax) * c10[k] + ax * c11[k])) /
+        255.0;
+  }
+  return rgb;
+}
+// The same of a CV_8UC3 image.
+inline Eigen::Vector3d SampleTextureBilinear(const cv::Mat& texture_bgr,
+                                             const Eigen::Vector2d& uv) {
+  return SampleTextureBilinear(texture_bgr.data, texture_bgr.step[0], texture_bgr.cols,
+                               texture_bgr.rows, uv);
+}
 
 // V x 3 RGB in [0, 1]: the texture at each vertex (mean over its UV corners, which differ
 // only at chart seams). Vertices without a corner get the mean texture colour.

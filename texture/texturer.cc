@@ -281,6 +281,40 @@ cv::Mat Texturer::LabelMap() const {
   return out;
 }
 
+namespace {
+
+// RenderTextured's pixels from the raster: the atlas sampled bilinearly at each covered pixel's
+// UV (frames: skip triangles with a negative entry; null: none). image and mask are continuous,
+// of the raster's size. The pointers are locals (parameters): the byte stores could alias
+// anything reached through memory, which would be reloaded at every pixel.
+void PaintTextured(const RasterBuffers& buffers, const Template& tmpl, const cv::Mat& atlas,
+                   const int* frames, cv::Vec3b* image, uint8_t* mask) {
+  const int pixels = buffers.width * buffers.height;
+  const int32_t* ids = buffers.triangle_id.data();
+  const Eigen::Vector2f* barycentric = buffers.barycentric.data();
+  const Eigen::Map<const Eigen::MatrixX2d> uvs(tmpl.uvs.data(), tmpl.uvs.rows(), 2);
+  const Eigen::Map<const Eigen::MatrixX3i> uv_triangles(tmpl.uv_triangles.data(),
+                                                        tmpl.uv_triangles.rows(), 3);
+  const uint8_t* texels = atlas.data;
+  const std::size_t step = atlas.step[0];
+  const int width = atlas.cols, height = atlas.rows;
+  for (int i = 0; i < pixels; ++i) {
+    const int f = ids[i];
+    if (f < 0 || (frames && frames[f] < 0)) continue;
+    const Eigen::Vector2f b = barycentric[i];
+    const Eigen::Vector2d uv = (1.0 - b.x() - b.y()) * uvs.row(uv_triangles(f, 0)) +
+                               b.x() * uvs.row(uv_triangles(f, 1)) +
+                               b.y() * uvs.row(uv_triangles(f, 2));
+    const Eigen::Vector3d rgb =
+        255.0 * SampleTextureBilinear(texels, step, width, height, uv);
+    image[i] = cv::Vec3b(cv::saturate_cast<uchar>(rgb[2]), cv::saturate_cast<uchar>(rgb[1]),
+                         cv::saturate_cast<uchar>(rgb[0]));
+    mask[i] = 255;
+  }
+}
+
+}  // namespace
+
 void RenderTextured(const Template& tmpl, const Eigen::MatrixX3d& posed_vertices,
                     const cv::Mat& atlas, const PinholeCamera& camera, cv::Mat* image,
                     cv::Mat* mask, const std::vector<int>* triangle_frames) {
@@ -295,22 +329,8 @@ void RenderTextured(const Template& tmpl, const Eigen::MatrixX3d& posed_vertices
   Rasterize(posed_vertices, tmpl.triangles, camera, RasterOptions(), &buffers);
   *image = cv::Mat(camera.height, camera.width, CV_8UC3, cv::Scalar(0, 0, 0));
   *mask = cv::Mat(camera.height, camera.width, CV_8UC1, cv::Scalar(0));
-  for (int v = 0; v < camera.height; ++v) {
-    for (int u = 0; u < camera.width; ++u) {
-      const int i = buffers.index(u, v);
-      const int f = buffers.triangle_id[i];
-      if (f < 0 || (triangle_frames && (*triangle_frames)[f] < 0)) continue;
-      const Eigen::Vector2f b = buffers.barycentric[i];
-      const Eigen::Vector2d uv = (1.0 - b.x() - b.y()) * tmpl.uvs.row(tmpl.uv_triangles(f, 0)) +
-                                 b.x() * tmpl.uvs.row(tmpl.uv_triangles(f, 1)) +
-                                 b.y() * tmpl.uvs.row(tmpl.uv_triangles(f, 2));
-      const Eigen::Vector3d rgb = 255.0 * SampleTextureBilinear(atlas, uv);
-      image->at<cv::Vec3b>(v, u) =
-          cv::Vec3b(cv::saturate_cast<uchar>(rgb[2]), cv::saturate_cast<uchar>(rgb[1]),
-                    cv::saturate_cast<uchar>(rgb[0]));
-      mask->at<uint8_t>(v, u) = 255;
-    }
-  }
+  PaintTextured(buffers, tmpl, atlas, triangle_frames ? triangle_frames->data() : nullptr,
+                reinterpret_cast<cv::Vec3b*>(image->data), mask->data);
 }
 
 }  // namespace artex

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <random>
 
 #include "models/error.h"
@@ -271,6 +272,80 @@ TEST(RasterizerTest, JitteredMeshHasNoCracksAndNoDoubleCoverage) {
   RasterBuffers buffers;
   Rasterize(v, t, camera, RasterOptions(), &buffers);
   for (int id : buffers.triangle_id) ASSERT_GE(id, 0);
+}
+
+// Rasterize against the definition it implements, whatever order it draws in: each triangle
+// rasterised alone, then per pixel the smallest depth and, among equal depths, the smallest
+// triangle index (depth, id and barycentrics bit for bit). The mesh: two interpenetrating
+// octahedra seen from several directions (front and back faces, occlusion in both index
+// orders), plus exact ties: every third triangle again with the same corners in the same order
+// (the same depths bit for bit; the first copy must win), every fifth reversed (facing the
+// other way), and a sheet's triangles each followed by its reversed copy.
+TEST(RasterizerTest, EqualDepthsGoToTheSmallerIndexWhateverTheFacing) {
+  Eigen::MatrixX3d octahedron(6, 3);
+  octahedron << 0.5, 0, 0, -0.5, 0, 0, 0, 0.5, 0, 0, -0.5, 0, 0, 0, 0.5, 0, 0, -0.5;
+  Eigen::MatrixX3i faces(8, 3);
+  faces << 0, 2, 4, 2, 1, 4, 1, 3, 4, 3, 0, 4, 2, 0, 5, 1, 2, 5, 3, 1, 5, 0, 3, 5;
+  Eigen::MatrixX3d v(16, 3);
+  v.topRows(6) = octahedron.rowwise() + Eigen::RowVector3d(0.0, 0.0, 2.0);
+  v.middleRows(6, 6) = (octahedron * 0.8).rowwise() + Eigen::RowVector3d(0.25, 0.1, 2.1);
+  // A square sheet beside them, seen from either side.
+  v.bottomRows(4) << -0.9, -0.4, 1.9, -0.5, -0.4, 1.9, -0.5, 0.4, 1.9, -0.9, 0.4, 1.9;
+  std::vector<Eigen::RowVector3i> list;
+  for (int f = 0; f < 16; ++f) {
+    const Eigen::RowVector3i tri = faces.row(f % 8).array() + (f < 8 ? 0 : 6);
+    list.push_back(tri);
+    if (f % 3 == 0) list.push_back(tri);
+    if (f % 5 == 0) list.emplace_back(tri[0], tri[2], tri[1]);
+  }
+  // The sheet's triangles each followed by its reversed copy: from one side the smaller index
+  // faces away and must still win the tie.
+  for (const Eigen::RowVector3i& tri :
+       {Eigen::RowVector3i(12, 13, 14), Eigen::RowVector3i(12, 14, 15)}) {
+    list.push_back(tri);
+    list.emplace_back(tri[0], tri[2], tri[1]);
+  }
+  Eigen::MatrixX3i t(static_cast<int>(list.size()), 3);
+  for (int f = 0; f < t.rows(); ++f) t.row(f) = list[f];
+  const PinholeCamera base = KinectLikeCamera();
+  int ties = 0, covered = 0;
+  for (const double yaw : {0.0, 0.7, 2.0, 3.1}) {
+    PinholeCamera camera = base;
+    const Eigen::Vector3d centre(0.1, 0.05, 2.05);
+    const Eigen::Vector3d eye =
+        centre + 1.9 * Eigen::Vector3d(std::sin(yaw), 0.3, -std::cos(yaw)).normalized();
+    camera.world_to_camera = PinholeCamera::LookAt(eye, centre, Eigen::Vector3d::UnitY());
+    RasterBuffers all;
+    Rasterize(v, t, camera, RasterOptions(), &all);
+    const std::size_t n = all.depth.size();
+    std::vector<float> depth(n, std::numeric_limits<float>::infinity());
+    std::vector<int32_t> id(n, -1);
+    std::vector<Eigen::Vector2f> bary(n, Eigen::Vector2f::Zero());
+    std::vector<int> hits(n, 0);
+    for (int f = 0; f < t.rows(); ++f) {
+      RasterBuffers one;
+      Rasterize(v, t.row(f), camera, RasterOptions(), &one);
+      for (std::size_t i = 0; i < n; ++i) {
+        if (one.triangle_id[i] < 0) continue;
+        if (one.depth[i] == depth[i]) ++hits[i];
+        if (one.depth[i] < depth[i]) {  // f ascending: an equal depth keeps the smaller index
+          depth[i] = one.depth[i];
+          id[i] = f;
+          bary[i] = one.barycentric[i];
+          hits[i] = 1;
+        }
+      }
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+      ASSERT_EQ(all.depth[i], depth[i]) << "pixel " << i << ", yaw " << yaw;
+      ASSERT_EQ(all.triangle_id[i], id[i]) << "pixel " << i << ", yaw " << yaw;
+      ASSERT_EQ(all.barycentric[i], bary[i]) << "pixel " << i << ", yaw " << yaw;
+      covered += id[i] >= 0;
+      ties += hits[i] > 1;
+    }
+  }
+  EXPECT_GT(covered, 1000);
+  EXPECT_GT(ties, 100);  // the duplicated triangles tie where they are in front
 }
 
 TEST(RasterizerTest, BackfaceCullingKeepsTheFrontOfAClosedMesh) {
