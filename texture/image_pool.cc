@@ -220,7 +220,7 @@ bool ImagePoolOptions::IsValid(std::string* error) const {
 
 std::size_t PoolEntry::MemoryBytes() const {
   return image.total() * image.elemSize() + vertices.size() * sizeof(double) +
-         visibility.visible.size() * 5 + vertex_colors.size() * 4 +
+         visibility.visible.size() * 5 + vertex_colors.size() * 4 + vertex_coloured.size() +
          edge_colors.size() * sizeof(std::uint16_t) +
          surface.MemoryBytes();
 }
@@ -358,6 +358,9 @@ int ImagePool::Insert(std::unique_ptr<PoolEntry> entry) {
       level[f] =
           static_cast<uint8_t>(1 + std::min(bins - 1, static_cast<int>(vis.quality[f] * bins)));
   }
+  entry->vertex_coloured.resize(entry->vertex_colors.rows());
+  for (Eigen::Index v = 0; v < entry->vertex_colors.rows(); ++v)
+    entry->vertex_coloured[v] = entry->vertex_colors.row(v).allFinite() ? 1 : 0;
   slot_frames_.push_back(entry->frame_index);
   entries_.push_back(std::move(entry));
   levels_.push_back(std::move(level));

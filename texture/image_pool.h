@@ -98,6 +98,10 @@ struct PoolEntry {
   // V x 3 colours (channel order of `image`, [0, 1]) at the projected vertices; NaN where not
   // measured (ImagePoolOptions::vertex_colors_need_full_ring, surface_aware_sampling).
   ColorRows vertex_colors;
+  // V: 1 where vertex_colors' row is finite (all three channels), else 0. Set by
+  // ImagePool::Insert: a byte per vertex, which readers that ask only whether a vertex has a
+  // colour scan without touching the colours.
+  std::vector<uint8_t> vertex_coloured;
   // (E * edge_samples) x 3 colours along every edge (rows e * samples + k); kEdgeColorUnseen
   // where the edge is not seen (neither side visible) or the sample has no surface pixel.
   EdgeColorRows edge_colors;

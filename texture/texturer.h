@@ -148,11 +148,10 @@ class Texturer {
         slot = pool_->SlotOfFrame(memo_frame);
       }
       if (slot < 0) continue;
-      const auto& colours = pool_->entry(slot).vertex_colors;
+      const PoolEntry& entry = pool_->entry(slot);
       for (int c = 0; c < 3; ++c) {
         const int v = template_.triangles(f, c);
-        const Eigen::RowVector3f col = colours.row(v);
-        if (col.allFinite()) visit(f, c, v, col);
+        if (entry.vertex_coloured[v]) visit(f, c, v, entry.vertex_colors.row(v));
       }
     }
   }

@@ -121,8 +121,11 @@ TEST_P(ImagePoolTest, ColorsEqualPointwiseSampling) {
     vertex_colors += sampled;
     ExpectSameColor(expected, sampled, e.vertex_colors.row(v).data(),
                     "vertex " + std::to_string(v));
+    ASSERT_EQ(e.vertex_coloured.at(v), sampled ? 1 : 0) << "vertex " << v;
   }
+  EXPECT_EQ(static_cast<int>(e.vertex_coloured.size()), v_count);
   EXPECT_GT(vertex_colors, v_count / 10);
+  EXPECT_LT(vertex_colors, v_count);  // some vertices without a colour: both flags occur
 
   // Edges: edge_samples points (k + 0.5) / samples along the edge, at the lower quality of its
   // visible sides; none when neither side is visible.

@@ -335,7 +335,9 @@ TEST(TexelSamplingTest, ComposeAtlasMatchesTheWholeImageDilation) {
     const uchar* kept = scratch.color.data;
     const cv::Mat reusing = ComposeAtlas(map, texels, &corrections, padding, &scratch);
     EXPECT_EQ(cv::norm(reusing, reference, cv::NORM_INF), 0.0) << "padding " << padding;
-    if (kept != nullptr) EXPECT_EQ(scratch.color.data, kept) << "padding " << padding;
+    if (kept != nullptr) {
+      EXPECT_EQ(scratch.color.data, kept) << "padding " << padding;
+    }
     // The padding grows into the empty texels (it is not a no-op the comparison would miss).
     if (padding > 0) {
       const cv::Mat unpadded = ReferenceComposition(map, texels, corrections, 0);
