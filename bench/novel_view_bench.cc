@@ -30,42 +30,26 @@ namespace {
 
 constexpr int kWarmupFrames = 10;
 
+// The walk at 640 x 480, textured over its frames.
 struct Scene {
-  Template body;
-  cv::Mat truth_texture;
-  PinholeCamera camera;
-  Eigen::MatrixX3d posed;  // the last frame's
+  bench::WalkSequence walk;
   std::unique_ptr<Texturer> texturer;
   cv::Mat atlas;
+  const Template& body() const { return walk.body; }
+  const Eigen::MatrixX3d& posed() const { return walk.posed.back(); }  // the last frame's
 };
 
 const Scene& TexturedWalk() {
   static const Scene* scene = [] {
     RetainFreedHeap(512);  // as the pipeline (pipeline.heap_retain_mb's default)
-    auto* s = new Scene;
-    s->body = GenerateTemplate();
-    SubjectTextureOptions texture_options;
-    texture_options.size = bench::kSubjectTextureSize;
-    s->truth_texture = GenerateSubjectTexture(s->body, texture_options);
-    MotionOptions motion;
-    motion.type = MotionType::kWalk;
-    motion.frames = kWarmupFrames;
-    motion.ramp_s = bench::kMotionRampSeconds;
-    const std::vector<Pose> poses = GenerateMotion(s->body, motion);
-    const Skinning skinning(s->body);
     VirtualKinectOptions kinect_options;
     kinect_options.color_width = 640;
     kinect_options.color_height = 480;
-    const VirtualKinect kinect(kinect_options, s->body, s->truth_texture);
-    s->camera = kinect.calibration().color;
-    const std::vector<ColorConditions> conditions = GenerateColorConditions(
-        kinect.options().color_model, kinect.options().seed, static_cast<int>(poses.size()));
-    s->texturer = std::make_unique<Texturer>(s->body, TexturingOptions());
-    for (std::size_t f = 0; f < poses.size(); ++f) {
-      skinning.Apply(poses[f], &s->posed);
-      const cv::Mat color = kinect.RenderColor(static_cast<int>(f), &s->posed, conditions[f]);
-      s->texturer->AddFrame(static_cast<int>(f), color, s->camera, s->posed);
-    }
+    auto* s = new Scene;
+    s->walk = bench::MakeWalk(kWarmupFrames, kinect_options);
+    s->texturer = std::make_unique<Texturer>(s->body(), TexturingOptions());
+    for (int f = 0; f < kWarmupFrames; ++f)
+      s->texturer->AddFrame(f, s->walk.color[f], s->walk.camera, s->walk.posed[f]);
     s->atlas = s->texturer->Atlas();
     return s;
   }();
@@ -74,10 +58,10 @@ const Scene& TexturedWalk() {
 
 TruthScene Truth(const Scene& s) {
   TruthScene truth;
-  truth.subject = &s.body;
-  truth.vertices = s.posed;
-  truth.texture = s.truth_texture;
-  truth.camera = s.camera;
+  truth.subject = &s.body();
+  truth.vertices = s.posed();
+  truth.texture = s.walk.texture;
+  truth.camera = s.walk.camera;
   return truth;
 }
 
@@ -102,15 +86,15 @@ void BM_RenderTextured(benchmark::State& state) {
   const bool model = state.range(0) != 0;
   const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
   const PinholeCamera camera =
-      HeldOutCameras(s.camera, s.posed.colwise().mean().transpose(), Eigen::Vector3d::UnitY(),
-                     HeldOutViewOptions())[0];
+      HeldOutCameras(s.walk.camera, s.posed().colwise().mean().transpose(),
+                     Eigen::Vector3d::UnitY(), HeldOutViewOptions())[0];
   const std::vector<int>& frames = s.texturer->triangle_frames();
   cv::Mat image, mask;
   for (auto _ : state) {
     if (model)
-      RenderTextured(s.body, s.posed, s.atlas, camera, &image, &mask, &frames);
+      RenderTextured(s.body(), s.posed(), s.atlas, camera, &image, &mask, &frames);
     else
-      RenderTextured(s.body, s.posed, s.truth_texture, camera, &image, &mask);
+      RenderTextured(s.body(), s.posed(), s.walk.texture, camera, &image, &mask);
     benchmark::DoNotOptimize(image.data);
   }
   state.counters["covered_px"] = cv::countNonZero(mask);
@@ -123,8 +107,8 @@ void BM_EvaluateNovelViews(benchmark::State& state) {
   const TruthScene truth = Truth(s);
   NovelViewQuality quality;
   for (auto _ : state) {
-    quality = EvaluateNovelViews(s.body, s.posed, s.atlas, s.texturer->triangle_frames(), truth,
-                                 HeldOutViewOptions());
+    quality = EvaluateNovelViews(s.body(), s.posed(), s.atlas, s.texturer->triangle_frames(),
+                                 truth, HeldOutViewOptions());
     benchmark::DoNotOptimize(quality.psnr_db);
   }
   state.counters["psnr_db"] = quality.psnr_db;

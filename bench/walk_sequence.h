@@ -36,6 +36,7 @@ inline double Median(std::vector<double> v) {
 // Posed template and colour image per frame.
 struct WalkSequence {
   Template body;
+  cv::Mat texture;  // the subject's true texture
   PinholeCamera camera;
   std::vector<Eigen::MatrixX3d> posed;
   std::vector<cv::Mat> color;
@@ -44,32 +45,36 @@ struct WalkSequence {
 constexpr int kSubjectTextureSize = 1024;  // the true texture (rendering only)
 constexpr double kMotionRampSeconds = 0.3;
 
-// Built on the first call (a few seconds); every later call must ask for the same length.
+// The walk of `frames` frames seen by a virtual Kinect with these options (a few seconds).
+inline WalkSequence MakeWalk(int frames, const VirtualKinectOptions& kinect_options) {
+  WalkSequence s;
+  s.body = GenerateTemplate();
+  SubjectTextureOptions texture_options;
+  texture_options.size = kSubjectTextureSize;
+  s.texture = GenerateSubjectTexture(s.body, texture_options);
+  MotionOptions motion;
+  motion.type = MotionType::kWalk;
+  motion.frames = frames;
+  motion.ramp_s = kMotionRampSeconds;
+  const std::vector<Pose> poses = GenerateMotion(s.body, motion);
+  const Skinning skinning(s.body);
+  const VirtualKinect kinect(kinect_options, s.body, s.texture);
+  s.camera = kinect.calibration().color;
+  const std::vector<ColorConditions> conditions = GenerateColorConditions(
+      kinect.options().color_model, kinect.options().seed, static_cast<int>(poses.size()));
+  for (std::size_t f = 0; f < poses.size(); ++f) {
+    Eigen::MatrixX3d posed;
+    skinning.Apply(poses[f], &posed);
+    s.color.push_back(kinect.RenderColor(static_cast<int>(f), &posed, conditions[f]));
+    s.posed.push_back(std::move(posed));
+  }
+  return s;
+}
+
+// MakeWalk with the virtual Kinect's defaults, built on the first call; every later call must
+// ask for the same length.
 inline const WalkSequence& Walk(int frames) {
-  static const WalkSequence seq = [frames] {
-    WalkSequence s;
-    s.body = GenerateTemplate();
-    SubjectTextureOptions texture_options;
-    texture_options.size = kSubjectTextureSize;
-    const cv::Mat texture = GenerateSubjectTexture(s.body, texture_options);
-    MotionOptions motion;
-    motion.type = MotionType::kWalk;
-    motion.frames = frames;
-    motion.ramp_s = kMotionRampSeconds;
-    const std::vector<Pose> poses = GenerateMotion(s.body, motion);
-    const Skinning skinning(s.body);
-    const VirtualKinect kinect(VirtualKinectOptions(), s.body, texture);
-    s.camera = kinect.calibration().color;
-    const std::vector<ColorConditions> conditions = GenerateColorConditions(
-        kinect.options().color_model, kinect.options().seed, static_cast<int>(poses.size()));
-    for (std::size_t f = 0; f < poses.size(); ++f) {
-      Eigen::MatrixX3d posed;
-      skinning.Apply(poses[f], &posed);
-      s.color.push_back(kinect.RenderColor(static_cast<int>(f), &posed, conditions[f]));
-      s.posed.push_back(std::move(posed));
-    }
-    return s;
-  }();
+  static const WalkSequence seq = MakeWalk(frames, VirtualKinectOptions());
   if (static_cast<int>(seq.posed.size()) != frames)
     throw std::logic_error("Walk: built with " + std::to_string(seq.posed.size()) +
                            " frames, asked for " + std::to_string(frames));

@@ -238,13 +238,10 @@ void RasterizeInto(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& tri
                 const double z = (e0 + e1 + e2) / w;
                 const size_t index = static_cast<size_t>(y) * width + x;
                 const float zf = static_cast<float>(z);
-                if constexpr (kSurface) {
-                  // An equal depth goes to the smaller index (+inf, where ids is -1, is never
-                  // equal: zf is finite or NaN).
-                  if (!(zf < depth[index] || (zf == depth[index] && f < ids[index]))) continue;
-                } else {
-                  if (!(zf < depth[index])) continue;
-                }
+                // With ids, an equal depth goes to the smaller index (+inf, where ids is -1, is
+                // never equal: zf is finite or NaN).
+                if (!(zf < depth[index] || (kSurface && zf == depth[index] && f < ids[index])))
+                  continue;
                 depth[index] = zf;
                 if constexpr (kSurface) {
                   ids[index] = f;

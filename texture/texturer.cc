@@ -193,9 +193,9 @@ double Texturer::LevelSeams() const {
       [this](int v, int frame_index, Eigen::Vector3f* c) {
         const int slot = pool_->SlotOfFrame(frame_index);
         if (slot < 0) return false;
-        const auto row = pool_->entry(slot).vertex_colors.row(v);
-        if (!row.allFinite()) return false;
-        *c = row.transpose();
+        const PoolEntry& entry = pool_->entry(slot);
+        if (!entry.vertex_coloured[v]) return false;
+        *c = entry.vertex_colors.row(v).transpose();
         return true;
       },
       &corrections_, &ls);
